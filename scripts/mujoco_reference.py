@@ -1,0 +1,646 @@
+#!/usr/bin/env python3
+"""Golden reference data for the `sim` crate, computed with MuJoCo.
+
+For every robot this script loads the URDF into MuJoCo, draws 500 joint configurations uniformly within
+the URDF joint limits (numpy.random.default_rng(20261123), one `rng.uniform(lower, upper, size=(500, n))`
+call, joints ordered from root to tip, continuous joints in [-pi, pi]) and writes
+`golden/kinematics_<robot>.csv` with, per configuration:
+
+  * q1..qN            joint positions (rad for revolute / continuous joints, m for prismatic joints);
+  * px, py, pz        position of the tip link's URDF frame in the root link's URDF frame (m);
+  * r11 .. r33        rotation matrix of that frame, row-major (dimensionless);
+  * tau1..tauN        gravity torques: MuJoCo `qfrc_bias` with qvel = 0 and gravity (0, 0, -9.81) m/s^2
+                      along the root link's -z axis, i.e. the torque (N m; N for prismatic joints) each
+                      joint must supply to hold the pose.
+
+MuJoCo URDF importer details handled here:
+
+  * the importer fuses static (fixed-joint) bodies by default (`compiler.fusestatic` is switched on by
+    the URDF parser); it is switched off so the tip link (behind a fixed joint) and the root link stay
+    bodies of their own, and the pose is taken as (root body pose)^-1 * (tip body pose);
+  * a URDF link called `world` becomes MuJoCo's world body (iiwa_stack's root);
+  * `<dynamics damping/friction>` are imported as joint damping / frictionloss; they do not enter
+    `qfrc_bias` (checked: zeroing them changes no bit of the output);
+  * third-party ROS exports carry `package://` meshes, Gazebo, transmission and ros2_control tags (the
+    latter two with `<joint>` children of their own): every `<visual>`, `<collision>`, `<gazebo>`,
+    `<transmission>` and `<ros2_control>` element is removed in memory before MuJoCo sees the file;
+  * a massless link behind a movable joint (legal URDF) makes MuJoCo refuse the model; it gets a tiny
+    mass and the torques are extrapolated linearly to zero mass (exact: qfrc_bias is linear in masses);
+  * `<mimic>` joints would be silently ignored by MuJoCo: they are refused (exit 2);
+  * MuJoCo stores inertia diagonalised (principal axes); masses and centres of mass are checked
+    against the URDF, and the full inertia tensor rebuilt from MuJoCo's principal axes is checked against
+    the URDF tensor (balanceinertia / boundmass / boundinertia / settotalmass are kept off).
+
+Independent cross-checks done on every run (the script fails with exit status 3 if one fails):
+a plain numpy forward kinematics / gravity-torque computation straight from the URDF text, which must
+agree with MuJoCo to 1e-12 m and 1e-10 N m (absolute); the fixed reference points of the iiwa7
+variants (flange at (0, 0, 1.266) m at q = 0; an independent Pinocchio 4.1 value for the two ROS exports);
+and, for ur5 / ur10 / wam, the published Denavit-Hartenberg tables (tip pose at every configuration,
+1e-12).
+
+Usage:
+  python scripts/mujoco_reference.py [--out DIR] [--shared DIR] [--robots a,b,...] [--compare-to DIR]
+
+Exit status: 0 OK; 1 a --compare-to mismatch; 2 a URDF that was asked for is missing or unparsable (or
+an unknown robot name); 3 an internal consistency check failed.
+Requirements: scripts/requirements.txt (mujoco==4.0.0, numpy).
+"""
+
+import argparse
+import hashlib
+import math
+import os
+import sys
+import tempfile
+import xml.etree.ElementTree as ET
+
+import mujoco
+import numpy as np
+
+REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+SCRIPT_REL = "scripts/mujoco_reference.py"
+
+SEED = 20261123
+N_CONFIGS = 500
+GRAVITY = (0.0, 0.0, -9.81)
+
+# name -> (base, path relative to base, tip link); base "repo" = repository root, "shared" = shared dir.
+ROBOTS = {
+    "iiwa7": ("repo", "sim/robots/iiwa7.urdf", "iiwa7_flange"),
+    "ur5": ("repo", "sim/robots/ur5.urdf", "ur5_flange"),
+    "ur10": ("repo", "sim/robots/ur10.urdf", "ur10_flange"),
+    "wam": ("repo", "sim/robots/wam.urdf", "wam_flange"),
+    "iiwa_stack_iiwa7": ("shared", "data/robots/iiwa_stack_iiwa7.urdf", "iiwa_link_ee"),
+    "lbr_stack_iiwa7": ("shared", "data/robots/lbr_stack_iiwa7.urdf", "lbr_link_ee"),
+}
+
+STRIP_TAGS = ("visual", "collision", "gazebo", "transmission", "ros2_control")
+MOVABLE = ("revolute", "continuous", "prismatic")
+
+COMPARE_TOL = 1e-12
+MASSLESS_EPS = 1e-6  # kg, see compute_robot
+SELF_POS_TOL = 1e-12
+SELF_ROT_TOL = 1e-12
+SELF_TAU_TOL = 1e-10
+SELF_INERTIA_TOL = 1e-12
+
+# Fixed reference points: robot -> list of (label, q, expected tip position, tolerance in m).
+Q_PIN = (0.1, 0.2, -0.3, -1.2, 0.4, 0.5, -0.6)
+P_PIN = (0.586678450550, -0.065874910531, 0.766998508288)  # Pinocchio 4.1, ../shared/data/robots/README.md
+CHECKS = {
+    "iiwa7": [("q = 0", (0.0,) * 7, (0.0, 0.0, 1.266), 1e-12)],
+    "iiwa_stack_iiwa7": [
+        ("q = 0", (0.0,) * 7, (0.0, 0.0, 1.266), 1e-12),
+        ("Pinocchio q = " + str(Q_PIN), Q_PIN, P_PIN, 1e-11),
+    ],
+    "lbr_stack_iiwa7": [
+        ("q = 0", (0.0,) * 7, (0.0, 0.0, 1.266), 1e-12),
+        ("Pinocchio q = " + str(Q_PIN), Q_PIN, P_PIN, 1e-11),
+    ],
+}
+
+
+# Published standard Denavit-Hartenberg tables (a, d, alpha; theta_i = q_i), independent of the URDF text:
+# Universal Robots "DH Parameters for calculations of kinematics and dynamics" (UR5, UR10 tables) and
+# Barrett "WAM Arm User's Manual" D1001 (7-DoF WAM). The URDFs of this project place the base link at DH
+# frame 0 and the flange at the last DH frame, so MuJoCo's tip pose must equal the DH product.
+HALF_PI = math.pi / 2
+DH = {
+    "ur5": ([0, -0.425, -0.39225, 0, 0, 0], [0.089159, 0, 0, 0.10915, 0.09465, 0.0823],
+            [HALF_PI, 0, 0, HALF_PI, -HALF_PI, 0]),
+    "ur10": ([0, -0.612, -0.5723, 0, 0, 0], [0.1273, 0, 0, 0.163941, 0.1157, 0.0922],
+             [HALF_PI, 0, 0, HALF_PI, -HALF_PI, 0]),
+    "wam": ([0, 0, 0.045, -0.045, 0, 0, 0], [0, 0, 0.55, 0, 0.3, 0, 0.06],
+            [-HALF_PI, HALF_PI, -HALF_PI, HALF_PI, -HALF_PI, HALF_PI, 0]),
+}
+
+
+def dh_pose(table, q):
+    T = np.eye(4)
+    for a, d, al, th in zip(*table, q):
+        ct, st, ca, sa = math.cos(th), math.sin(th), math.cos(al), math.sin(al)
+        T = T @ np.array([[ct, -st * ca, st * sa, a * ct], [st, ct * ca, -ct * sa, a * st],
+                          [0, sa, ca, d], [0, 0, 0, 1]])
+    return T[:3, 3], T[:3, :3]
+
+
+class UrdfError(Exception):
+    pass
+
+
+class CheckError(Exception):
+    pass
+
+
+# ----------------------------------------------------------------------------------------------------
+# URDF reading (also used for the independent numpy cross-check)
+
+
+def _floats(text, n, default):
+    if text is None:
+        return np.array(default, dtype=float)
+    vals = [float(v) for v in text.split()]
+    if len(vals) != n:
+        raise UrdfError("expected %d numbers, got %r" % (n, text))
+    return np.array(vals, dtype=float)
+
+
+def rpy_matrix(rpy):
+    """URDF rpy: fixed-axis roll about x, then pitch about y, then yaw about z: R = Rz(y) Ry(p) Rx(r)."""
+    r, p, y = rpy
+    cr, sr, cp, sp, cy, sy = math.cos(r), math.sin(r), math.cos(p), math.sin(p), math.cos(y), math.sin(y)
+    return np.array(
+        [
+            [cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
+            [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
+            [-sp, cp * sr, cp * cr],
+        ]
+    )
+
+
+def axis_angle_matrix(axis, angle):
+    x, y, z = axis
+    c, s = math.cos(angle), math.sin(angle)
+    C = 1.0 - c
+    return np.array(
+        [
+            [c + x * x * C, x * y * C - z * s, x * z * C + y * s],
+            [y * x * C + z * s, c + y * y * C, y * z * C - x * s],
+            [z * x * C - y * s, z * y * C + x * s, c + z * z * C],
+        ]
+    )
+
+
+def _origin(elem):
+    o = elem.find("origin") if elem is not None else None
+    if o is None:
+        return np.zeros(3), np.eye(3)
+    return _floats(o.get("xyz"), 3, [0, 0, 0]), rpy_matrix(_floats(o.get("rpy"), 3, [0, 0, 0]))
+
+
+def load_urdf(path, tip):
+    """Parse and clean a URDF. Returns (cleaned xml text, description dict)."""
+    try:
+        tree = ET.parse(path)
+    except (OSError, ET.ParseError) as e:
+        raise UrdfError("cannot parse %s: %s" % (path, e))
+    root = tree.getroot()
+    if root.tag != "robot":
+        raise UrdfError("%s: root element is <%s>, not <robot>" % (path, root.tag))
+    for parent in list(root.iter()):
+        for child in list(parent):
+            if child.tag in STRIP_TAGS:
+                parent.remove(child)
+
+    links = {}
+    for l in root.findall("link"):
+        inertial = l.find("inertial")
+        if inertial is None:
+            links[l.get("name")] = None
+        else:
+            c, R = _origin(inertial)
+            m = float(inertial.find("mass").get("value"))
+            ie = inertial.find("inertia")
+            g = lambda k: float(ie.get(k, "0")) if ie is not None else 0.0
+            I = np.array(
+                [
+                    [g("ixx"), g("ixy"), g("ixz")],
+                    [g("ixy"), g("iyy"), g("iyz")],
+                    [g("ixz"), g("iyz"), g("izz")],
+                ]
+            )
+            links[l.get("name")] = (m, c, R @ I @ R.T)
+    joints = {}  # child link -> joint description
+    for j in root.findall("joint"):  # direct children of <robot> only
+        jt = j.get("type")
+        if j.find("mimic") is not None:
+            raise UrdfError("%s: joint %s is a mimic joint (MuJoCo would ignore the coupling)" % (path, j.get("name")))
+        parent, child = j.find("parent").get("link"), j.find("child").get("link")
+        xyz, R = _origin(j)
+        axis = _floats(j.find("axis").get("xyz") if j.find("axis") is not None else None, 3, [1, 0, 0])
+        if jt in MOVABLE:
+            axis = axis / np.linalg.norm(axis)
+        lim = j.find("limit")
+        if jt == "continuous":
+            lo, hi = -math.pi, math.pi
+        elif jt in ("revolute", "prismatic"):
+            if lim is None:
+                raise UrdfError("%s: joint %s has no <limit>" % (path, j.get("name")))
+            lo, hi = float(lim.get("lower", "0")), float(lim.get("upper", "0"))
+        elif jt == "fixed":
+            lo = hi = None
+        else:
+            raise UrdfError("%s: joint %s of type %s is not supported" % (path, j.get("name"), jt))
+        if child in joints:
+            raise UrdfError("%s: link %s has two parent joints" % (path, child))
+        joints[child] = dict(name=j.get("name"), type=jt, parent=parent, child=child, xyz=xyz, R=R,
+                             axis=axis, lower=lo, upper=hi)
+    roots = [l for l in links if l not in joints]
+    if len(roots) != 1:
+        raise UrdfError("%s: expected one root link, found %r" % (path, roots))
+    if tip not in links:
+        raise UrdfError("%s: tip link %s not found" % (path, tip))
+    chain = []
+    l = tip
+    while l != roots[0]:
+        chain.append(joints[l])
+        l = joints[l]["parent"]
+    chain.reverse()
+    movable = [j for j in chain if j["type"] in MOVABLE]
+    others = [j["name"] for j in joints.values() if j["type"] in MOVABLE and j not in movable]
+    if others:
+        raise UrdfError("%s: movable joints off the root-tip chain are not supported: %r" % (path, others))
+    desc = dict(root=roots[0], tip=tip, links=links, joints=joints, chain=chain, movable=movable)
+    return ET.tostring(root, encoding="unicode"), desc
+
+
+def numpy_reference(desc, q):
+    """Tip pose in the root frame and gravity torques, straight from the URDF (independent of MuJoCo)."""
+    g = np.array(GRAVITY)
+    frames = {desc["root"]: (np.zeros(3), np.eye(3))}
+    axes = []  # (joint position, joint axis in the root frame, type, child link, joint name)
+    # every link of the tree (all off-chain joints are fixed, so their links hang on at fixed offsets)
+    order = [desc["root"]]
+    children = {}
+    for j in desc["joints"].values():
+        children.setdefault(j["parent"], []).append(j)
+    i = 0
+    qmap = {j["name"]: q[n] for n, j in enumerate(desc["movable"])}
+    while i < len(order):
+        p, R = frames[order[i]]
+        for j in children.get(order[i], []):
+            pj, Rj = p + R @ j["xyz"], R @ j["R"]
+            if j["type"] in ("revolute", "continuous"):
+                axes.append((pj, Rj @ j["axis"], j["type"], j["child"], j["name"]))
+                Rj = Rj @ axis_angle_matrix(j["axis"], qmap[j["name"]])
+            elif j["type"] == "prismatic":
+                axes.append((pj, Rj @ j["axis"], j["type"], j["child"], j["name"]))
+                pj = pj + Rj @ j["axis"] * qmap[j["name"]]
+            frames[j["child"]] = (pj, Rj)
+            order.append(j["child"])
+        i += 1
+
+    def subtree(link):
+        out = [link]
+        for j in children.get(link, []):
+            out += subtree(j["child"])
+        return out
+
+    tau = []
+    by_name = {a[4]: a for a in axes}
+    for j in desc["movable"]:
+        pj, a, jt, child, _ = by_name[j["name"]]
+        t = 0.0
+        for l in subtree(child):
+            if desc["links"][l] is None:
+                continue
+            m, c, _I = desc["links"][l]
+            pl, Rl = frames[l]
+            f = m * g
+            if jt == "prismatic":
+                t -= a @ f
+            else:
+                t -= a @ np.cross(pl + Rl @ c - pj, f)
+        tau.append(t)
+    p, R = frames[desc["tip"]]
+    return p, R, np.array(tau)
+
+
+# ----------------------------------------------------------------------------------------------------
+# MuJoCo
+
+
+def massless_moving_links(desc):
+    """Links without mass behind a movable joint: MuJoCo refuses them ("mass and inertia of moving
+    bodies must be larger than mjMINVAL")."""
+    return [l for l, j in desc["joints"].items()
+            if j["type"] in MOVABLE and (desc["links"][l] is None or desc["links"][l][0] == 0.0)]
+
+
+def build_model(xml, desc, keep_joint_dynamics=False, eps=0.0):
+    """Compile the cleaned URDF; massless moving links get mass `eps` (kg) at their origin."""
+    spec = mujoco.MjSpec.from_string(xml)
+    for link in massless_moving_links(desc):
+        b = spec.body(link)
+        b.explicitinertial = True
+        b.mass = eps
+        b.ipos = [0.0, 0.0, 0.0]
+        b.iquat = [1.0, 0.0, 0.0, 0.0]
+        b.inertia = [eps, eps, eps]
+        b.fullinertia = [float("nan"), 0.0, 0.0, 0.0, 0.0, 0.0]
+    c = spec.compiler
+    c.fusestatic = False  # the URDF parser switches it on; keep root and tip links as bodies
+    c.discardvisual = False
+    c.balanceinertia = False
+    c.boundmass = 0.0
+    c.boundinertia = 0.0
+    c.settotalmass = -1.0
+    c.inertiafromgeom = mujoco.mjtInertiaFromGeom.mjINERTIAFROMGEOM_FALSE
+    spec.option.gravity = GRAVITY
+    spec.option.disableflags |= mujoco.mjtDisableBit.mjDSBL_CONTACT
+    if not keep_joint_dynamics:
+        for j in spec.joints:
+            j.damping = np.zeros_like(np.asarray(j.damping))
+            j.frictionloss = 0.0
+            j.armature = 0.0
+            j.stiffness = np.zeros_like(np.asarray(j.stiffness))
+    model = spec.compile()
+    return model
+
+
+def check_model(model, desc, robot, eps):
+    """MuJoCo must have kept the URDF structure and inertials exactly."""
+    massless = massless_moving_links(desc)
+    if model.ngeom != 0:
+        raise CheckError("%s: MuJoCo model has %d geoms (expected none)" % (robot, model.ngeom))
+    if model.nq != len(desc["movable"]) or model.nv != len(desc["movable"]):
+        raise CheckError("%s: nq=%d nv=%d, URDF chain has %d movable joints"
+                         % (robot, model.nq, model.nv, len(desc["movable"])))
+    for n, j in enumerate(desc["movable"]):
+        mj = model.joint(j["name"])
+        if int(mj.qposadr[0]) != n or int(mj.dofadr[0]) != n:
+            raise CheckError("%s: joint %s is not at qpos index %d" % (robot, j["name"], n))
+        if model.dof_armature[n] != 0.0:
+            raise CheckError("%s: joint %s has armature" % (robot, j["name"]))
+    root = model.body(desc["root"])
+    for link, inert in desc["links"].items():
+        if link == desc["root"] and root.id == 0:
+            continue  # became MuJoCo's world body; a fixed body's inertia never matters
+        b = model.body(link)
+        m, c, I = inert if inert is not None else (0.0, np.zeros(3), np.zeros((3, 3)))
+        if link in massless:
+            m, c, I = eps, np.zeros(3), eps * np.eye(3)
+        if abs(model.body_mass[b.id] - m) > 1e-15 * max(1.0, m):
+            raise CheckError("%s: mass of %s changed: %r -> %r" % (robot, link, m, model.body_mass[b.id]))
+        if m == 0.0:
+            continue
+        if np.max(np.abs(model.body_ipos[b.id] - c)) > 1e-15:
+            raise CheckError("%s: centre of mass of %s changed" % (robot, link))
+        Rq = np.zeros(9)
+        mujoco.mju_quat2Mat(Rq, model.body_iquat[b.id])
+        Rq = Rq.reshape(3, 3)
+        I_mj = Rq @ np.diag(model.body_inertia[b.id]) @ Rq.T
+        if np.max(np.abs(I_mj - I)) > SELF_INERTIA_TOL:
+            raise CheckError("%s: inertia of %s changed by %g" % (robot, link, np.max(np.abs(I_mj - I))))
+
+
+def mujoco_eval(model, data, root_id, tip_id, q):
+    data.qpos[:] = q
+    data.qvel[:] = 0.0
+    data.qacc[:] = 0.0
+    data.ctrl[:] = 0.0
+    mujoco.mj_forward(model, data)
+    Rr = data.xmat[root_id].reshape(3, 3)
+    Rt = data.xmat[tip_id].reshape(3, 3)
+    p = Rr.T @ (data.xpos[tip_id] - data.xpos[root_id])
+    R = Rr.T @ Rt
+    return p, R, data.qfrc_bias.copy()
+
+
+# ----------------------------------------------------------------------------------------------------
+
+
+def fmt(x):
+    return repr(float(x))
+
+
+def show(x):
+    """12 decimals for the printed checks, without '-0.000000000000'."""
+    return "%.12f" % (round(float(x), 12) + 0.0)
+
+
+def compute_robot(robot, path, rel_label, tip):
+    xml, desc = load_urdf(path, tip)
+    with open(path, "rb") as f:
+        sha = hashlib.sha256(f.read()).hexdigest()
+    n = len(desc["movable"])
+    lower = np.array([j["lower"] for j in desc["movable"]])
+    upper = np.array([j["upper"] for j in desc["movable"]])
+    rng = np.random.default_rng(SEED)
+    Q = rng.uniform(lower, upper, size=(N_CONFIGS, n))
+
+    # Massless links behind a movable joint (legal in URDF) are refused by MuJoCo. They get a tiny mass
+    # eps, and since qfrc_bias at qvel = 0 is linear in every mass, the torques are extrapolated to
+    # eps = 0 exactly (up to rounding): tau = 2 tau(eps) - tau(2 eps).
+    eps_list = [MASSLESS_EPS, 2 * MASSLESS_EPS] if massless_moving_links(desc) else [0.0]
+    try:
+        models = [build_model(xml, desc, eps=e) for e in eps_list]
+        model_dyn = build_model(xml, desc, keep_joint_dynamics=True, eps=eps_list[0])
+    except Exception as e:  # mujoco raises ValueError on compile errors
+        raise UrdfError("%s: MuJoCo cannot load it: %s" % (path, str(e).strip().splitlines()[0]))
+    for m_, e in zip(models, eps_list):
+        check_model(m_, desc, robot, e)
+    model = models[0]
+    datas = [mujoco.MjData(m_) for m_ in models]
+    data, data_dyn = datas[0], mujoco.MjData(model_dyn)
+    root_id, tip_id = model.body(desc["root"]).id, model.body(tip).id
+
+    def evaluate(q):
+        res = [mujoco_eval(m_, d_, root_id, tip_id, q) for m_, d_ in zip(models, datas)]
+        p, R, tau = res[0]
+        if len(res) == 2:
+            if not (np.array_equal(p, res[1][0]) and np.array_equal(R, res[1][1])):
+                raise CheckError("%s: the pose depends on the massless-link mass" % robot)
+            tau = 2.0 * res[0][2] - res[1][2]
+        return p, R, tau
+
+    if tip_id == root_id:
+        raise UrdfError("%s: tip link is the root link" % path)
+
+    # the root link must sit at the world origin, unrotated, so gravity is -z of the root frame
+    mujoco.mj_kinematics(model, data)
+    if np.any(data.xpos[root_id] != 0.0) or np.any(data.xmat[root_id] != np.eye(3).ravel()):
+        raise CheckError("%s: root body is not at the MuJoCo world origin" % robot)
+
+    rows = []
+    worst = {"pos": 0.0, "rot": 0.0, "tau": 0.0}
+    for k in range(N_CONFIGS):
+        p, R, tau = evaluate(Q[k])
+        p1, R1, tau1 = mujoco_eval(model, data, root_id, tip_id, Q[k])  # (data is reused, evaluate is done)
+        p2, R2, tau2 = mujoco_eval(model_dyn, data_dyn, root_id, tip_id, Q[k])
+        if not (np.array_equal(p1, p2) and np.array_equal(R1, R2) and np.array_equal(tau1, tau2)):
+            raise CheckError("%s: URDF joint damping/friction changed MuJoCo's output (row %d)" % (robot, k))
+        pn, Rn, taun = numpy_reference(desc, Q[k])
+        worst["pos"] = max(worst["pos"], float(np.max(np.abs(p - pn))))
+        worst["rot"] = max(worst["rot"], float(np.max(np.abs(R - Rn))))
+        worst["tau"] = max(worst["tau"], float(np.max(np.abs(tau - taun))))
+        rows.append(list(Q[k]) + list(p) + list(R.ravel()) + list(tau))
+    if worst["pos"] > SELF_POS_TOL or worst["rot"] > SELF_ROT_TOL or worst["tau"] > SELF_TAU_TOL:
+        raise CheckError("%s: MuJoCo and the numpy URDF cross-check disagree: %r" % (robot, worst))
+
+    checks = []
+    for label, q, expected, tol in CHECKS.get(robot, []):
+        p, _R, _tau = evaluate(np.array(q, dtype=float))
+        err = float(np.max(np.abs(p - np.array(expected))))
+        checks.append("%s: %s tip at (%s, %s, %s) m, expected (%s, %s, %s), max |err| %.1e"
+                      % ((robot, label) + tuple(show(x) for x in list(p) + list(expected)) + (err,)))
+        if err > tol:
+            raise CheckError(checks[-1] + " > %g" % tol)
+    if robot in DH:
+        for label, q in (("q = 0", np.zeros(n)), ("q = (0.1, 0.2, -0.3, -1.2, 0.4, 0.5, -0.6)[:n]", np.array(Q_PIN[:n])),
+                         ("all %d configurations" % N_CONFIGS, None)):
+            qs = [q] if q is not None else list(Q)
+            err = 0.0
+            for qq in qs:
+                p, R, _tau = evaluate(qq)
+                pd, Rd = dh_pose(DH[robot], qq)
+                err = max(err, float(np.max(np.abs(p - pd))), float(np.max(np.abs(R - Rd))))
+            if q is not None:
+                msg = "%s: %s tip at (%s, %s, %s) m, published DH table gives (%s, %s, %s)" % (
+                    (robot, label) + tuple(show(x) for x in list(p) + list(pd)))
+            else:
+                msg = "%s: %s against the published DH table" % (robot, label)
+            checks.append(msg + ", max |err| (position, rotation) %.1e" % err)
+            if err > 1e-12:
+                raise CheckError(checks[-1] + " > 1e-12")
+
+    header = (["q%d" % (i + 1) for i in range(n)] + ["px", "py", "pz"]
+              + ["r%d%d" % (i, j) for i in (1, 2, 3) for j in (1, 2, 3)]
+              + ["tau%d" % (i + 1) for i in range(n)])
+    kinds = sorted({j["type"] for j in desc["movable"]})
+    qunit = "rad" if "prismatic" not in kinds else "rad (revolute/continuous) or m (prismatic)"
+    tunit = "N m" if "prismatic" not in kinds else "N m (revolute/continuous) or N (prismatic)"
+    comments = [
+        "generated by %s -- do not edit; regenerate with: python %s" % (SCRIPT_REL, SCRIPT_REL),
+        "mujoco %s, numpy %s" % (mujoco.__version__, np.__version__),
+        "urdf: %s" % rel_label,
+        "urdf sha256: %s" % sha,
+        "root link: %s (frame of px..r33); tip link: %s" % (desc["root"], tip),
+        "joints (root to tip): %s" % " ".join("%s(%s)" % (j["name"], j["type"]) for j in desc["movable"]),
+        "configurations: %d, numpy.random.default_rng(%d).uniform(lower, upper, size=(%d, %d)) within the "
+        "URDF limits (continuous joints in [-pi, pi])" % (N_CONFIGS, SEED, N_CONFIGS, n),
+        "gravity: (%r, %r, %r) m/s^2 in the root link frame; qvel = 0; contacts disabled" % GRAVITY,
+        "columns: q1..q%d joint positions [%s]; px,py,pz tip position in the root frame [m]; "
+        "r11..r33 tip rotation matrix, row-major [1]; tau1..tau%d gravity torques = MuJoCo qfrc_bias, "
+        "the torque each joint must supply to hold the pose [%s]" % (n, qunit, n, tunit),
+        "numbers are Python repr() of float64 (round-trip exact)",
+    ]
+    text = "".join("# " + c + "\n" for c in comments)
+    text += ",".join(header) + "\n"
+    text += "".join(",".join(fmt(x) for x in r) + "\n" for r in rows)
+    return text, checks, worst
+
+
+def write_atomic(path, text):
+    d = os.path.dirname(path)
+    os.makedirs(d, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix="." + os.path.basename(path) + ".", suffix=".tmp", dir=d)
+    try:
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(tmp, 0o666 & ~umask)  # mkstemp creates 0600; give the file ordinary permissions
+        with os.fdopen(fd, "w", newline="\n") as f:
+            f.write(text)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+
+
+def parse_csv(text):
+    lines = [l for l in text.splitlines() if l and not l.startswith("#")]
+    header = lines[0].split(",")
+    rows = [[float(x) for x in l.split(",")] for l in lines[1:]]
+    if any(len(r) != len(header) for r in rows):
+        raise ValueError("ragged rows")
+    return header, rows
+
+
+def compare(robot, text, other_path):
+    """Returns (ok, worst difference, message); row numbers count data rows from 1."""
+    try:
+        with open(other_path) as f:
+            h2, r2 = parse_csv(f.read())
+    except (OSError, ValueError, IndexError) as e:
+        return False, math.inf, "%s: cannot read %s: %s" % (robot, other_path, e)
+    h1, r1 = parse_csv(text)
+    if h1 != h2:
+        return False, math.inf, "%s: header differs from %s" % (robot, other_path)
+    if len(r1) != len(r2):
+        return False, math.inf, "%s: %d rows here, %d in %s" % (robot, len(r1), len(r2), other_path)
+    nq = sum(1 for h in h1 if h.startswith("q"))
+    worst = (0.0, 1, h1[0])
+    for i, (a, b) in enumerate(zip(r1, r2)):
+        for c, (x, y) in enumerate(zip(a, b)):
+            if c < nq and x != y:
+                return False, math.inf, "%s: row %d column %s: q differs (%r vs %r, |difference| %.3g)" % (
+                    robot, i + 1, h1[c], x, y, abs(x - y))
+            d = abs(x - y)
+            if math.isnan(d):
+                d = math.inf
+            if d > worst[0]:
+                worst = (d, i + 1, h1[c])
+    msg = "%s: worst |difference| %.3g at row %d column %s (vs %s)" % (robot, worst[0], worst[1], worst[2],
+                                                                      other_path)
+    return worst[0] <= COMPARE_TOL, worst[0], msg
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--out", default=os.path.join(REPO, "golden"), help="output directory (default <repo>/golden)")
+    ap.add_argument("--shared", default=os.path.join(os.path.dirname(REPO), "shared"),
+                    help="shared data directory (default <repo>/../shared)")
+    ap.add_argument("--robots", default=None, help="comma-separated robot names (default: all that exist)")
+    ap.add_argument("--compare-to", default=None, metavar="DIR",
+                    help="compare with the files of the same name in DIR; exit 1 on a difference > %g" % COMPARE_TOL)
+    args = ap.parse_args(argv)
+
+    explicit = args.robots is not None
+    names = [r.strip() for r in args.robots.split(",") if r.strip()] if explicit else list(ROBOTS)
+    for r in names:
+        if r not in ROBOTS:
+            print("error: unknown robot %r (known: %s)" % (r, ", ".join(ROBOTS)), file=sys.stderr)
+            return 2
+
+    results = []
+    for r in names:
+        base, rel, tip = ROBOTS[r]
+        base_dir = REPO if base == "repo" else args.shared
+        path = os.path.join(base_dir, rel)
+        label = "%s (relative to the %s)" % (rel, "repository root" if base == "repo" else "shared directory")
+        if not os.path.isfile(path):
+            if explicit:
+                print("error: %s: URDF %s not found" % (r, path), file=sys.stderr)
+                return 2
+            print("skip %s: %s not found" % (r, path))
+            continue
+        try:
+            text, checks, worst = compute_robot(r, path, label, tip)
+        except UrdfError as e:
+            print("error: %s: %s" % (r, e), file=sys.stderr)
+            return 2
+        except CheckError as e:
+            print("check failed: %s" % e, file=sys.stderr)
+            return 3
+        for c in checks:
+            print("check " + c)
+        print("%s: %d configurations; numpy cross-check max |diff| pos %.1e m, rot %.1e, tau %.1e N m"
+              % (r, N_CONFIGS, worst["pos"], worst["rot"], worst["tau"]))
+        results.append((r, text))
+
+    # compare before writing, so that --out and --compare-to may name the same directory
+    status = 0
+    if args.compare_to is not None:
+        failed = []
+        for r, text in results:
+            ok, d, msg = compare(r, text, os.path.join(args.compare_to, "kinematics_%s.csv" % r))
+            print(("OK " if ok else "MISMATCH ") + msg)
+            if not ok:
+                failed.append((d, msg))
+        if failed:
+            print("compare failed (tolerance %g, q exact); worst: %s" % (COMPARE_TOL, max(failed)[1]),
+                  file=sys.stderr)
+            status = 1
+
+    for r, text in results:
+        out = os.path.join(args.out, "kinematics_%s.csv" % r)
+        write_atomic(out, text)
+        print("wrote %s" % out)
+    return status
+
+
+if __name__ == "__main__":
+    sys.exit(main())
