@@ -27,6 +27,7 @@
 pub mod error;
 pub mod kinematics;
 pub mod lie;
+pub mod measurement_table;
 pub mod model;
 pub mod robots;
 pub mod statics;

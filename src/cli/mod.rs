@@ -1,0 +1,91 @@
+//! Subcommands, one module each, and the error type that decides the exit code.
+
+mod calibrate;
+mod fk;
+mod generate;
+mod info;
+mod plan_poses;
+mod predict;
+mod robot_arg;
+
+use clap::{Parser, Subcommand};
+
+/// Simulate robot calibration campaigns with known errors, identify them, and diagnose what is left.
+#[derive(Parser, Debug)]
+#[command(name = "robocal", version, about, long_about = None)]
+pub struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand, Debug)]
+enum Command {
+    /// Show a robot's chain: joints, axes, limits, masses.
+    Info(info::Args),
+    /// Flange pose at a joint configuration.
+    Fk(fk::Args),
+    /// Generate a measurement campaign with known injected errors (scenario file).
+    Generate(generate::Args),
+    /// Identify the error model from measurements.
+    Calibrate(calibrate::Args),
+    /// Predict target positions with a calibrated model.
+    Predict(predict::Args),
+    /// Choose the poses that determine the parameters best.
+    PlanPoses(plan_poses::Args),
+}
+
+/// A failed command: bad input (exit 2) or a runtime failure (exit 1).
+#[derive(Debug)]
+pub enum CliError {
+    /// The user's input is wrong: a file, a flag value, a table cell.
+    Input(String),
+    /// The input was fine but the work failed.
+    Runtime(String),
+}
+
+impl CliError {
+    /// Exit code per `shared/spec/cli.md`.
+    pub fn exit_code(&self) -> u8 {
+        match self {
+            CliError::Input(_) => 2,
+            CliError::Runtime(_) => 1,
+        }
+    }
+}
+
+impl std::fmt::Display for CliError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            CliError::Input(m) | CliError::Runtime(m) => f.write_str(m),
+        }
+    }
+}
+
+impl From<sim::SimError> for CliError {
+    fn from(e: sim::SimError) -> Self {
+        CliError::Input(e.to_string())
+    }
+}
+
+/// Result of a subcommand.
+pub type CliResult = Result<(), CliError>;
+
+/// Runs the parsed command line.
+pub fn run(cli: Cli) -> CliResult {
+    match cli.command {
+        Command::Info(a) => info::run(a),
+        Command::Fk(a) => fk::run(a),
+        Command::Generate(a) => generate::run(a),
+        Command::Calibrate(a) => calibrate::run(a),
+        Command::Predict(a) => predict::run(a),
+        Command::PlanPoses(a) => plan_poses::run(a),
+    }
+}
+
+/// Prints one JSON document to stdout.
+pub fn print_json(value: &serde_json::Value) -> CliResult {
+    let s = serde_json::to_string_pretty(value)
+        .map_err(|e| CliError::Runtime(format!("cannot write JSON: {e}")))?;
+    println!("{s}");
+    Ok(())
+}
