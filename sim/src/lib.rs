@@ -24,6 +24,7 @@
 //! ```
 #![warn(missing_docs)]
 
+pub mod effects;
 pub mod error;
 pub mod kinematics;
 pub mod lie;
