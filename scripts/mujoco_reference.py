@@ -38,8 +38,20 @@ variants (flange at (0, 0, 1.266) m at q = 0; an independent Pinocchio 4.1 value
 and, for ur5 / ur10 / wam, the published Denavit-Hartenberg tables (tip pose at every configuration,
 1e-12).
 
+Settle experiment (robots in SETTLE_ROBOTS, i.e. iiwa7): `golden/settle_<robot>.csv` holds the compliant
+arm at rest under gravity for 200 configurations (numpy.random.default_rng(20261124), within the URDF
+limits) x two joint-stiffness sets x payload 0 and 3 kg (a point mass at a stated point of the tip link
+frame): joint i is a MuJoCo 4.0 joint spring (`stiffness` = [k_i, 0, 0], `springref` = q_i), and the link-side
+angles theta solve qfrc_passive = qfrc_bias at qvel = 0, i.e. K (q - theta) = tau_g(theta), by Newton on
+MuJoCo's own forces. See the comment above SETTLE_ROBOTS for why Newton rather than stepping, and for the
+checks done on every run (residual, the numpy torque balance, a dynamic mj_step settle of a few poses).
+
 Usage:
   python scripts/mujoco_reference.py [--out DIR] [--shared DIR] [--robots a,b,...] [--compare-to DIR]
+                                     [--experiment all|kinematics|settle]
+
+`--experiment` (default all) selects kinematics_<robot>.csv, settle_<robot>.csv or both; the kinematics
+files are the same bytes whichever is chosen.
 
 Exit status: 0 OK; 1 a --compare-to mismatch; 2 a URDF that was asked for is missing or unparsable (or
 an unknown robot name); 3 an internal consistency check failed.
@@ -521,6 +533,282 @@ def compute_robot(robot, path, rel_label, tip):
     return text, checks, worst
 
 
+# ----------------------------------------------------------------------------------------------------
+# Settle experiment: the compliant arm at rest under gravity (golden/settle_<robot>.csv)
+#
+# Each joint is a linear torsional spring between the commanded (motor-side) angle q and the link-side
+# angle theta: MuJoCo 4.0 joint `stiffness` (a 3-vector [k, k2, k3]: linear plus two higher-order
+# coefficients, here [k, 0, 0]; springyield = 0, i.e. elastic) with the spring reference qpos_spring = q
+# (`springref`). The arm settles where the passive spring force balances gravity:
+#
+#     qfrc_passive(theta) - qfrc_bias(theta) = 0,   qvel = 0,   i.e.   K (q - theta) = tau_g(theta).
+#
+# This is solved by Newton's method on MuJoCo's own forces (mj_forward at qvel = 0; the 7x7 Jacobian by
+# central differences of the same residual, which only affects the convergence rate, never the root).
+# Why not step the simulation until it stops: a dynamic settle stops on a velocity threshold, so its
+# result carries a settle error that depends on damping, time step and integrator (MuJoCo's springs are
+# explicit: a stiff spring on the light wrist needs a small step), while the rest state itself is
+# exactly the root above. Newton finds that root to rounding. As evidence that the two agree, the first
+# SETTLE_DYN_CHECK configurations of every case are also settled dynamically (mj_step, Euler with
+# implicit joint damping 2 sqrt(k I), armature SETTLE_DYN_ARMATURE to slow the wrist down, 1 ms steps,
+# until max |qvel| < 1e-11 rad/s) and must reach the Newton root within SETTLE_DYN_TOL rad. Armature and
+# damping change the motion, never the rest state. Joint limits are disabled (mjDSBL_LIMIT): neither
+# the analytic model nor rapier has them, and the sag may carry a joint a hair past its limit.
+
+SETTLE_ROBOTS = {"iiwa7"}
+SETTLE_SEED = 20261124
+N_SETTLE = 200
+# Joint stiffness sets (N m/rad), root to tip: an iiwa-like order of magnitude (1e4 N m/rad at the base
+# joints, less at the wrist) and a soft arm about five times more compliant.
+SETTLE_STIFFNESS = (
+    ("stiff", (15000.0, 15000.0, 10000.0, 10000.0, 6000.0, 4000.0, 4000.0)),
+    ("soft", (2500.0, 2500.0, 2000.0, 2000.0, 1500.0, 1000.0, 1000.0)),
+)
+SETTLE_PAYLOAD_KG = (0.0, 3.0)
+SETTLE_PAYLOAD_COM = (0.02, -0.01, 0.08)  # point mass position in the flange (tip link) frame, m
+SETTLE_FD_STEP = 1e-6  # rad, central differences for the Newton Jacobian
+SETTLE_STEP_TOL = 1e-14  # rad, Newton stops when max |step| is below this
+SETTLE_MAX_NEWTON = 30
+SETTLE_RESIDUAL_TOL = 1e-9  # N m, max |qfrc_passive - qfrc_bias| at the root (self-check)
+SETTLE_NUMPY_TOL = 1e-9  # N m, max |K (q - theta) - tau_numpy(theta)| (independent self-check)
+SETTLE_DYN_CHECK = 3
+SETTLE_DYN_ARMATURE = 0.1  # kg m^2
+SETTLE_DYN_DT = 1e-3  # s
+SETTLE_DYN_TOL = 1e-9  # rad
+SETTLE_DYN_MAX_STEPS = 200000
+SETTLE_COMPARE_TOL = 1e-12  # rad and m; the residual column is compared to SETTLE_RESIDUAL_TOL
+
+
+def build_settle_model(xml, desc, stiffness, payload_kg):
+    """The URDF as in build_model (no geoms, inertials kept exactly, gravity -z, contacts off), plus joint
+    springs [k, 0, 0] and, for payload_kg > 0, a point mass welded to the tip link at
+    SETTLE_PAYLOAD_COM. Joint damping, friction and armature are zero; joint limits are disabled."""
+    spec = mujoco.MjSpec.from_string(xml)
+    c = spec.compiler
+    c.fusestatic = False
+    c.discardvisual = False
+    c.balanceinertia = False
+    c.boundmass = 0.0
+    c.boundinertia = 0.0
+    c.settotalmass = -1.0
+    c.inertiafromgeom = mujoco.mjtInertiaFromGeom.mjINERTIAFROMGEOM_FALSE
+    spec.option.gravity = GRAVITY
+    spec.option.disableflags |= mujoco.mjtDisableBit.mjDSBL_CONTACT | mujoco.mjtDisableBit.mjDSBL_LIMIT
+    for j, k in zip(desc["movable"], stiffness):
+        js = spec.joint(j["name"])
+        js.damping = np.zeros_like(np.asarray(js.damping))
+        js.frictionloss = 0.0
+        js.armature = 0.0
+        js.stiffness = [k, 0.0, 0.0]
+        js.springref = 0.0  # set per configuration through mjModel.qpos_spring
+        js.springyield = 0.0
+    if payload_kg > 0.0:
+        b = spec.body(desc["tip"]).add_body(name="robocal_payload", pos=list(SETTLE_PAYLOAD_COM))
+        b.explicitinertial = True
+        b.mass = payload_kg
+        b.ipos = [0.0, 0.0, 0.0]
+        b.iquat = [1.0, 0.0, 0.0, 0.0]
+        b.inertia = [0.0, 0.0, 0.0]  # a point mass; inertia never enters a static balance
+    model = spec.compile()
+    n = len(desc["movable"])
+    if model.nq != n or np.any(model.jnt_stiffness != np.array(stiffness)) or np.any(model.jnt_stiffnesspoly != 0):
+        raise CheckError("settle model: joint stiffness not as set: %r %r" % (model.jnt_stiffness, model.jnt_stiffnesspoly))
+    if np.any(model.dof_damping != 0.0) or np.any(model.dof_armature != 0.0):
+        raise CheckError("settle model: joint damping or armature left on")
+    return model
+
+
+def settle_residual(model, data, theta):
+    """qfrc_passive - qfrc_bias at rest at theta: the net joint torque (N m); zero at equilibrium."""
+    data.qpos[:] = theta
+    data.qvel[:] = 0.0
+    data.qacc[:] = 0.0
+    data.ctrl[:] = 0.0
+    mujoco.mj_forward(model, data)
+    return data.qfrc_passive - data.qfrc_bias
+
+
+def settle_newton(model, data, q):
+    """Newton on settle_residual from theta = q; returns (theta, residual, iterations)."""
+    model.qpos_spring[:] = q
+    theta = np.array(q, dtype=float)
+    n = len(theta)
+    J = np.empty((n, n))
+    for it in range(1, SETTLE_MAX_NEWTON + 1):
+        r = settle_residual(model, data, theta)
+        for j in range(n):
+            tp, tm = theta.copy(), theta.copy()
+            tp[j] += SETTLE_FD_STEP
+            tm[j] -= SETTLE_FD_STEP
+            J[:, j] = (settle_residual(model, data, tp) - settle_residual(model, data, tm)) / (2 * SETTLE_FD_STEP)
+        step = np.linalg.solve(J, -r)
+        theta = theta + step
+        if np.max(np.abs(step)) < SETTLE_STEP_TOL:
+            r = settle_residual(model, data, theta)
+            return theta, float(np.max(np.abs(r))), it
+    raise CheckError("settle: Newton did not converge in %d iterations at q = %r" % (SETTLE_MAX_NEWTON, list(q)))
+
+
+def settle_dynamic(model, data, q, stiffness):
+    """Settles by simulation (see the section comment); returns theta at rest."""
+    n = len(q)
+    model.qpos_spring[:] = q
+    data.qpos[:] = q
+    data.qvel[:] = 0.0
+    mujoco.mj_forward(model, data)
+    M = np.zeros((model.nv, model.nv))
+    mujoco.mj_fullM(model, data, M)
+    inertia = 1.0 / np.diag(np.linalg.inv(M + SETTLE_DYN_ARMATURE * np.eye(n)))
+    saved = (model.dof_damping.copy(), model.dof_armature.copy(), model.opt.timestep, model.opt.integrator)
+    model.dof_damping[:] = 2.0 * np.sqrt(np.array(stiffness) * inertia)
+    model.dof_armature[:] = SETTLE_DYN_ARMATURE
+    model.opt.timestep = SETTLE_DYN_DT
+    model.opt.integrator = mujoco.mjtIntegrator.mjINT_EULER
+    try:
+        steps = 0
+        while steps < SETTLE_DYN_MAX_STEPS:
+            mujoco.mj_step(model, data, nstep=100)
+            steps += 100
+            if np.max(np.abs(data.qvel)) < 1e-11:
+                return data.qpos.copy(), steps
+        raise CheckError("settle: the dynamic check did not come to rest in %d steps" % SETTLE_DYN_MAX_STEPS)
+    finally:
+        model.dof_damping[:], model.dof_armature[:], model.opt.timestep, model.opt.integrator = saved
+
+
+def payload_desc(desc, payload_kg):
+    """desc with the payload as one more link behind a fixed joint at the tip, for numpy_reference."""
+    if payload_kg == 0.0:
+        return desc
+    d = dict(desc)
+    d["links"] = dict(desc["links"])
+    d["joints"] = dict(desc["joints"])
+    d["links"]["robocal_payload"] = (payload_kg, np.zeros(3), np.zeros((3, 3)))
+    d["joints"]["robocal_payload"] = dict(name="robocal_payload_joint", type="fixed", parent=desc["tip"],
+                                          child="robocal_payload", xyz=np.array(SETTLE_PAYLOAD_COM), R=np.eye(3),
+                                          axis=np.array([1.0, 0.0, 0.0]), lower=None, upper=None)
+    return d
+
+
+def compute_settle(robot, path, rel_label, tip):
+    xml, desc = load_urdf(path, tip)
+    with open(path, "rb") as f:
+        sha = hashlib.sha256(f.read()).hexdigest()
+    n = len(desc["movable"])
+    if massless_moving_links(desc):
+        raise UrdfError("%s: the settle experiment needs a mass on every moving link" % path)
+    lower = np.array([j["lower"] for j in desc["movable"]])
+    upper = np.array([j["upper"] for j in desc["movable"]])
+    Q = np.random.default_rng(SETTLE_SEED).uniform(lower, upper, size=(N_SETTLE, n))
+    rows = []
+    worst = {"residual": 0.0, "numpy": 0.0, "numpy_pos": 0.0, "dynamic": 0.0, "newton": 0, "sag": 0.0}
+    for name, stiffness in SETTLE_STIFFNESS:
+        if len(stiffness) != n:
+            raise CheckError("%s: stiffness set %s has %d entries for %d joints" % (robot, name, len(stiffness), n))
+        K = np.array(stiffness)
+        for payload_kg in SETTLE_PAYLOAD_KG:
+            model = build_settle_model(xml, desc, stiffness, payload_kg)
+            data = mujoco.MjData(model)
+            root_id, tip_id = model.body(desc["root"]).id, model.body(tip).id
+            pdesc = payload_desc(desc, payload_kg)
+            for k in range(N_SETTLE):
+                q = Q[k]
+                theta, res, its = settle_newton(model, data, q)
+                p, R, _tau = mujoco_eval(model, data, root_id, tip_id, theta)
+                pn, Rn, taun = numpy_reference(pdesc, theta)
+                worst["residual"] = max(worst["residual"], res)
+                worst["numpy"] = max(worst["numpy"], float(np.max(np.abs(K * (q - theta) - taun))))
+                worst["numpy_pos"] = max(worst["numpy_pos"], float(np.max(np.abs(p - pn))), float(np.max(np.abs(R - Rn))))
+                worst["newton"] = max(worst["newton"], its)
+                worst["sag"] = max(worst["sag"], float(np.max(np.abs(q - theta))))
+                if k < SETTLE_DYN_CHECK:
+                    theta_dyn, _steps = settle_dynamic(model, data, q, stiffness)
+                    worst["dynamic"] = max(worst["dynamic"], float(np.max(np.abs(theta_dyn - theta))))
+                rows.append([float(k)] + list(K) + [payload_kg] + list(SETTLE_PAYLOAD_COM) + list(q) + list(theta)
+                            + list(p) + list(R.ravel()) + [res])
+    if worst["residual"] > SETTLE_RESIDUAL_TOL:
+        raise CheckError("%s: settle residual %.3g N m > %g" % (robot, worst["residual"], SETTLE_RESIDUAL_TOL))
+    if worst["numpy"] > SETTLE_NUMPY_TOL or worst["numpy_pos"] > SELF_POS_TOL:
+        raise CheckError("%s: settled poses fail the numpy URDF cross-check: torque %.3g N m, pose %.3g"
+                         % (robot, worst["numpy"], worst["numpy_pos"]))
+    if worst["dynamic"] > SETTLE_DYN_TOL:
+        raise CheckError("%s: dynamic settle and Newton root differ by %.3g rad > %g"
+                         % (robot, worst["dynamic"], SETTLE_DYN_TOL))
+
+    header = (["config"] + ["k%d" % (i + 1) for i in range(n)] + ["payload_kg", "payload_x", "payload_y", "payload_z"]
+              + ["q%d" % (i + 1) for i in range(n)] + ["theta%d" % (i + 1) for i in range(n)] + ["px", "py", "pz"]
+              + ["r%d%d" % (i, j) for i in (1, 2, 3) for j in (1, 2, 3)] + ["residual"])
+    comments = [
+        "generated by %s -- do not edit; regenerate with: python %s" % (SCRIPT_REL, SCRIPT_REL),
+        "mujoco %s, numpy %s" % (mujoco.__version__, np.__version__),
+        "urdf: %s" % rel_label,
+        "urdf sha256: %s" % sha,
+        "root link: %s (frame of px..r33); tip link: %s" % (desc["root"], tip),
+        "joints (root to tip): %s" % " ".join("%s(%s)" % (j["name"], j["type"]) for j in desc["movable"]),
+        "experiment: compliant joints at rest under gravity; joint i is a linear spring of stiffness k_i between the "
+        "commanded angle q_i and the link-side angle theta_i (MuJoCo joint stiffness [k_i, 0, 0], springref = q_i); "
+        "theta solves K (q - theta) = tau_g(theta), i.e. qfrc_passive = qfrc_bias at qvel = 0, by Newton on "
+        "MuJoCo's forces to |step| < %g rad" % SETTLE_STEP_TOL,
+        "configurations: %d, numpy.random.default_rng(%d).uniform(lower, upper, size=(%d, %d)) within the URDF "
+        "limits; every configuration for every stiffness set and payload, in the order stiffness set, payload, "
+        "configuration" % (N_SETTLE, SETTLE_SEED, N_SETTLE, n),
+        "stiffness sets [N m/rad]: %s" % "; ".join("%s = %s" % (nm, ", ".join(repr(v) for v in ks))
+                                                   for nm, ks in SETTLE_STIFFNESS),
+        "payload: point mass of payload_kg at (payload_x, payload_y, payload_z) in the tip link frame, welded to it "
+        "(masses %s kg)" % ", ".join(repr(m) for m in SETTLE_PAYLOAD_KG),
+        "gravity: (%r, %r, %r) m/s^2 in the root link frame; contacts and joint limits disabled; no joint damping, "
+        "friction or armature" % GRAVITY,
+        "self-checks: max |qfrc_passive - qfrc_bias| %.1e N m; numpy URDF torque balance %.1e N m, pose %.1e; "
+        "Newton iterations <= %d; largest sag %.4f rad; dynamic settle (mj_step) of the first %d configurations "
+        "per case agrees to %.1e rad"
+        % (worst["residual"], worst["numpy"], worst["numpy_pos"], worst["newton"], worst["sag"], SETTLE_DYN_CHECK,
+           worst["dynamic"]),
+        "columns: config 0-based index of the configuration; k1..k%d joint stiffness [N m/rad]; payload_kg [kg], "
+        "payload_x..z [m]; q1..q%d commanded joint angles [rad]; theta1..theta%d settled link-side angles [rad]; "
+        "px,py,pz settled tip position in the root frame [m]; r11..r33 settled tip rotation, row-major [1]; "
+        "residual max |qfrc_passive - qfrc_bias| at theta [N m]" % (n, n, n),
+        "numbers are Python repr() of float64 (round-trip exact)",
+    ]
+    text = "".join("# " + c + "\n" for c in comments)
+    text += ",".join(header) + "\n"
+    text += "".join(",".join(fmt(x) for x in r) + "\n" for r in rows)
+    return text, worst
+
+
+def compare_settle(robot, text, other_path):
+    """Returns (ok, worst difference, message). Inputs (config, k, payload, q) must match exactly; theta,
+    pose within SETTLE_COMPARE_TOL; the residual column only has to stay below SETTLE_RESIDUAL_TOL."""
+    try:
+        with open(other_path) as f:
+            h2, r2 = parse_csv(f.read())
+    except (OSError, ValueError, IndexError) as e:
+        return False, math.inf, "%s: cannot read %s: %s" % (robot, other_path, e)
+    h1, r1 = parse_csv(text)
+    if h1 != h2:
+        return False, math.inf, "%s: header differs from %s" % (robot, other_path)
+    if len(r1) != len(r2):
+        return False, math.inf, "%s: %d rows here, %d in %s" % (robot, len(r1), len(r2), other_path)
+    exact = {c for c, h in enumerate(h1) if h == "config" or h.startswith(("k", "payload", "q"))}
+    res_col = h1.index("residual")
+    worst = (0.0, 1, h1[0])
+    for i, (a, b) in enumerate(zip(r1, r2)):
+        for c, (x, y) in enumerate(zip(a, b)):
+            if c in exact and x != y:
+                return False, math.inf, "%s: row %d column %s: input differs (%r vs %r)" % (robot, i + 1, h1[c], x, y)
+            if c == res_col:
+                if not (y <= SETTLE_RESIDUAL_TOL):
+                    return False, math.inf, "%s: row %d: residual %r in %s" % (robot, i + 1, y, other_path)
+                continue
+            d = abs(x - y)
+            if math.isnan(d):
+                d = math.inf
+            if d > worst[0]:
+                worst = (d, i + 1, h1[c])
+    msg = "%s settle: worst |difference| %.3g at row %d column %s (vs %s)" % (robot, worst[0], worst[1], worst[2],
+                                                                            other_path)
+    return worst[0] <= SETTLE_COMPARE_TOL, worst[0], msg
+
+
 def write_atomic(path, text):
     d = os.path.dirname(path)
     os.makedirs(d, exist_ok=True)
@@ -586,7 +874,12 @@ def main(argv=None):
     ap.add_argument("--robots", default=None, help="comma-separated robot names (default: all that exist)")
     ap.add_argument("--compare-to", default=None, metavar="DIR",
                     help="compare with the files of the same name in DIR; exit 1 on a difference > %g" % COMPARE_TOL)
+    ap.add_argument("--experiment", choices=("all", "kinematics", "settle"), default="all",
+                    help="which golden files to compute: kinematics_<robot>.csv, settle_<robot>.csv (robots %s "
+                         "only), or both (default)" % ", ".join(sorted(SETTLE_ROBOTS)))
     args = ap.parse_args(argv)
+    do_kin = args.experiment in ("all", "kinematics")
+    do_settle = args.experiment in ("all", "settle")
 
     explicit = args.robots is not None
     names = [r.strip() for r in args.robots.split(",") if r.strip()] if explicit else list(ROBOTS)
@@ -596,6 +889,7 @@ def main(argv=None):
             return 2
 
     results = []
+    settle_results = []
     for r in names:
         base, rel, tip = ROBOTS[r]
         base_dir = REPO if base == "repo" else args.shared
@@ -607,19 +901,33 @@ def main(argv=None):
                 return 2
             print("skip %s: %s not found" % (r, path))
             continue
-        try:
-            text, checks, worst = compute_robot(r, path, label, tip)
-        except UrdfError as e:
-            print("error: %s: %s" % (r, e), file=sys.stderr)
-            return 2
-        except CheckError as e:
-            print("check failed: %s" % e, file=sys.stderr)
-            return 3
-        for c in checks:
-            print("check " + c)
-        print("%s: %d configurations; numpy cross-check max |diff| pos %.1e m, rot %.1e, tau %.1e N m"
-              % (r, N_CONFIGS, worst["pos"], worst["rot"], worst["tau"]))
-        results.append((r, text))
+        if do_kin:
+            try:
+                text, checks, worst = compute_robot(r, path, label, tip)
+            except UrdfError as e:
+                print("error: %s: %s" % (r, e), file=sys.stderr)
+                return 2
+            except CheckError as e:
+                print("check failed: %s" % e, file=sys.stderr)
+                return 3
+            for c in checks:
+                print("check " + c)
+            print("%s: %d configurations; numpy cross-check max |diff| pos %.1e m, rot %.1e, tau %.1e N m"
+                  % (r, N_CONFIGS, worst["pos"], worst["rot"], worst["tau"]))
+            results.append((r, text))
+        if do_settle and r in SETTLE_ROBOTS:
+            try:
+                text, worst = compute_settle(r, path, label, tip)
+            except UrdfError as e:
+                print("error: %s: %s" % (r, e), file=sys.stderr)
+                return 2
+            except CheckError as e:
+                print("check failed: %s" % e, file=sys.stderr)
+                return 3
+            print("%s settle: %d rows; residual %.1e N m; numpy torque balance %.1e N m; dynamic settle vs Newton "
+                  "%.1e rad; largest sag %.4f rad" % (r, N_SETTLE * len(SETTLE_STIFFNESS) * len(SETTLE_PAYLOAD_KG),
+                                                      worst["residual"], worst["numpy"], worst["dynamic"], worst["sag"]))
+            settle_results.append((r, text))
 
     # compare before writing, so that --out and --compare-to may name the same directory
     status = 0
@@ -630,6 +938,11 @@ def main(argv=None):
             print(("OK " if ok else "MISMATCH ") + msg)
             if not ok:
                 failed.append((d, msg))
+        for r, text in settle_results:
+            ok, d, msg = compare_settle(r, text, os.path.join(args.compare_to, "settle_%s.csv" % r))
+            print(("OK " if ok else "MISMATCH ") + msg)
+            if not ok:
+                failed.append((d, msg))
         if failed:
             print("compare failed (tolerance %g, q exact); worst: %s" % (COMPARE_TOL, max(failed)[1]),
                   file=sys.stderr)
@@ -637,6 +950,10 @@ def main(argv=None):
 
     for r, text in results:
         out = os.path.join(args.out, "kinematics_%s.csv" % r)
+        write_atomic(out, text)
+        print("wrote %s" % out)
+    for r, text in settle_results:
+        out = os.path.join(args.out, "settle_%s.csv" % r)
         write_atomic(out, text)
         print("wrote %s" % out)
     return status

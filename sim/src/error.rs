@@ -90,7 +90,98 @@ pub enum SimError {
         /// Built-in names.
         known: String,
     },
+    /// A measurement table (CSV or Parquet, `shared/spec/measurements.md`) is malformed or does not fit
+    /// the robot. Displayed on one line as `data.csv: row 17 (line 18), column q3: 'abc' is not a number`.
+    #[error("{file}{}: {message}", table_location(.row, .line, .column))]
+    Table {
+        /// File name as given (or a description such as `<measurement table>` for in-memory tables).
+        file: String,
+        /// 1-based data row (row 1 is the first row after the header), when the problem is in one row.
+        row: Option<usize>,
+        /// 1-based line of the text file holding that row (CSV only; counts the header and blank lines).
+        line: Option<usize>,
+        /// Column name, when the problem is in one column.
+        column: Option<String>,
+        /// What is wrong, with the offending value.
+        message: String,
+    },
+    /// An injected-effect parameter is out of its domain, or its length does not fit the robot.
+    /// Displayed as `joint_compliance: stiffness[3] = -5: must be > 0 N m/rad (inf = rigid)`.
+    #[error("{effect}: {field} = {value}: {problem}")]
+    BadEffect {
+        /// Effect name as in the scenario files: `kinematic_offsets`, `joint_compliance`,
+        /// `gear_backlash`, `thermal_drift`.
+        effect: &'static str,
+        /// Field, with a 0-based index where it is a list entry (e.g. `stiffness[3]`).
+        field: String,
+        /// The offending value (or length), as text.
+        value: String,
+        /// What is wrong with it.
+        problem: String,
+    },
+    /// The conditions of one simulated measurement (joint values, directions, temperature, payload,
+    /// gravity, target offset) are unusable.
+    #[error("measurement conditions: {field} = {value}: {problem}")]
+    BadCondition {
+        /// Field, e.g. `dir[2]` (0-based) or `payload.mass`.
+        field: String,
+        /// The offending value, as text.
+        value: String,
+        /// What is wrong with it.
+        problem: String,
+    },
+    /// A scenario file (TOML) is malformed, or asks for something that cannot be simulated. Displayed on
+    /// one line as `iiwa7.toml: effects.compliance.stiffness_nm_per_rad[2]: -5e4 must be > 0 N m/rad`.
+    #[error("{file}: {key}: {message}")]
+    Scenario {
+        /// Scenario file name as given.
+        file: String,
+        /// Dotted key path (with a 0-based index for list entries), or `line L, [section] key` for
+        /// TOML syntax and type errors.
+        key: String,
+        /// What is wrong, with the offending value.
+        message: String,
+    },
+    /// The joint-compliance equilibrium `K (q - θ) = τ_g(θ)` has no solution near the commanded pose
+    /// (joints too soft for the load) or the iteration failed to converge.
+    #[error("joint compliance: no equilibrium found: {reason}")]
+    ComplianceDiverged {
+        /// What happened, with the iteration count and the size of the last step.
+        reason: String,
+    },
+    /// A setting of the rapier physics-engine truth ([`crate::rapier_truth`]) is out of its domain.
+    #[error("rapier truth: {field} = {value}: {problem}")]
+    BadSettleOption {
+        /// Setting, e.g. `dt` or `stiffness_nm_per_rad[2]`.
+        field: String,
+        /// The offending value, as text.
+        value: String,
+        /// What is wrong with it.
+        problem: String,
+    },
+    /// The rapier physics-engine truth did not come to rest within its step budget (or ran away).
+    #[error("rapier truth: not settled: {reason}")]
+    NotSettled {
+        /// What happened, with the step count, the last joint speed and the torque residual.
+        reason: String,
+    },
 }
 
 /// Result alias for the `sim` crate.
 pub type Result<T> = std::result::Result<T, SimError>;
+
+/// `: row R (line L), column C` part of a [`SimError::Table`] message (empty parts left out).
+fn table_location(row: &Option<usize>, line: &Option<usize>, column: &Option<String>) -> String {
+    let mut s = String::new();
+    if let Some(r) = row {
+        s.push_str(&format!(": row {r}"));
+        if let Some(l) = line {
+            s.push_str(&format!(" (line {l})"));
+        }
+    }
+    if let Some(c) = column {
+        s.push_str(if row.is_some() { ", column " } else { ": column " });
+        s.push_str(c);
+    }
+    s
+}

@@ -24,14 +24,19 @@
 //! ```
 #![warn(missing_docs)]
 
+pub mod campaign;
 pub mod effects;
 pub mod error;
+pub mod generate;
 pub mod kinematics;
 pub mod lie;
 pub mod measurement_table;
 pub mod model;
+pub mod rapier_truth;
 pub mod robots;
+pub mod scenario;
 pub mod statics;
+pub mod tracker;
 pub mod trig;
 pub mod urdf;
 

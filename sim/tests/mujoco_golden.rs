@@ -16,7 +16,14 @@ const ROTATION_TOL_RAD: f64 = 1e-9;
 /// Gravity torque agreement, relative to the configuration's largest torque magnitude.
 const TORQUE_REL_TOL: f64 = 1e-9;
 /// Robots the script must have written.
-const ROBOTS: &[&str] = &["iiwa7", "ur5", "ur10", "wam", "iiwa_stack_iiwa7", "lbr_stack_iiwa7"];
+const ROBOTS: &[&str] = &[
+    "iiwa7",
+    "ur5",
+    "ur10",
+    "wam",
+    "iiwa_stack_iiwa7",
+    "lbr_stack_iiwa7",
+];
 
 struct Golden {
     urdf: PathBuf,
@@ -27,8 +34,7 @@ struct Golden {
 }
 
 fn read_golden(path: &Path) -> Golden {
-    let text = std::fs::read_to_string(path)
-        .unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    let text = std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
     let mut urdf = None;
     let (mut base, mut tip) = (String::new(), String::new());
     let mut header = Vec::new();
@@ -64,7 +70,11 @@ fn read_golden(path: &Path) -> Golden {
 fn check_dir(dir: &Path) {
     for robot in ROBOTS {
         let path = dir.join(format!("kinematics_{robot}.csv"));
-        assert!(path.exists(), "{} is missing: run scripts/mujoco_reference.py", path.display());
+        assert!(
+            path.exists(),
+            "{} is missing: run scripts/mujoco_reference.py",
+            path.display()
+        );
         let g = read_golden(&path);
         let spec = ChainSpec {
             base_link: Some(g.base.clone()),
@@ -73,7 +83,12 @@ fn check_dir(dir: &Path) {
         let model = load_file(&g.urdf, &spec).unwrap();
         let n = model.nq();
         assert_eq!(g.header.len(), 2 * n + 12, "{}: columns", path.display());
-        assert!(g.rows.len() >= 500, "{}: only {} rows", path.display(), g.rows.len());
+        assert!(
+            g.rows.len() >= 500,
+            "{}: only {} rows",
+            path.display(),
+            g.rows.len()
+        );
         let mut data = Data::new(&model);
         let gravity = Vector3::new(0.0, 0.0, -9.81);
         let (mut worst_p, mut worst_r, mut worst_t) = (0.0f64, 0.0f64, 0.0f64);
@@ -85,16 +100,28 @@ fn check_dir(dir: &Path) {
             let dp = (data.flange.translation.vector - p_ref).norm();
             let dr = rotation_angle(&(data.flange.rotation.matrix().transpose() * r_ref));
             let tau_ref = &row[n + 12..];
-            let scale = tau_ref.iter().fold(0.0f64, |a, t| a.max(t.abs())).max(1e-12);
+            let scale = tau_ref
+                .iter()
+                .fold(0.0f64, |a, t| a.max(t.abs()))
+                .max(1e-12);
             let dt = data
                 .gravity_torque
                 .iter()
                 .zip(tau_ref)
                 .fold(0.0f64, |a, (x, y)| a.max((x - y).abs()))
                 / scale;
-            assert!(dp < POSITION_TOL_M, "{robot} row {k}: position off by {dp:e} m");
-            assert!(dr < ROTATION_TOL_RAD, "{robot} row {k}: rotation off by {dr:e} rad");
-            assert!(dt < TORQUE_REL_TOL, "{robot} row {k}: torque off by {dt:e} (relative)");
+            assert!(
+                dp < POSITION_TOL_M,
+                "{robot} row {k}: position off by {dp:e} m"
+            );
+            assert!(
+                dr < ROTATION_TOL_RAD,
+                "{robot} row {k}: rotation off by {dr:e} rad"
+            );
+            assert!(
+                dt < TORQUE_REL_TOL,
+                "{robot} row {k}: torque off by {dt:e} (relative)"
+            );
             worst_p = worst_p.max(dp);
             worst_r = worst_r.max(dr);
             worst_t = worst_t.max(dt);
@@ -108,7 +135,11 @@ fn check_dir(dir: &Path) {
 
 /// Angle of a rotation matrix (rad), accurate near zero (atan2, not acos of the trace).
 fn rotation_angle(a: &Matrix3<f64>) -> f64 {
-    let v = Vector3::new(a[(2, 1)] - a[(1, 2)], a[(0, 2)] - a[(2, 0)], a[(1, 0)] - a[(0, 1)]);
+    let v = Vector3::new(
+        a[(2, 1)] - a[(1, 2)],
+        a[(0, 2)] - a[(2, 0)],
+        a[(1, 0)] - a[(0, 1)],
+    );
     (0.5 * v.norm()).atan2(0.5 * (a.trace() - 1.0))
 }
 

@@ -1,12 +1,217 @@
-//! `robocal calibrate` (being written).
+//! `robocal calibrate`: identify the kinematic error model from a measurement table.
 
-use super::{CliError, CliResult};
+use super::{CliError, CliResult, print_json, robot_arg::RobotArgs};
+use calib::CalibError;
+use calib::calibrate::{CalibrationOptions, Dataset, RobustLoss, calibrate};
+use calib::model_file::{CalibratedModel, calibrated_urdf, urdf_deviation};
+use calib::robot::Robot;
+use calib::stats::split_by_pose;
+use serde_json::json;
+use sim::ChainSpec;
+use sim::measurement_table::{self, MeasurementTable};
+use std::path::{Path, PathBuf};
 
 /// Arguments of `robocal calibrate`.
 #[derive(clap::Args, Debug)]
-pub struct Args {}
+pub struct Args {
+    #[command(flatten)]
+    robot: RobotArgs,
+    /// Measurement table (.csv or .parquet, see the measurement contract).
+    #[arg(long, value_name = "FILE")]
+    data: PathBuf,
+    /// Error model: `kinematic` (joint error twists, zero offsets, base and target).
+    #[arg(long, value_name = "MODEL", default_value = "kinematic")]
+    model: String,
+    /// Where to write the calibrated model (JSON, with the robot embedded).
+    #[arg(long, value_name = "MODEL.json")]
+    out: PathBuf,
+    /// Held-out measurements for validation (instead of splitting --data).
+    #[arg(long, value_name = "FILE")]
+    test_data: Option<PathBuf>,
+    /// Fraction of the poses of --data held out for validation (0 = calibrate on everything).
+    /// Repeated measurements of a pose stay together.
+    #[arg(long, value_name = "F", default_value_t = 0.3)]
+    test_fraction: f64,
+    /// Seed of the train/test split.
+    #[arg(long, value_name = "N", default_value_t = 0)]
+    seed: u64,
+    /// Robust loss against outliers (iteratively reweighted): `huber` or `cauchy`.
+    #[arg(long, value_name = "LOSS")]
+    robust: Option<String>,
+    /// Also write a URDF of the calibrated robot (joint origins adjusted).
+    #[arg(long, value_name = "FILE.urdf")]
+    urdf_out: Option<PathBuf>,
+    /// Print one JSON document on stdout instead of text on stderr.
+    #[arg(long)]
+    json: bool,
+}
+
+/// Error models of the next version, refused with a clear message.
+const LATER_MODELS: &[&str] = &["joint_compliance", "gear_backlash", "thermal_drift", "auto"];
+
+/// Checks `--model`; only `kinematic` is available.
+pub(crate) fn check_model(name: &str) -> Result<(), CliError> {
+    if name == "kinematic" {
+        return Ok(());
+    }
+    let known =
+        |p: &str| p == "kinematic" || LATER_MODELS.contains(&p) || p.starts_with("learned:");
+    if name.split('+').all(known) {
+        return Err(CliError::Input(
+            CalibError::UnsupportedModel {
+                name: name.to_string(),
+            }
+            .to_string(),
+        ));
+    }
+    let bad: Vec<&str> = name.split('+').filter(|p| !known(p)).collect();
+    Err(CliError::Input(format!(
+        "--model {name}: unknown model part '{}' (known: kinematic, joint_compliance, gear_backlash, \
+         thermal_drift, auto, learned:...)",
+        bad.join("', '")
+    )))
+}
+
+/// Reads a measurement table and checks it against the robot; warnings go to stderr.
+pub(crate) fn read_table(path: &Path, robot: &sim::Model) -> Result<MeasurementTable, CliError> {
+    let table = measurement_table::read(path)?;
+    for w in measurement_table::check_against_model(&table, robot, path)? {
+        eprintln!("warning: {w}");
+    }
+    Ok(table)
+}
+
+fn input(e: CalibError) -> CliError {
+    match e {
+        CalibError::Io { .. } => CliError::Runtime(e.to_string()),
+        _ => CliError::Input(e.to_string()),
+    }
+}
 
 /// Runs `robocal calibrate`.
-pub fn run(_args: Args) -> CliResult {
-    Err(CliError::Runtime("not implemented yet".into()))
+pub fn run(args: Args) -> CliResult {
+    check_model(&args.model)?;
+    let robust = match args.robust.as_deref() {
+        None => None,
+        Some("huber") => Some(RobustLoss::HUBER),
+        Some("cauchy") => Some(RobustLoss::CAUCHY),
+        Some(other) => {
+            return Err(CliError::Input(format!(
+                "--robust {other}: unknown loss (huber or cauchy)"
+            )));
+        }
+    };
+    if !(0.0..1.0).contains(&args.test_fraction) {
+        return Err(CliError::Input(format!(
+            "--test-fraction {}: must be in [0, 1)",
+            args.test_fraction
+        )));
+    }
+    let spec = ChainSpec {
+        base_link: args.robot.base_link.clone(),
+        tip_link: args.robot.tip_link.clone(),
+    };
+    let robot = Robot::load(&args.robot.robot, &spec).map_err(input)?;
+    let model = &robot.model;
+    let table = read_table(&args.data, model)?;
+    let data_name = args.data.display().to_string();
+    let test_table = match &args.test_data {
+        Some(p) => Some(read_table(p, model)?),
+        None => None,
+    };
+    let (train, test, split) = match (&test_table, &args.test_data) {
+        (Some(t), Some(p)) => (
+            Dataset::all(&table, &data_name),
+            Some(Dataset::all(t, &p.display().to_string())),
+            json!({"kind": "test_file", "test_data": p.display().to_string()}),
+        ),
+        _ => {
+            let (tr, te) = split_by_pose(&table, args.test_fraction, args.seed);
+            let split =
+                json!({"kind": "by_pose", "test_fraction": args.test_fraction, "seed": args.seed});
+            let train = Dataset {
+                table: &table,
+                rows: tr,
+                name: if te.is_empty() {
+                    data_name.clone()
+                } else {
+                    format!("{data_name} (training set)")
+                },
+            };
+            let test = (!te.is_empty()).then(|| Dataset {
+                table: &table,
+                rows: te,
+                name: format!("{data_name} (test set)"),
+            });
+            (train, test, split)
+        }
+    };
+    let options = CalibrationOptions {
+        robust,
+        ..CalibrationOptions::default()
+    };
+    let cal = calibrate(model, &train, test.as_ref(), &options).map_err(|e| {
+        let mut m = input(e);
+        if let CliError::Input(s) = &mut m
+            && args.test_data.is_none()
+            && args.test_fraction > 0.0
+            && s.contains("distinct poses give")
+        {
+            s.push_str(&format!(
+                " (--test-fraction {} held out part of the poses; --test-fraction 0 uses all)",
+                args.test_fraction
+            ));
+        }
+        m
+    })?;
+    let report = &cal.report;
+    if !report.was_successful() {
+        let msg = format!(
+            "calibration did not converge: {} after {} iterations",
+            report.after.solver.termination, report.after.solver.iterations
+        );
+        if args.json {
+            print_json(&json!({"error": msg, "report": report}))?;
+        } else {
+            eprint!("{}", report.text());
+        }
+        return Err(CliError::Runtime(msg));
+    }
+    let file = CalibratedModel::new(&robot, &cal);
+    calib::io::write_atomic(&args.out, file.to_json().as_bytes()).map_err(input)?;
+    if let Some(path) = &args.urdf_out {
+        let urdf = calibrated_urdf(model, &cal.params);
+        let configs: Vec<Vec<f64>> = train
+            .rows
+            .iter()
+            .take(200)
+            .map(|&r| table.q_row(r).to_vec())
+            .collect();
+        let dev = urdf_deviation(model, &cal.params, &urdf, &configs).map_err(input)?;
+        if dev > 1e-9 {
+            return Err(CliError::Runtime(format!(
+                "{}: the calibrated URDF deviates from the model by {dev:.1e} (m or rotation entry); not written",
+                path.display()
+            )));
+        }
+        calib::io::write_atomic(path, urdf.as_bytes()).map_err(input)?;
+    }
+    if args.json {
+        print_json(&json!({
+            "robot": model.name,
+            "model": "kinematic",
+            "data": data_name,
+            "out": args.out.display().to_string(),
+            "urdf_out": args.urdf_out.as_ref().map(|p| p.display().to_string()),
+            "split": split,
+            "report": report,
+        }))
+    } else {
+        eprint!("{}", report.text());
+        eprintln!("wrote {}", args.out.display());
+        if let Some(p) = &args.urdf_out {
+            eprintln!("wrote {}", p.display());
+        }
+        Ok(())
+    }
 }

@@ -1,12 +1,113 @@
-//! `robocal predict` (being written).
+//! `robocal predict`: where a calibrated model says the target is, for every row of a table.
 
-use super::{CliError, CliResult};
+use super::{CliError, CliResult, print_json};
+use calib::CalibError;
+use calib::model_file::{CalibratedModel, Predictor, calibrated_urdf, urdf_deviation};
+use serde_json::json;
+use sim::SimError;
+use sim::measurement_table::{self, MeasurementTable};
+use std::path::{Path, PathBuf};
 
 /// Arguments of `robocal predict`.
 #[derive(clap::Args, Debug)]
-pub struct Args {}
+pub struct Args {
+    /// Calibrated model written by `robocal calibrate`.
+    #[arg(long, value_name = "MODEL.json")]
+    model: PathBuf,
+    /// Joint configurations: a measurement table (its x, y, z are ignored), or a CSV with `pose, q1..qN`.
+    #[arg(long, value_name = "FILE")]
+    data: PathBuf,
+    /// Where to write `pose,x,y,z` (and `qw,qx,qy,qz` with orientation), tracker frame, m.
+    #[arg(long, value_name = "PRED.csv")]
+    out: PathBuf,
+    /// Also write a URDF of the calibrated robot (joint origins adjusted).
+    #[arg(long, value_name = "FILE.urdf")]
+    urdf_out: Option<PathBuf>,
+    /// Print one JSON summary on stdout instead of text on stderr.
+    #[arg(long)]
+    json: bool,
+}
+
+fn err(e: CalibError) -> CliError {
+    match e {
+        CalibError::Io { .. } => CliError::Runtime(e.to_string()),
+        _ => CliError::Input(e.to_string()),
+    }
+}
+
+/// A table of joint values: the measurement contract, or (CSV without x, y, z) just `pose, q1..qN`.
+fn read_configs(path: &Path, robot: &sim::Model) -> Result<MeasurementTable, CliError> {
+    let table = match measurement_table::read(path) {
+        Ok(t) => t,
+        Err(SimError::Table {
+            column: Some(c), ..
+        }) if matches!(c.as_str(), "x" | "y" | "z")
+            && path
+                .extension()
+                .is_some_and(|e| e.eq_ignore_ascii_case("csv")) =>
+        {
+            calib::io::read_joint_csv(path).map_err(err)?
+        }
+        Err(e) => return Err(e.into()),
+    };
+    if table.n_joints != robot.nq() {
+        return Err(CliError::Input(format!(
+            "{}: {} joint columns, but the model's robot '{}' has {} joints",
+            path.display(),
+            table.n_joints,
+            robot.name,
+            robot.nq()
+        )));
+    }
+    for w in measurement_table::check_against_model(&table, robot, path)? {
+        eprintln!("warning: {w}");
+    }
+    Ok(table)
+}
 
 /// Runs `robocal predict`.
-pub fn run(_args: Args) -> CliResult {
-    Err(CliError::Runtime("not implemented yet".into()))
+pub fn run(args: Args) -> CliResult {
+    let file = CalibratedModel::load(&args.model).map_err(err)?;
+    let mut predictor = Predictor::from_file(&file).map_err(err)?;
+    let table = read_configs(&args.data, &predictor.model)?;
+    let preds = predictor
+        .predict_table(&table, &args.data.display().to_string())
+        .map_err(err)?;
+    calib::io::write_atomic(&args.out, preds.to_csv().as_bytes()).map_err(err)?;
+    if let Some(path) = &args.urdf_out {
+        let urdf = calibrated_urdf(&predictor.model, &predictor.params);
+        let configs: Vec<Vec<f64>> = (0..table.len().min(200))
+            .map(|r| table.q_row(r).to_vec())
+            .collect();
+        let dev =
+            urdf_deviation(&predictor.model, &predictor.params, &urdf, &configs).map_err(err)?;
+        if dev > 1e-9 {
+            return Err(CliError::Runtime(format!(
+                "{}: the calibrated URDF deviates from the model by {dev:.1e}; not written",
+                path.display()
+            )));
+        }
+        calib::io::write_atomic(path, urdf.as_bytes()).map_err(err)?;
+    }
+    if args.json {
+        print_json(&json!({
+            "model": args.model.display().to_string(),
+            "robot": predictor.model.name,
+            "rows": table.len(),
+            "orientation": preds.orientation.is_some(),
+            "out": args.out.display().to_string(),
+            "urdf_out": args.urdf_out.as_ref().map(|p| p.display().to_string()),
+        }))
+    } else {
+        eprintln!(
+            "predicted {} rows with the calibrated '{}' model; wrote {}",
+            table.len(),
+            predictor.model.name,
+            args.out.display()
+        );
+        if let Some(p) = &args.urdf_out {
+            eprintln!("wrote {}", p.display());
+        }
+        Ok(())
+    }
 }

@@ -1,5 +1,561 @@
-//! (being written)
+//! Joint compliance: elastic joints that sag under gravity and payload.
+//!
+//! # Model
+//!
+//! Each joint `i` is a torsional spring of stiffness `kᵢ` (N m/rad; N/m for prismatic joints;
+//! `f64::INFINITY` = rigid) between the motor side, at `qᵢ` (after backlash), and the link side, at `θᵢ`.
+//! The link settles where every spring balances the holding torque of gravity and payload:
+//!
+//! ```text
+//! K (q − θ) = τ_g(θ)        ⇔        θ = q − K⁻¹ τ_g(θ)
+//! ```
+//!
+//! with `τ_g(θ) = −Σₖ Jₖ(θ)ᵀ mₖ g` (see [`crate::statics`]; the payload of
+//! [`super::Conditions::payload`] is one more mass at the flange). This is solved exactly by Newton's
+//! method on `F(θ) = θ − q + K⁻¹ τ_g(θ)` with the analytic Jacobian `I + K⁻¹ H(θ)`, where
+//! `H = ∂τ_g/∂θ` is the (symmetric) Hessian of the potential energy (refreshed while the steps exceed
+//! 10⁻⁶ rad, reused for the last, tiny ones); iteration stops when
+//! `max |Δθ| < ` [`TOLERANCE_RAD`] and fails after [`MAX_ITERATIONS`] steps or when the link strays more
+//! than [`MAX_DEFLECTION_RAD`] from the motor (no equilibrium near the commanded pose: the joints are
+//! too soft for the load). The first-order solution `θ₁ = q − K⁻¹ τ_g(q)` is returned as well; it
+//! differs from the exact one by `K⁻¹ H K⁻¹ τ_g`, second order in the compliance.
+//!
+//! # Geometry of the gravity torques
+//!
+//! `τ_g` uses the nominal model's inertials (masses, centres of mass in the joint frames) attached to
+//! the *real* joint frames: thermally grown link vectors and kinematic offsets, base error included,
+//! with gravity given in the nominal base frame. Using the nominal geometry instead would change
+//! `τ_g` by `O(ε τ_g)` for geometric errors of relative size `ε` (≈ 10⁻³), and the sag `K⁻¹ τ_g`
+//! (≈ 10⁻³ rad) by `O(ε K⁻¹ τ_g)` ≈ 10⁻⁶ rad: a product of two small effects, second order, but
+//! micrometres at the flange; the real geometry is what the physical robot feels, so the truth uses it.
+//! Centres of mass are not moved by thermal growth (see [`super::thermal_drift`]).
 
-/// (being written)
-#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct JointCompliance {}
+use super::kinematic_offsets::Chain;
+use crate::error::{Result, SimError};
+use crate::lie::Pose;
+use crate::statics::Payload;
+use nalgebra::{Point3, Vector3};
+
+/// Convergence threshold on the Newton step, `max |Δθ|` (rad; m for prismatic joints).
+pub const TOLERANCE_RAD: f64 = 1e-13;
+/// Most Newton steps before the equilibrium is declared not found.
+pub const MAX_ITERATIONS: usize = 50;
+/// Largest accepted sag `|qᵢ − θᵢ|` (rad or m): beyond it there is no equilibrium near the commanded
+/// pose worth the name (a real robot's sag is below 0.01 rad).
+pub const MAX_DEFLECTION_RAD: f64 = 0.5;
+
+const EFFECT: &str = "joint_compliance";
+
+fn bad(field: impl Into<String>, value: impl ToString, problem: impl Into<String>) -> SimError {
+    SimError::BadEffect {
+        effect: EFFECT,
+        field: field.into(),
+        value: value.to_string(),
+        problem: problem.into(),
+    }
+}
+
+/// Per-joint stiffness (see the module docs for the model).
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(try_from = "JointComplianceSpec")]
+pub struct JointCompliance {
+    /// Stiffness of each joint (N m/rad; N/m for prismatic joints), > 0; `inf` = rigid. Serialized as a
+    /// number, or the string `"inf"` for a rigid joint (JSON has no infinity).
+    #[serde(serialize_with = "serialize_stiffness")]
+    stiffness_nm_per_rad: Vec<f64>,
+}
+
+#[derive(serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+struct JointComplianceSpec {
+    stiffness_nm_per_rad: Vec<StiffnessEntry>,
+}
+
+/// A stiffness as written in a file: a number, or `"inf"` / `"rigid"`.
+#[derive(serde::Serialize, serde::Deserialize)]
+#[serde(untagged)]
+enum StiffnessEntry {
+    Number(f64),
+    Word(String),
+}
+
+fn serialize_stiffness<S: serde::Serializer>(
+    k: &[f64],
+    s: S,
+) -> std::result::Result<S::Ok, S::Error> {
+    use serde::Serialize;
+    k.iter()
+        .map(|&v| {
+            if v == f64::INFINITY {
+                StiffnessEntry::Word("inf".into())
+            } else {
+                StiffnessEntry::Number(v)
+            }
+        })
+        .collect::<Vec<_>>()
+        .serialize(s)
+}
+
+impl TryFrom<JointComplianceSpec> for JointCompliance {
+    type Error = SimError;
+    fn try_from(s: JointComplianceSpec) -> Result<Self> {
+        let mut k = Vec::with_capacity(s.stiffness_nm_per_rad.len());
+        for (i, e) in s.stiffness_nm_per_rad.into_iter().enumerate() {
+            k.push(match e {
+                StiffnessEntry::Number(v) => v,
+                StiffnessEntry::Word(w) => match w.to_ascii_lowercase().as_str() {
+                    "inf" | "infinity" | "rigid" => f64::INFINITY,
+                    _ => {
+                        return Err(bad(
+                            format!("stiffness_nm_per_rad[{i}]"),
+                            format!("'{w}'"),
+                            "must be a number (N m/rad) or \"inf\" for a rigid joint",
+                        ));
+                    }
+                },
+            });
+        }
+        JointCompliance::new(k)
+    }
+}
+
+impl JointCompliance {
+    /// Joint springs of stiffness `stiffness_nm_per_rad` (N m/rad or N/m, one per joint): each > 0, or
+    /// `f64::INFINITY` for a rigid joint. Refuses NaN, zero and negative values.
+    pub fn new(stiffness_nm_per_rad: Vec<f64>) -> Result<Self> {
+        for (i, &k) in stiffness_nm_per_rad.iter().enumerate() {
+            if k.is_nan() || k <= 0.0 {
+                return Err(bad(
+                    format!("stiffness_nm_per_rad[{i}]"),
+                    k,
+                    "must be > 0 N m/rad (inf = rigid)",
+                ));
+            }
+        }
+        Ok(JointCompliance {
+            stiffness_nm_per_rad,
+        })
+    }
+
+    /// The same stiffness (N m/rad) for all `nq` joints.
+    pub fn uniform(nq: usize, stiffness_nm_per_rad: f64) -> Result<Self> {
+        JointCompliance::new(vec![stiffness_nm_per_rad; nq])
+    }
+
+    /// Stiffness of each joint (N m/rad or N/m; infinite = rigid).
+    pub fn stiffness_nm_per_rad(&self) -> &[f64] {
+        &self.stiffness_nm_per_rad
+    }
+
+    /// Compliance `1/kᵢ` of each joint (rad/(N m) or m/N; 0 = rigid).
+    pub fn compliance(&self) -> Vec<f64> {
+        self.stiffness_nm_per_rad.iter().map(|k| 1.0 / k).collect()
+    }
+
+    /// Checks that the length fits a robot with `nq` joints.
+    pub fn check_fits(&self, nq: usize) -> Result<()> {
+        if self.stiffness_nm_per_rad.len() != nq {
+            return Err(bad(
+                "stiffness_nm_per_rad",
+                format!("{} entries", self.stiffness_nm_per_rad.len()),
+                format!("the robot has {nq} joints"),
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// Mass (kg) and centre of mass (joint frame, m) of each moving body, in chain order.
+pub(crate) type BodyMasses = [(f64, Vector3<f64>)];
+
+/// Workspace for gravity torques and the equilibrium solve on an `n`-joint chain.
+#[derive(Clone, Debug)]
+pub(crate) struct GravityWork {
+    /// Joint axes in the base frame (unit).
+    pub w: Vec<Vector3<f64>>,
+    /// First moment of everything beyond joint `i` about joint `i`'s origin, `Σ m (c − pᵢ)` (kg m).
+    pub r: Vec<Vector3<f64>>,
+    /// Mass beyond joint `i`, joint `i`'s body included (kg).
+    pub mass: Vec<f64>,
+    /// Holding torques (N m or N).
+    pub tau: Vec<f64>,
+    /// Hessian `∂τ/∂θ`, row-major n×n (N m/rad).
+    pub hess: Vec<f64>,
+    /// Newton matrix, row-major n×n.
+    pub jac: Vec<f64>,
+    /// Newton right-hand side / step.
+    pub step: Vec<f64>,
+    /// Row permutation of the LU factors in `jac`.
+    pub piv: Vec<usize>,
+    /// `wⱼ·g` per joint (m/s²).
+    pub wg: Vec<f64>,
+    /// `rⱼ·g` per joint (kg m²/s²).
+    pub rg: Vec<f64>,
+}
+
+impl GravityWork {
+    /// Workspace for `n` joints.
+    pub fn new(n: usize) -> Self {
+        GravityWork {
+            w: vec![Vector3::zeros(); n],
+            r: vec![Vector3::zeros(); n],
+            mass: vec![0.0; n],
+            tau: vec![0.0; n],
+            hess: vec![0.0; n * n],
+            jac: vec![0.0; n * n],
+            step: vec![0.0; n],
+            piv: vec![0; n],
+            wg: vec![0.0; n],
+            rg: vec![0.0; n],
+        }
+    }
+}
+
+/// Holding torques `τ_g` (into `ws.tau`) of the chain whose frames `poses` and `flange` were just
+/// evaluated, for `gravity` (base frame, m/s²); also fills `ws.w`, `ws.r`, `ws.mass` for the Hessian.
+pub(crate) fn chain_gravity_torques(
+    chain: &Chain,
+    poses: &[Pose],
+    flange: &Pose,
+    bodies: &BodyMasses,
+    payload: Option<&Payload>,
+    gravity: &Vector3<f64>,
+    ws: &mut GravityWork,
+) {
+    // Walk from the tip, as `statics::gravity_torques`: mass and first moment Σ m c beyond joint i.
+    let mut mass = 0.0;
+    let mut moment = Vector3::zeros();
+    if let Some(pl) = payload {
+        let c = flange * Point3::from(Vector3::from(pl.com));
+        mass += pl.mass;
+        moment += c.coords * pl.mass;
+    }
+    for i in (0..chain.nq()).rev() {
+        let t = &poses[i];
+        let (m, com) = &bodies[i];
+        let c = t * Point3::from(*com);
+        mass += m;
+        moment += c.coords * *m;
+        let joint = &chain.joints[i];
+        let w = t.rotation * joint.axis;
+        let r = moment - t.translation.vector * mass;
+        ws.tau[i] = if joint.rotational {
+            -w.dot(&r.cross(gravity))
+        } else {
+            -w.dot(&(gravity * mass))
+        };
+        ws.w[i] = w;
+        ws.r[i] = r;
+        ws.mass[i] = mass;
+    }
+}
+
+/// Hessian `H = ∂τ_g/∂θ` (into `ws.hess`, row-major) from the quantities of the last
+/// [`chain_gravity_torques`] call. For `j ≥ i` (joint `j` moves everything beyond `i`'s part that
+/// `τᵢ` depends on), with `rⱼ` the first moment beyond `j` about joint `j` and `mⱼ` the mass beyond `j`:
+///
+/// ```text
+/// i, j rotational:            Hᵢⱼ = −[(wᵢ·rⱼ)(wⱼ·g) − (wᵢ·wⱼ)(rⱼ·g)]
+/// i rotational, j prismatic:  Hᵢⱼ = −mⱼ wᵢ·(wⱼ × g)
+/// i prismatic:                Hᵢⱼ = 0
+/// ```
+///
+/// and `Hⱼᵢ = Hᵢⱼ` (a Hessian of the potential energy).
+pub(crate) fn chain_gravity_hessian(chain: &Chain, gravity: &Vector3<f64>, ws: &mut GravityWork) {
+    let n = chain.nq();
+    for j in 0..n {
+        ws.wg[j] = ws.w[j].dot(gravity);
+        ws.rg[j] = ws.r[j].dot(gravity);
+    }
+    for i in 0..n {
+        let wi = ws.w[i];
+        let rot_i = chain.joints[i].rotational;
+        for j in i..n {
+            let h = if !rot_i {
+                0.0
+            } else if chain.joints[j].rotational {
+                -(wi.dot(&ws.r[j]) * ws.wg[j] - wi.dot(&ws.w[j]) * ws.rg[j])
+            } else {
+                -ws.mass[j] * wi.dot(&ws.w[j].cross(gravity))
+            };
+            ws.hess[i * n + j] = h;
+            ws.hess[j * n + i] = h;
+        }
+    }
+}
+
+/// LU factorization with partial pivoting of the row-major n×n matrix `a`, in place (unit lower
+/// factor below the diagonal, upper factor above it, reciprocal pivots on it); `piv[k]` is the row
+/// swapped into position `k`. False if `a` is singular to working precision.
+fn lu_factor(a: &mut [f64], piv: &mut [usize], n: usize) -> bool {
+    for col in 0..n {
+        let mut p_row = col;
+        for row in col + 1..n {
+            if a[row * n + col].abs() > a[p_row * n + col].abs() {
+                p_row = row;
+            }
+        }
+        piv[col] = p_row;
+        let p = a[p_row * n + col];
+        if !p.is_finite() || p.abs() <= 1e-300 {
+            return false;
+        }
+        if p_row != col {
+            for k in 0..n {
+                a.swap(p_row * n + k, col * n + k);
+            }
+        }
+        let inv = 1.0 / p;
+        a[col * n + col] = inv;
+        let (upper, lower) = a.split_at_mut((col + 1) * n);
+        let pivot_row = &upper[col * n..];
+        for row in lower.chunks_exact_mut(n) {
+            let f = row[col] * inv;
+            row[col] = f;
+            for k in col + 1..n {
+                row[k] -= f * pivot_row[k];
+            }
+        }
+    }
+    true
+}
+
+/// Solves `A x = b` in place (b becomes x) with the factors of [`lu_factor`].
+fn lu_solve(a: &[f64], piv: &[usize], b: &mut [f64], n: usize) {
+    // The factorization swapped whole rows (multipliers included): permute b first, then substitute.
+    for (col, &p) in piv.iter().enumerate().take(n) {
+        b.swap(col, p);
+    }
+    for col in 0..n {
+        let bc = b[col];
+        for row in col + 1..n {
+            b[row] -= a[row * n + col] * bc;
+        }
+    }
+    for col in (0..n).rev() {
+        let row = &a[col * n..(col + 1) * n];
+        let mut s = b[col];
+        for k in col + 1..n {
+            s -= row[k] * b[k];
+        }
+        b[col] = s * row[col];
+    }
+}
+
+/// Steps larger than this (rad or m) refresh the Newton matrix; below it the last factorization is
+/// reused (its change over such a step is ~10⁻⁸ of itself, so convergence stays immediate).
+const REFRESH_STEP_RAD: f64 = 1e-6;
+
+/// Everything the equilibrium solve reads.
+pub(crate) struct Equilibrium<'a> {
+    /// The real chain.
+    pub chain: &'a Chain,
+    /// Temperature offset `ΔT` (K) the chain is evaluated at.
+    pub dt: f64,
+    /// Nominal inertials.
+    pub bodies: &'a BodyMasses,
+    /// Payload at the flange.
+    pub payload: Option<&'a Payload>,
+    /// Gravity, base frame (m/s²).
+    pub gravity: &'a Vector3<f64>,
+    /// `1/kᵢ` (rad/(N m) or m/N; 0 = rigid).
+    pub compliance: &'a [f64],
+}
+
+impl Equilibrium<'_> {
+    /// Solves `θ = q_motor − K⁻¹ τ_g(θ)` (chain angles, rad or m) into `theta`, and the first-order
+    /// solution into `first`. On entry `poses` and `flange` must hold the chain evaluated at `q_motor`
+    /// (the caller has them already; this saves one evaluation). Returns the Newton steps taken and the
+    /// flange pose at `theta`; `poses` holds the joint frames at `theta` afterwards.
+    pub fn solve(
+        &self,
+        q_motor: &[f64],
+        theta: &mut [f64],
+        first: &mut [f64],
+        poses: &mut [Pose],
+        mut flange: Pose,
+        ws: &mut GravityWork,
+    ) -> Result<(usize, Pose)> {
+        let n = self.chain.nq();
+        theta.copy_from_slice(q_motor);
+        let mut last_step = f64::NAN;
+        for it in 1..=MAX_ITERATIONS {
+            if it > 1 {
+                flange = self.chain.eval(theta, self.dt, poses);
+            }
+            chain_gravity_torques(
+                self.chain,
+                poses,
+                &flange,
+                self.bodies,
+                self.payload,
+                self.gravity,
+                ws,
+            );
+            if it == 1 {
+                for i in 0..n {
+                    first[i] = q_motor[i] - self.compliance[i] * ws.tau[i];
+                }
+            }
+            if it == 1 || last_step > REFRESH_STEP_RAD {
+                chain_gravity_hessian(self.chain, self.gravity, ws);
+                for i in 0..n {
+                    let c = self.compliance[i];
+                    for j in 0..n {
+                        let delta = if i == j { 1.0 } else { 0.0 };
+                        ws.jac[i * n + j] = delta + c * ws.hess[i * n + j];
+                    }
+                }
+                if !lu_factor(&mut ws.jac, &mut ws.piv, n) {
+                    return Err(SimError::ComplianceDiverged {
+                        reason: format!(
+                            "the stiffness matrix K + ∂τ_g/∂θ is singular at step {it} (a joint buckles under the load)"
+                        ),
+                    });
+                }
+            }
+            for i in 0..n {
+                ws.step[i] = -(theta[i] - q_motor[i] + self.compliance[i] * ws.tau[i]);
+            }
+            lu_solve(&ws.jac, &ws.piv, &mut ws.step, n);
+            let mut step = 0.0f64;
+            for i in 0..n {
+                theta[i] += ws.step[i];
+                step = step.max(ws.step[i].abs());
+                let sag = (q_motor[i] - theta[i]).abs();
+                if !sag.is_finite() || sag > MAX_DEFLECTION_RAD {
+                    return Err(SimError::ComplianceDiverged {
+                        reason: format!(
+                            "joint {} sags {sag:.3e} rad (> {MAX_DEFLECTION_RAD} rad) at step {it}: stiffness too low for the load",
+                            i + 1
+                        ),
+                    });
+                }
+            }
+            last_step = step;
+            if step < TOLERANCE_RAD {
+                let flange = self.chain.eval(theta, self.dt, poses);
+                return Ok((it, flange));
+            }
+        }
+        Err(SimError::ComplianceDiverged {
+            reason: format!(
+                "no convergence in {MAX_ITERATIONS} Newton steps (last step {last_step:.3e} rad > {TOLERANCE_RAD:e})"
+            ),
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::kinematics::Data;
+    use crate::robots;
+    use crate::statics::{DEFAULT_GRAVITY, gravity_torques};
+
+    fn bodies(m: &crate::Model) -> Vec<(f64, Vector3<f64>)> {
+        m.bodies.iter().map(|b| (b.mass, b.com)).collect()
+    }
+
+    #[test]
+    fn chain_torques_match_statics_and_hessian_matches_finite_differences() {
+        let m = robots::load_builtin("iiwa7").unwrap();
+        let chain = Chain::grown(&m, None);
+        let b = bodies(&m);
+        let g = Vector3::from(DEFAULT_GRAVITY);
+        let pl = Payload {
+            mass: 2.3,
+            com: [0.02, -0.01, 0.07],
+        };
+        let mut ws = GravityWork::new(7);
+        let mut poses = vec![Pose::identity(); 7];
+        let mut d = Data::new(&m);
+        let q = [0.3, -0.7, 1.1, 1.4, -0.5, 0.9, 0.2];
+        let f = chain.eval(&q, 0.0, &mut poses);
+        chain_gravity_torques(&chain, &poses, &f, &b, Some(&pl), &g, &mut ws);
+        gravity_torques(&m, &mut d, &q, &g, Some(&pl)).unwrap();
+        for i in 0..7 {
+            assert!((ws.tau[i] - d.gravity_torque[i]).abs() < 1e-12, "joint {i}");
+        }
+        chain_gravity_hessian(&chain, &g, &mut ws);
+        let hess = ws.hess.clone();
+        let h = 1e-6;
+        for j in 0..7 {
+            let (mut qp, mut qm) = (q, q);
+            qp[j] += h;
+            qm[j] -= h;
+            gravity_torques(&m, &mut d, &qp, &g, Some(&pl)).unwrap();
+            let tp = d.gravity_torque.clone();
+            gravity_torques(&m, &mut d, &qm, &g, Some(&pl)).unwrap();
+            for i in 0..7 {
+                let fd = (tp[i] - d.gravity_torque[i]) / (2.0 * h);
+                assert!(
+                    (fd - hess[i * 7 + j]).abs() < 1e-7,
+                    "H[{i}][{j}]: fd {fd} vs {}",
+                    hess[i * 7 + j]
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn lu_factors_solve_pivoting_systems_and_are_reusable() {
+        // [[0, 2], [3, 1]] x = [4, 5] → x = [1, 2] (hand solution; needs the row swap).
+        let mut a = [0.0, 2.0, 3.0, 1.0];
+        let mut piv = [0; 2];
+        let mut b = [4.0, 5.0];
+        assert!(lu_factor(&mut a, &mut piv, 2));
+        lu_solve(&a, &piv, &mut b, 2);
+        assert!((b[0] - 1.0).abs() < 1e-15 && (b[1] - 2.0).abs() < 1e-15);
+        // Reused factors, second right-hand side: [2, 7] → x = [2, 1].
+        let mut b = [2.0, 7.0];
+        lu_solve(&a, &piv, &mut b, 2);
+        assert!((b[0] - 2.0).abs() < 1e-15 && (b[1] - 1.0).abs() < 1e-15);
+        // 3×3 with pivoting at two levels: A = [[1, 2, 3], [4, 5, 6], [7, 8, 10]], x = [1, -1, 2]
+        // gives b = A x = [5, 11, 19] (by hand).
+        let mut a = [1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 10.0];
+        let mut piv = [0; 3];
+        let mut b = [5.0, 11.0, 19.0];
+        assert!(lu_factor(&mut a, &mut piv, 3));
+        lu_solve(&a, &piv, &mut b, 3);
+        assert!(
+            (b[0] - 1.0).abs() < 1e-14 && (b[1] + 1.0).abs() < 1e-14 && (b[2] - 2.0).abs() < 1e-14,
+            "{b:?}"
+        );
+        let mut a = [1.0, 2.0, 2.0, 4.0];
+        assert!(!lu_factor(&mut a, &mut [0; 2], 2));
+    }
+
+    #[test]
+    fn constructor_refuses_bad_stiffness_naming_the_field() {
+        for k in [0.0, -5.0, f64::NAN, f64::NEG_INFINITY] {
+            let e = JointCompliance::new(vec![1e4, k]).unwrap_err();
+            assert!(e.to_string().contains("stiffness_nm_per_rad[1]"), "{e}");
+        }
+        assert!(JointCompliance::new(vec![1e4, f64::INFINITY]).is_ok());
+        assert!(
+            JointCompliance::uniform(3, 1e4)
+                .unwrap()
+                .check_fits(7)
+                .is_err()
+        );
+    }
+
+    #[test]
+    fn infinite_stiffness_survives_json_and_toml() {
+        let c = JointCompliance::new(vec![5000.0, f64::INFINITY]).unwrap();
+        let s = serde_json::to_string(&c).unwrap();
+        assert_eq!(s, r#"{"stiffness_nm_per_rad":[5000.0,"inf"]}"#);
+        assert_eq!(serde_json::from_str::<JointCompliance>(&s).unwrap(), c);
+        let t: JointCompliance = toml::from_str("stiffness_nm_per_rad = [5000.0, inf]").unwrap();
+        assert_eq!(t, c);
+        let r: JointCompliance =
+            toml::from_str(r#"stiffness_nm_per_rad = [5000.0, "rigid"]"#).unwrap();
+        assert_eq!(r, c);
+        let e = toml::from_str::<JointCompliance>(r#"stiffness_nm_per_rad = [5000.0, "stiff"]"#)
+            .unwrap_err();
+        assert!(e.to_string().contains("stiffness_nm_per_rad[1]"), "{e}");
+        let e = toml::from_str::<JointCompliance>("stiffness_nm_per_rad = [-1.0]").unwrap_err();
+        assert!(e.to_string().contains("stiffness_nm_per_rad[0]"), "{e}");
+    }
+}

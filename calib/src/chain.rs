@@ -1,0 +1,269 @@
+//! Evaluation of the kinematic error model: predicted target position (and orientation) in the tracker
+//! frame, and its analytic Jacobian with respect to a step of every parameter.
+//!
+//! # Evaluation
+//! With `Hᵢ` the home pose of joint frame `i` (base frame, q = 0) and `Aᵢ` its local unit screw, the real
+//! screw is `Sᵢ' = Ad(Gᵢ Hᵢ) Aᵢ`, so `exp([Sᵢ'] θ) = Hᵢ' exp([Aᵢ] θ) Hᵢ'⁻¹` with `Hᵢ' = Gᵢ Hᵢ`. The product
+//! collapses into the cheap chain of local joint frames
+//!
+//! ```text
+//! F₀ = T_tracker_base,   Fᵢ = Fᵢ₋₁ Oᵢ exp([Aᵢ](qᵢ + δqᵢ)),   Oᵢ = H'ᵢ₋₁⁻¹ Hᵢ'  (H'₀ = I)
+//! T_tracker_flange = Fₙ H'ₙ⁻¹ M,   p_tracker = T_tracker_flange p_flange
+//! ```
+//!
+//! prepared once per parameter point ([`Chain::update`]).
+//!
+//! # Jacobian
+//! With `Pᵢ = T_tracker_base E₁ ⋯ Eᵢ = Fᵢ Hᵢ'⁻¹` (tracker frame; `Eᵢ = exp([Sᵢ'] θᵢ)`, `P₀ = T_tracker_base`),
+//! a step `Δξᵢ` of joint `i`'s error twist, `Sᵢ' ← Ad(exp[Δξᵢ]) Sᵢ'`, changes `Eᵢ` into
+//! `exp([Δξᵢ]) Eᵢ exp(−[Δξᵢ])`, i.e. moves the flange by the tracker-frame twist
+//! `(Ad(Pᵢ₋₁) − Ad(Pᵢ)) Δξᵢ` to first order. A twist `[ω; v]` moves the point `p` by `ω × p + v`, so the
+//! 3×6 block of `∂p_tracker/∂ξᵢ` is `A(Pᵢ₋₁) − A(Pᵢ)` with `A(R, t) = [ −[p − t] R , R ]`, and the
+//! rotation block is `[Rᵢ₋₁ − Rᵢ , 0]`. A zero offset moves the flange by the joint's current screw
+//! (`ωᵢ × (p − oᵢ)` for a revolute joint with axis `ωᵢ` through `oᵢ`, `ωᵢ` for a prismatic one), the
+//! base twist `β` by `[−[p], I]`, the target position by `R_tracker_flange`, and the target rotation
+//! `ρ` (target frame) turns the target by `R_tracker_target ρ`.
+
+use crate::params::{KinematicParams, ParamLayout};
+use nalgebra::{Matrix3, Vector3};
+use sim::lie::{Pose, pose_from};
+use sim::{Joint, JointKind, Model};
+
+/// The kinematic error model prepared at one parameter point: immutable during evaluations, which write
+/// into a [`ChainScratch`].
+#[derive(Clone, Debug)]
+pub struct Chain {
+    kind: Vec<JointKind>,
+    /// Unit axis `aᵢ` in joint frame `i`.
+    axis: Vec<Vector3<f64>>,
+    /// `Oᵢ`: joint frame `i` in joint frame `i − 1` at zero angle (m).
+    origin: Vec<Pose>,
+    /// Folded Rodrigues terms of `Oᵢ`'s rotation times the joint rotation ([`Joint::rotation_terms`]).
+    terms: Vec<[Matrix3<f64>; 3]>,
+    /// `H'ᵢ⁻¹` (m).
+    home_inv: Vec<Pose>,
+    /// `H'ₙ⁻¹ M`: flange in the last joint frame (m).
+    flange_offset: Pose,
+    zero_offset: Vec<f64>,
+    t_tracker_base: Pose,
+    p_flange_target: Vector3<f64>,
+    r_flange_target: Option<Matrix3<f64>>,
+}
+
+/// Per-evaluation workspace of a [`Chain`]: made once, reused without allocating.
+#[derive(Clone, Debug)]
+pub struct ChainScratch {
+    /// `Fᵢ`: joint frame `i` in the tracker frame at the last configuration (m).
+    pub frames: Vec<Pose>,
+    /// `T_tracker_flange` at the last configuration (m).
+    pub t_tracker_flange: Pose,
+    /// Predicted target position, tracker frame (m).
+    pub p_tracker: Vector3<f64>,
+    /// Predicted target orientation, tracker frame (identity without orientation parameters).
+    pub r_tracker_target: Matrix3<f64>,
+}
+
+impl ChainScratch {
+    /// Workspace for a chain of `n` joints.
+    pub fn new(n: usize) -> Self {
+        ChainScratch {
+            frames: vec![Pose::identity(); n],
+            t_tracker_flange: Pose::identity(),
+            p_tracker: Vector3::zeros(),
+            r_tracker_target: Matrix3::identity(),
+        }
+    }
+}
+
+impl Chain {
+    /// Prepares `model` with the error parameters `params`.
+    pub fn new(model: &Model, params: &KinematicParams) -> Self {
+        let n = model.nq();
+        let mut c = Chain {
+            kind: model.joints.iter().map(|j| j.kind).collect(),
+            axis: model.joints.iter().map(|j| j.axis).collect(),
+            origin: vec![Pose::identity(); n],
+            terms: vec![[Matrix3::zeros(); 3]; n],
+            home_inv: vec![Pose::identity(); n],
+            flange_offset: Pose::identity(),
+            zero_offset: vec![0.0; n],
+            t_tracker_base: Pose::identity(),
+            p_flange_target: Vector3::zeros(),
+            r_flange_target: None,
+        };
+        c.update(model, params);
+        c
+    }
+
+    /// Number of joints.
+    #[inline]
+    pub fn nq(&self) -> usize {
+        self.kind.len()
+    }
+
+    /// Re-prepares for new parameters of the same robot, without allocating.
+    ///
+    /// # Panics
+    /// If `params` has a different joint count than `model`.
+    pub fn update(&mut self, model: &Model, params: &KinematicParams) {
+        assert_eq!(params.joint_error.len(), model.nq(), "joint count");
+        let mut prev_inv = Pose::identity();
+        for (i, joint) in model.joints.iter().enumerate() {
+            let home = params.joint_error[i] * joint.home;
+            let origin = prev_inv * home;
+            self.origin[i] = origin;
+            self.terms[i] = Joint::rotation_terms_for(&origin, &joint.axis);
+            prev_inv = home.inverse();
+            self.home_inv[i] = prev_inv;
+        }
+        self.flange_offset = prev_inv * model.home_flange;
+        self.zero_offset.copy_from_slice(&params.zero_offset);
+        self.t_tracker_base = params.t_tracker_base;
+        self.p_flange_target = params.p_flange_target;
+        self.r_flange_target = params.r_flange_target;
+    }
+
+    /// Evaluates the chain at the controller's joint values `q` (rad or m) into `s`.
+    ///
+    /// # Panics
+    /// If `q.len()` differs from the joint count.
+    pub fn forward(&self, s: &mut ChainScratch, q: &[f64]) {
+        assert_eq!(q.len(), self.nq(), "joint vector length");
+        let mut r = *self.t_tracker_base.rotation.matrix();
+        let mut p = self.t_tracker_base.translation.vector;
+        for (i, &qi) in q.iter().enumerate() {
+            let theta = qi + self.zero_offset[i];
+            let o = &self.origin[i];
+            p += r * o.translation.vector;
+            match self.kind[i] {
+                JointKind::Revolute | JointKind::Continuous => {
+                    let (sn, cs) = sim::trig::sin_cos(theta);
+                    let [k0, k1, k2] = &self.terms[i];
+                    r *= k0 + k1 * cs + k2 * sn;
+                }
+                JointKind::Prismatic => {
+                    r *= o.rotation.matrix();
+                    p += r * (self.axis[i] * theta);
+                }
+            }
+            s.frames[i] = pose_from(r, p);
+        }
+        s.t_tracker_flange = s.frames[self.nq() - 1] * self.flange_offset;
+        s.p_tracker = (s.t_tracker_flange * nalgebra::Point3::from(self.p_flange_target)).coords;
+        s.r_tracker_target = match &self.r_flange_target {
+            Some(rf) => s.t_tracker_flange.rotation.matrix() * rf,
+            None => Matrix3::identity(),
+        };
+    }
+
+    /// Jacobian of the predicted target position (tracker frame, m per parameter unit) at the last
+    /// [`Chain::forward`] configuration, row-major into `out` (3 rows of `layout.len()`).
+    pub fn position_jacobian(&self, s: &ChainScratch, layout: &ParamLayout, out: &mut [f64]) {
+        let np = layout.len();
+        debug_assert_eq!(out.len(), 3 * np);
+        let p = s.p_tracker;
+        let mut prev_r = *self.t_tracker_base.rotation.matrix();
+        let mut prev_a = rot_block(&prev_r, &(p - self.t_tracker_base.translation.vector));
+        for i in 0..self.nq() {
+            let f = &s.frames[i];
+            let fr = f.rotation.matrix();
+            let hinv = &self.home_inv[i];
+            let cur_r = fr * hinv.rotation.matrix();
+            let cur_t = f.translation.vector + fr * hinv.translation.vector;
+            let cur_a = rot_block(&cur_r, &(p - cur_t));
+            let k0 = layout.joint_twist(i);
+            for row in 0..3 {
+                let o = &mut out[row * np + k0..row * np + k0 + 6];
+                for c in 0..3 {
+                    o[c] = prev_a[(row, c)] - cur_a[(row, c)];
+                    o[3 + c] = prev_r[(row, c)] - cur_r[(row, c)];
+                }
+            }
+            let w = fr * self.axis[i];
+            let col = if self.kind[i].is_rotational() {
+                w.cross(&(p - f.translation.vector))
+            } else {
+                w
+            };
+            let kz = layout.zero_offset(i);
+            for row in 0..3 {
+                out[row * np + kz] = col[row];
+            }
+            prev_r = cur_r;
+            prev_a = cur_a;
+        }
+        let kb = layout.base();
+        let kt = layout.target_position();
+        let rf = s.t_tracker_flange.rotation.matrix();
+        // [−[p], I]: column c of −[p] is e_c × p.
+        let ec_cross_p = [
+            Vector3::new(0.0, -p.z, p.y),
+            Vector3::new(p.z, 0.0, -p.x),
+            Vector3::new(-p.y, p.x, 0.0),
+        ];
+        for row in 0..3 {
+            let o = &mut out[row * np + kb..row * np + kb + 6];
+            for c in 0..3 {
+                o[c] = ec_cross_p[c][row];
+                o[3 + c] = if row == c { 1.0 } else { 0.0 };
+            }
+            for c in 0..3 {
+                out[row * np + kt + c] = rf[(row, c)];
+            }
+            if let Some(ko) = layout.target_orientation() {
+                for c in 0..3 {
+                    out[row * np + ko + c] = 0.0;
+                }
+            }
+        }
+    }
+
+    /// Jacobian of the predicted target orientation at the last [`Chain::forward`] configuration: the
+    /// tracker-frame rotation vector (rad) by which each parameter unit turns the target, row-major into
+    /// `out` (3 rows of `layout.len()`). Only meaningful with orientation parameters.
+    pub fn orientation_jacobian(&self, s: &ChainScratch, layout: &ParamLayout, out: &mut [f64]) {
+        let np = layout.len();
+        debug_assert_eq!(out.len(), 3 * np);
+        out.fill(0.0);
+        let mut prev_r = *self.t_tracker_base.rotation.matrix();
+        for i in 0..self.nq() {
+            let fr = s.frames[i].rotation.matrix();
+            let cur_r = fr * self.home_inv[i].rotation.matrix();
+            let k0 = layout.joint_twist(i);
+            for row in 0..3 {
+                for c in 0..3 {
+                    out[row * np + k0 + c] = prev_r[(row, c)] - cur_r[(row, c)];
+                }
+            }
+            if self.kind[i].is_rotational() {
+                let w = fr * self.axis[i];
+                let kz = layout.zero_offset(i);
+                for row in 0..3 {
+                    out[row * np + kz] = w[row];
+                }
+            }
+            prev_r = cur_r;
+        }
+        let kb = layout.base();
+        for row in 0..3 {
+            out[row * np + kb + row] = 1.0;
+        }
+        if let Some(ko) = layout.target_orientation() {
+            for row in 0..3 {
+                for c in 0..3 {
+                    out[row * np + ko + c] = s.r_tracker_target[(row, c)];
+                }
+            }
+        }
+    }
+}
+
+/// `−[d] R`: column `c` is `R_c × d`.
+#[inline]
+fn rot_block(r: &Matrix3<f64>, d: &Vector3<f64>) -> Matrix3<f64> {
+    Matrix3::from_columns(&[
+        r.column(0).cross(d),
+        r.column(1).cross(d),
+        r.column(2).cross(d),
+    ])
+}

@@ -1,0 +1,501 @@
+//! Weighted nonlinear least squares: a Levenberg–Marquardt solver restricted to the identifiable
+//! subspace, for any [`LeastSquaresProblem`].
+//!
+//! # Algorithm
+//! The problem gives weighted residuals `r` (each divided by its standard deviation, so the cost
+//! `χ² = ‖r‖²` is in noise units) and their Jacobian `J` with respect to a step from the current point
+//! (re-linearised after every accepted step). Columns are scaled by the expected parameter magnitudes
+//! `D` (`J_s = J D`; a zero scale freezes a parameter). Steps are taken in the identifiable subspace `B`
+//! only: at the start it is spanned by the eigenvectors of the scaled normal matrix `J_sᵀ J_s` with
+//! eigenvalues above `max(1e-11 λ_max, floor²)` (cheap, and accurate enough to step in); at the solution
+//! the SVD `J_s = U Σ Vᵀ` (Householder QR, then the SVD of `R`) decides: singular values below
+//! `max(rank_rtol · σ_max, min_singular_value)` are unidentifiable. Should the SVD find another rank
+//! than the start, the iterations go on in its subspace. Each iteration solves the damped reduced normal
+//! equations `(Bᵀ J_sᵀ J_s B + μ diag) z = −Bᵀ J_sᵀ r` (Cholesky; Marquardt's diagonal damping with
+//! Nielsen's update of `μ`) and steps by `D B z`. Restricting to `B` makes every step the minimum-norm
+//! (in scaled units) Gauss–Newton step.
+//!
+//! # Stopping: converged to the noise
+//! At each point the full Gauss–Newton step would lower `χ²` by `pred = gᵀ G⁻¹ g` (reduced gradient `g`,
+//! reduced normal matrix `G`), the squared length of the residual's projection onto the identifiable
+//! column space. The solve stops when `pred ≤ decrease_tol + relative_decrease_tol · χ²`: with the default
+//! `decrease_tol = 1e-12`, no remaining step could move the predictions by more than about 1e-6 of a
+//! noise standard deviation (in RSS over all rows); `relative_decrease_tol = 1e-10` takes over when
+//! model errors keep `χ²` far above its degrees of freedom. It also stops when a step no longer changes `χ²` beyond rounding
+//! (`NoFurtherDecrease`, also a success). Only a cap on iterations (`MaxIterations`), a failure to find a
+//! decreasing step (`DampingLimit`) or non-finite values end a solve unsuccessfully.
+
+use nalgebra::{DMatrix, DVector};
+
+/// A weighted nonlinear least-squares problem on a manifold, linearised at a current point.
+///
+/// Shape of levenberg-marquardt's trait: [`LeastSquaresProblem::set_params`] moves the trial point and
+/// caches the shared work, then [`LeastSquaresProblem::residuals`] and the Jacobian functions read it.
+pub trait LeastSquaresProblem {
+    /// Number of step parameters `p`.
+    fn n_params(&self) -> usize;
+    /// Number of scalar residuals `m`.
+    fn n_residuals(&self) -> usize;
+    /// Moves the trial point to the linearisation point plus `step` (length `p`, physical units).
+    fn set_params(&mut self, step: &[f64]);
+    /// Makes the trial point the new linearisation point.
+    fn accept(&mut self);
+    /// Weighted residuals (dimensionless, noise units) at the trial point into `out` (length `m`).
+    fn residuals(&mut self, out: &mut [f64]);
+    /// Weighted Jacobian (m × p) at the trial point, with respect to a step taken from it.
+    fn jacobian(&mut self, out: &mut DMatrix<f64>);
+    /// Normal equations of the column-scaled problem at the trial point: `gram = D Jᵀ J D` (p × p,
+    /// full symmetric), `gradient = D Jᵀ r`; returns `χ² = ‖r‖²`. The default forms `J`; problems
+    /// override it to accumulate row by row without allocating.
+    fn normal_equations(
+        &mut self,
+        scales: &[f64],
+        gram: &mut DMatrix<f64>,
+        gradient: &mut [f64],
+    ) -> f64 {
+        let (m, p) = (self.n_residuals(), self.n_params());
+        let mut j = DMatrix::zeros(m, p);
+        let mut r = vec![0.0; m];
+        self.jacobian(&mut j);
+        self.residuals(&mut r);
+        for (c, s) in scales.iter().enumerate() {
+            j.column_mut(c).scale_mut(*s);
+        }
+        gram.copy_from(&j.tr_mul(&j));
+        let g = j.tr_mul(&DVector::from_column_slice(&r));
+        gradient.copy_from_slice(g.as_slice());
+        r.iter().map(|v| v * v).sum()
+    }
+}
+
+/// Settings of [`minimize`].
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct LmOptions {
+    /// Safety cap on iterations; reaching it is an unsuccessful termination. Default 100.
+    pub max_iterations: usize,
+    /// Singular values of the scaled, weighted Jacobian below `rank_rtol · σ_max` are unidentifiable.
+    /// Default 1e-8: structural null directions sit at rounding level (about 1e-15 σ_max), while any
+    /// combination with σ/σ_max above 1e-8 can be solved, if with large noise amplification (reported).
+    pub rank_rtol: f64,
+    /// Singular values below this absolute floor are unidentifiable too. With rows weighted by the
+    /// noise and columns scaled by the expected magnitudes, `1/σₖ` is the standard deviation of the
+    /// combination in units of its expected magnitude; below the default 0.1 it would exceed ten
+    /// expected magnitudes: the data do not determine it, fitting it only fits noise and model errors,
+    /// and its Gauss–Newton steps leave the region where the linearisation holds.
+    pub min_singular_value: f64,
+    /// Absolute tolerance on the predicted decrease of `χ²` by a full Gauss–Newton step. Default 1e-12.
+    pub decrease_tol: f64,
+    /// Relative tolerance on the same, against `χ²`. Default 1e-10: what is left is a negligible
+    /// fraction of the noise-scaled cost (this one matters when model errors keep `χ²/dof` above 1).
+    pub relative_decrease_tol: f64,
+    /// Initial Marquardt damping `μ` (relative to the reduced normal matrix' diagonal). Default 1e-6.
+    pub initial_damping: f64,
+}
+
+impl Default for LmOptions {
+    fn default() -> Self {
+        LmOptions {
+            max_iterations: 100,
+            rank_rtol: 1e-8,
+            min_singular_value: 0.1,
+            decrease_tol: 1e-12,
+            relative_decrease_tol: 1e-10,
+            initial_damping: 1e-6,
+        }
+    }
+}
+
+/// Why a solve ended.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum TerminationReason {
+    /// No Gauss–Newton step could lower `χ²` by more than the tolerance: converged to the noise.
+    Converged,
+    /// Steps no longer change `χ²` beyond rounding: converged to machine precision.
+    NoFurtherDecrease,
+    /// Every parameter is frozen or unidentifiable: nothing to solve.
+    NoIdentifiableParameters,
+    /// [`LmOptions::max_iterations`] reached before convergence.
+    MaxIterations,
+    /// No damping gave a decreasing step.
+    DampingLimit,
+    /// A residual or Jacobian entry was NaN or infinite at the start.
+    NonFinite,
+}
+
+impl std::fmt::Display for TerminationReason {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            TerminationReason::Converged => "converged to the noise",
+            TerminationReason::NoFurtherDecrease => "converged to rounding level",
+            TerminationReason::NoIdentifiableParameters => "no identifiable parameter",
+            TerminationReason::MaxIterations => "iteration limit reached before convergence",
+            TerminationReason::DampingLimit => "no decreasing step found",
+            TerminationReason::NonFinite => "non-finite residuals",
+        })
+    }
+}
+
+/// Outcome of [`minimize`]: a report, not an error.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct MinimizationReport {
+    /// Why the solve ended.
+    pub termination: TerminationReason,
+    /// Accepted and rejected iterations (one normal-equation evaluation each).
+    pub iterations: usize,
+    /// Residual evaluations (trial points).
+    pub evaluations: usize,
+    /// `χ²` (sum of squared weighted residuals) at the start (with a robust loss: before the first
+    /// reweighting round, while `cost_final` carries the final weights).
+    pub cost_initial: f64,
+    /// `χ²` at the end.
+    pub cost_final: f64,
+    /// Predicted `χ²` decrease of a full Gauss–Newton step at the end.
+    pub predicted_decrease: f64,
+    /// Number of residuals `m`.
+    pub n_residuals: usize,
+    /// Number of parameters `p`.
+    pub n_params: usize,
+    /// Identifiable combinations at the end (rank of the scaled Jacobian).
+    pub rank: usize,
+}
+
+impl MinimizationReport {
+    /// True when the solve converged (to the noise or to rounding level).
+    pub fn was_successful(&self) -> bool {
+        matches!(
+            self.termination,
+            TerminationReason::Converged | TerminationReason::NoFurtherDecrease
+        )
+    }
+}
+
+/// The SVD of the scaled, weighted Jacobian `J D = U Σ Vᵀ`: identifiable and unidentifiable subspaces.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Subspace {
+    /// Column scales `D` (physical units per scaled unit; 0 = frozen).
+    pub scales: Vec<f64>,
+    /// All `p` singular values, descending (trailing zeros when `m < p`).
+    pub singular_values: Vec<f64>,
+    /// Right singular vectors as columns (p × p, scaled coordinates), in the order of the singular values.
+    pub v: DMatrix<f64>,
+    /// Number of singular values above `max(rtol · σ_max, floor)`.
+    pub rank: usize,
+    /// The relative threshold used.
+    pub rtol: f64,
+    /// The absolute threshold used.
+    pub floor: f64,
+    /// Number of residuals the Jacobian had.
+    pub n_residuals: usize,
+}
+
+impl Subspace {
+    /// Computes the split for the weighted Jacobian `j` (m × p) with column scales `scales`: singular
+    /// values above `max(rtol · σ_max, floor)` are identifiable.
+    pub fn analyze(j: &DMatrix<f64>, scales: &[f64], rtol: f64, floor: f64) -> Subspace {
+        let (m, p) = j.shape();
+        let mut js = j.clone();
+        for (c, s) in scales.iter().enumerate() {
+            js.column_mut(c).scale_mut(*s);
+        }
+        let square = if m > p {
+            js.qr().r()
+        } else {
+            let mut sq = DMatrix::zeros(p, p);
+            sq.view_mut((0, 0), (m, p)).copy_from(&js);
+            sq
+        };
+        let svd = square.svd(false, true);
+        let vt = svd.v_t.expect("SVD was asked for V");
+        let mut order: Vec<usize> = (0..p).collect();
+        order.sort_by(|&a, &b| svd.singular_values[b].total_cmp(&svd.singular_values[a]));
+        let singular_values: Vec<f64> = order.iter().map(|&k| svd.singular_values[k]).collect();
+        let mut v = DMatrix::zeros(p, p);
+        for (c, &k) in order.iter().enumerate() {
+            v.set_column(c, &vt.row(k).transpose());
+        }
+        let smax = singular_values.first().copied().unwrap_or(0.0);
+        let rank = if smax > 0.0 && smax.is_finite() {
+            let t = (rtol * smax).max(floor);
+            singular_values.iter().filter(|s| **s > t).count()
+        } else {
+            0
+        };
+        Subspace {
+            scales: scales.to_vec(),
+            singular_values,
+            v,
+            rank,
+            rtol,
+            floor,
+            n_residuals: m,
+        }
+    }
+
+    /// Number of parameters `p`.
+    pub fn n_params(&self) -> usize {
+        self.scales.len()
+    }
+
+    /// The identifiable singular values `σ₁ ≥ … ≥ σ_rank`.
+    pub fn identifiable_singular_values(&self) -> &[f64] {
+        &self.singular_values[..self.rank]
+    }
+
+    /// Covariance of the step parameters in physical units, `s² D V_r Σ_r⁻² V_rᵀ D` (the pseudo-inverse of
+    /// the weighted normal matrix in the identifiable subspace), for a variance factor `s²`.
+    pub fn covariance(&self, variance_factor: f64) -> DMatrix<f64> {
+        let p = self.n_params();
+        let r = self.rank;
+        let mut w = DMatrix::zeros(p, r);
+        for c in 0..r {
+            let s = self.singular_values[c];
+            for k in 0..p {
+                w[(k, c)] = self.scales[k] * self.v[(k, c)] / s;
+            }
+        }
+        (&w * w.transpose()) * variance_factor
+    }
+}
+
+/// Buffers of [`minimize`], reusable across solves of the same size.
+#[derive(Clone, Debug)]
+pub struct LmWorkspace {
+    residuals: Vec<f64>,
+    jacobian: DMatrix<f64>,
+    gram: DMatrix<f64>,
+    gradient: Vec<f64>,
+}
+
+impl LmWorkspace {
+    /// Buffers for `m` residuals and `p` parameters.
+    pub fn new(m: usize, p: usize) -> Self {
+        LmWorkspace {
+            residuals: vec![0.0; m],
+            jacobian: DMatrix::zeros(m, p),
+            gram: DMatrix::zeros(p, p),
+            gradient: vec![0.0; p],
+        }
+    }
+
+    /// The weighted Jacobian (m × p) at the end of the last solve, unscaled.
+    pub fn jacobian(&self) -> &DMatrix<f64> {
+        &self.jacobian
+    }
+
+    /// The column-scaled normal matrix `D JᵀJ D` (p × p) at the end of the last solve.
+    pub fn gram(&self) -> &DMatrix<f64> {
+        &self.gram
+    }
+
+    /// The weighted residuals at the end of the last solve.
+    pub fn residuals(&self) -> &[f64] {
+        &self.residuals
+    }
+}
+
+fn chi2(r: &[f64]) -> f64 {
+    r.iter().map(|v| v * v).sum()
+}
+
+/// Minimises `χ² = ‖r‖²` of `problem` from its current point with column scales `scales` (physical units
+/// per scaled unit, 0 = frozen). On return the problem's linearisation point is the solution and its
+/// trial point equals it; the workspace holds the final residuals and Jacobian, and the returned
+/// [`Subspace`] is the SVD at the solution (for covariance and identifiability).
+pub fn minimize<P: LeastSquaresProblem>(
+    problem: &mut P,
+    scales: &[f64],
+    options: &LmOptions,
+    ws: &mut LmWorkspace,
+) -> (MinimizationReport, Subspace) {
+    let (m, p) = (problem.n_residuals(), problem.n_params());
+    assert_eq!(scales.len(), p, "one scale per parameter");
+    if ws.residuals.len() != m || ws.gram.nrows() != p {
+        *ws = LmWorkspace::new(m, p);
+    }
+    let zero = vec![0.0; p];
+    problem.set_params(&zero);
+    let cost_initial = problem.normal_equations(scales, &mut ws.gram, &mut ws.gradient);
+    let mut report = MinimizationReport {
+        termination: TerminationReason::Converged,
+        iterations: 0,
+        evaluations: 1,
+        cost_initial,
+        cost_final: cost_initial,
+        predicted_decrease: 0.0,
+        n_residuals: m,
+        n_params: p,
+        rank: 0,
+    };
+    if !cost_initial.is_finite() || ws.gram.iter().any(|v| !v.is_finite()) {
+        report.termination = TerminationReason::NonFinite;
+        let sub = Subspace {
+            scales: scales.to_vec(),
+            singular_values: vec![0.0; p],
+            v: DMatrix::identity(p, p),
+            rank: 0,
+            rtol: options.rank_rtol,
+            floor: options.min_singular_value,
+            n_residuals: m,
+        };
+        return (report, sub);
+    }
+    // Starting subspace from the eigenvectors of the scaled normal matrix (cheap, and accurate enough
+    // to step in); the decision that counts is the SVD at the solution. Should that find a different
+    // rank (a combination with σ/σ_max between `rank_rtol` and √GRAM_RTOL), the iterations go on in
+    // the SVD's subspace, at most twice.
+    let mut basis = gram_basis(&ws.gram, options.min_singular_value);
+    let mut fresh = true;
+    let mut sub;
+    loop {
+        if basis.ncols() == 0 {
+            report.termination = TerminationReason::NoIdentifiableParameters;
+        } else {
+            iterate(problem, scales, options, ws, &basis, fresh, &mut report);
+        }
+        fresh = false;
+        problem.jacobian(&mut ws.jacobian);
+        problem.residuals(&mut ws.residuals);
+        sub = Subspace::analyze(
+            &ws.jacobian,
+            scales,
+            options.rank_rtol,
+            options.min_singular_value,
+        );
+        report.rank = sub.rank;
+        let settled = sub.rank == basis.ncols();
+        if settled || !report.was_successful() || report.evaluations > 10 * options.max_iterations {
+            break;
+        }
+        basis = sub.v.columns(0, sub.rank).into_owned();
+    }
+    (report, sub)
+}
+
+/// Relative eigenvalue threshold of the scaled normal matrix for the starting subspace: rounding in
+/// `JᵀJ` leaves structural null eigenvalues near 1e-14 λ_max.
+const GRAM_RTOL: f64 = 1e-11;
+
+/// Eigenvectors of the symmetric `gram` with eigenvalues above `max(GRAM_RTOL · λ_max, floor²)`, as
+/// columns.
+fn gram_basis(gram: &DMatrix<f64>, floor: f64) -> DMatrix<f64> {
+    let p = gram.nrows();
+    let eig = gram.clone().symmetric_eigen();
+    let lmax = eig.eigenvalues.iter().copied().fold(0.0, f64::max);
+    let keep: Vec<usize> = (0..p)
+        .filter(|&k| lmax > 0.0 && eig.eigenvalues[k] > (GRAM_RTOL * lmax).max(floor * floor))
+        .collect();
+    let mut b = DMatrix::zeros(p, keep.len());
+    for (c, &k) in keep.iter().enumerate() {
+        b.set_column(c, &eig.eigenvectors.column(k));
+    }
+    b
+}
+
+/// The LM iterations in the subspace `sub`; leaves the trial point at the linearisation point.
+/// With `fresh`, `ws.gram` and `ws.gradient` already hold the normal equations at the current point.
+fn iterate<P: LeastSquaresProblem>(
+    problem: &mut P,
+    scales: &[f64],
+    options: &LmOptions,
+    ws: &mut LmWorkspace,
+    b: &DMatrix<f64>,
+    mut fresh: bool,
+    report: &mut MinimizationReport,
+) {
+    let p = scales.len();
+    let r = b.ncols();
+    let mut gb = DMatrix::zeros(p, r);
+    let mut gr = DMatrix::zeros(r, r);
+    let mut grad_r = DVector::zeros(r);
+    let mut z = DVector::zeros(r);
+    let mut step = vec![0.0; p];
+    let mut mu = options.initial_damping;
+    let mut nu = 2.0;
+    let start_iterations = report.iterations;
+    loop {
+        let cost = if fresh {
+            fresh = false;
+            report.cost_final
+        } else {
+            problem.normal_equations(scales, &mut ws.gram, &mut ws.gradient)
+        };
+        report.cost_final = cost;
+        gb.gemm(1.0, &ws.gram, b, 0.0);
+        gr.gemm_tr(1.0, b, &gb, 0.0);
+        let g = DVector::from_column_slice(&ws.gradient);
+        grad_r.gemv_tr(1.0, b, &g, 0.0);
+        let diag: Vec<f64> = (0..r).map(|k| gr[(k, k)].max(f64::MIN_POSITIVE)).collect();
+        // Full Gauss–Newton prediction (tiny ridge against rounding in the normal matrix).
+        let pred_gn = {
+            let mut a = gr.clone();
+            for k in 0..r {
+                a[(k, k)] += 1e-14 * diag[k];
+            }
+            match a.cholesky() {
+                Some(ch) => grad_r.dot(&ch.solve(&grad_r)),
+                None => f64::INFINITY,
+            }
+        };
+        report.predicted_decrease = pred_gn;
+        if pred_gn <= options.decrease_tol + options.relative_decrease_tol * cost {
+            report.termination = TerminationReason::Converged;
+            return;
+        }
+        if report.iterations - start_iterations >= options.max_iterations {
+            report.termination = TerminationReason::MaxIterations;
+            return;
+        }
+        report.iterations += 1;
+        loop {
+            let mut a = gr.clone();
+            for k in 0..r {
+                a[(k, k)] += mu * diag[k];
+            }
+            let Some(ch) = a.cholesky() else {
+                mu *= nu;
+                nu *= 2.0;
+                if mu > 1e16 {
+                    report.termination = TerminationReason::DampingLimit;
+                    problem.set_params(&vec![0.0; p]);
+                    return;
+                }
+                continue;
+            };
+            z.copy_from(&ch.solve(&grad_r));
+            z.neg_mut();
+            // Predicted decrease of the damped step: −(2 gᵀz + zᵀ G z).
+            let pred = -(2.0 * grad_r.dot(&z) + z.dot(&(&gr * &z)));
+            let bz = b * &z;
+            for k in 0..p {
+                step[k] = scales[k] * bz[k];
+            }
+            problem.set_params(&step);
+            problem.residuals(&mut ws.residuals);
+            report.evaluations += 1;
+            let trial = chi2(&ws.residuals);
+            let actual = cost - trial;
+            if trial.is_finite() && actual.abs() <= 1e-15 * cost && pred <= 1e-12 * cost.max(1e-300)
+            {
+                problem.set_params(&vec![0.0; p]);
+                report.termination = TerminationReason::NoFurtherDecrease;
+                return;
+            }
+            let rho = if pred > 0.0 { actual / pred } else { -1.0 };
+            if trial.is_finite() && rho > 1e-4 {
+                problem.accept();
+                report.cost_final = trial;
+                mu *= (1.0f64 / 3.0).max(1.0 - (2.0 * rho - 1.0).powi(3));
+                nu = 2.0;
+                break;
+            }
+            mu *= nu;
+            nu *= 2.0;
+            if mu > 1e16 {
+                problem.set_params(&vec![0.0; p]);
+                report.termination = TerminationReason::DampingLimit;
+                return;
+            }
+        }
+    }
+}

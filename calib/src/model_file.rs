@@ -1,0 +1,579 @@
+//! The calibrated model file (`MODEL.json`): everything `predict` needs, with the robot embedded; the
+//! predictor that evaluates it; and the export of a calibrated URDF.
+//!
+//! # MODEL.json
+//! ```json
+//! {
+//!   "format": "robocal-calibrated-model", "format_version": 1, "software": "robocal-calib 0.1.0",
+//!   "model": "kinematic",
+//!   "robot": {"name": "iiwa7", "source": "built-in robot 'iiwa7'", "base_link": "…", "tip_link": "…",
+//!             "urdf": "<?xml …"},
+//!   "parameters": {
+//!     "joint_error_twists": [[ωx, ωy, ωz, vx, vy, vz], …],   // ξᵢ, base frame (rad, m)
+//!     "zero_offsets": [δq₁, …],                              // rad (m for prismatic joints)
+//!     "t_tracker_base": {"translation_m": [x, y, z], "rotation": [[…], […], […]]},
+//!     "p_flange_target_m": [x, y, z],
+//!     "r_flange_target": [[…], […], […]] or null
+//!   },
+//!   "covariance": {"parameters": ["joint 1 twist ω_x", …], "matrix": [[…], …], "variance_factor": 1.02}
+//! }
+//! ```
+//! The real screw of joint `i` is `Ad(exp[ξᵢ]) Sᵢ` with `Sᵢ` the embedded URDF's screw; the covariance is
+//! that of a step at the solution in [`crate::params::ParamLayout`] order (physical units). Floats are written by
+//! `serde_json` as the shortest decimal that reads back to the same `f64`.
+
+use crate::calibrate::Calibration;
+use crate::chain::{Chain, ChainScratch};
+use crate::error::{CalibError, Result};
+use crate::lie3::{quaternion_from_rotation, rpy_from_rotation};
+use crate::params::KinematicParams;
+use crate::robot::Robot;
+use nalgebra::{Matrix3, Vector3, Vector6};
+use sim::lie::{Pose, exp_twist, pose_from};
+use sim::measurement_table::MeasurementTable;
+use sim::{ChainSpec, JointKind, Model};
+
+/// The `format` value of a calibrated model file.
+pub const FORMAT: &str = "robocal-calibrated-model";
+/// The current `format_version`.
+pub const FORMAT_VERSION: u32 = 1;
+
+/// The robot, embedded.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct EmbeddedRobot {
+    /// Robot name from the URDF.
+    pub name: String,
+    /// Where the URDF came from when the model was calibrated.
+    pub source: String,
+    /// Root link of the chain.
+    pub base_link: String,
+    /// Tip link of the chain (the flange).
+    pub tip_link: String,
+    /// The URDF text.
+    pub urdf: String,
+}
+
+/// A pose as translation (m) and rotation matrix rows.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PoseJson {
+    /// Translation (m).
+    pub translation_m: [f64; 3],
+    /// Rotation matrix, row by row.
+    pub rotation: [[f64; 3]; 3],
+}
+
+fn rows(m: &Matrix3<f64>) -> [[f64; 3]; 3] {
+    [0, 1, 2].map(|i| [m[(i, 0)], m[(i, 1)], m[(i, 2)]])
+}
+
+fn matrix(r: &[[f64; 3]; 3]) -> Matrix3<f64> {
+    Matrix3::from_fn(|i, j| r[i][j])
+}
+
+/// The kinematic parameters in file form.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ModelParameters {
+    /// Error twist `ξᵢ = [ω; v]` per joint (base frame; rad, m).
+    pub joint_error_twists: Vec<[f64; 6]>,
+    /// Zero offset per joint (rad; m for prismatic joints).
+    pub zero_offsets: Vec<f64>,
+    /// `T_tracker_base`.
+    pub t_tracker_base: PoseJson,
+    /// Target position in the flange frame (m).
+    pub p_flange_target_m: [f64; 3],
+    /// Target orientation in the flange frame (rotation matrix rows), or `null` for position-only models.
+    pub r_flange_target: Option<[[f64; 3]; 3]>,
+}
+
+/// Covariance of the parameters.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CovarianceJson {
+    /// Parameter names in [`crate::params::ParamLayout`] order.
+    pub parameters: Vec<String>,
+    /// The covariance matrix, row by row (physical units).
+    pub matrix: Vec<Vec<f64>>,
+    /// The variance factor `σ̂²` it includes.
+    pub variance_factor: f64,
+}
+
+/// A calibrated model file.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CalibratedModel {
+    /// Always [`FORMAT`].
+    pub format: String,
+    /// [`FORMAT_VERSION`].
+    pub format_version: u32,
+    /// Software that wrote it.
+    pub software: String,
+    /// Model name: `kinematic`.
+    pub model: String,
+    /// The robot.
+    pub robot: EmbeddedRobot,
+    /// The identified parameters.
+    pub parameters: ModelParameters,
+    /// Their covariance, when known.
+    pub covariance: Option<CovarianceJson>,
+}
+
+impl CalibratedModel {
+    /// The file form of a calibration of `robot`.
+    pub fn new(robot: &Robot, cal: &Calibration) -> Self {
+        let p = &cal.params;
+        let n = robot.model.nq();
+        let vf = if cal.report.chi2_per_dof.is_finite() {
+            cal.report.chi2_per_dof
+        } else {
+            1.0
+        };
+        CalibratedModel {
+            format: FORMAT.into(),
+            format_version: FORMAT_VERSION,
+            software: format!("robocal-calib {}", env!("CARGO_PKG_VERSION")),
+            model: "kinematic".into(),
+            robot: EmbeddedRobot {
+                name: robot.model.name.clone(),
+                source: robot.source.clone(),
+                base_link: robot.model.base_link.clone(),
+                tip_link: robot.model.tip_link.clone(),
+                urdf: robot.urdf.clone(),
+            },
+            parameters: ModelParameters {
+                joint_error_twists: (0..n)
+                    .map(|i| {
+                        let x = p.joint_twist(i);
+                        [x[0], x[1], x[2], x[3], x[4], x[5]]
+                    })
+                    .collect(),
+                zero_offsets: p.zero_offset.clone(),
+                t_tracker_base: PoseJson {
+                    translation_m: p.t_tracker_base.translation.vector.into(),
+                    rotation: rows(p.t_tracker_base.rotation.matrix()),
+                },
+                p_flange_target_m: p.p_flange_target.into(),
+                r_flange_target: p.r_flange_target.as_ref().map(rows),
+            },
+            covariance: Some(CovarianceJson {
+                parameters: (0..cal.layout.len()).map(|k| cal.layout.name(k)).collect(),
+                matrix: (0..cal.covariance.nrows())
+                    .map(|i| cal.covariance.row(i).iter().copied().collect())
+                    .collect(),
+                variance_factor: vf,
+            }),
+        }
+    }
+
+    /// JSON text (pretty-printed).
+    pub fn to_json(&self) -> String {
+        serde_json::to_string_pretty(self).expect("a calibrated model serialises")
+    }
+
+    /// Reads and checks a model file; errors name the file and the key.
+    pub fn load(path: &std::path::Path) -> Result<Self> {
+        let file = path.display().to_string();
+        let text = std::fs::read_to_string(path).map_err(|e| CalibError::Io {
+            path: file.clone(),
+            message: e.to_string(),
+        })?;
+        Self::from_json(&text, &file)
+    }
+
+    /// Parses and checks model-file text; `file` names it in errors.
+    pub fn from_json(text: &str, file: &str) -> Result<Self> {
+        let bad = |message: String| CalibError::ModelFile {
+            file: file.to_string(),
+            message,
+        };
+        let v: serde_json::Value =
+            serde_json::from_str(text).map_err(|e| bad(format!("not JSON: {e}")))?;
+        match v.get("format").and_then(|f| f.as_str()) {
+            Some(FORMAT) => {}
+            other => {
+                return Err(bad(format!(
+                    "key 'format' is {other:?}, not \"{FORMAT}\": not a robocal calibrated model"
+                )));
+            }
+        }
+        let m: CalibratedModel = serde_json::from_value(v).map_err(|e| bad(format!("{e}")))?;
+        if m.format_version != FORMAT_VERSION {
+            return Err(bad(format!(
+                "key 'format_version' is {}, this version reads {FORMAT_VERSION}",
+                m.format_version
+            )));
+        }
+        if m.model != "kinematic" {
+            return Err(bad(format!(
+                "key 'model' is '{}': this version predicts with the 'kinematic' model only",
+                m.model
+            )));
+        }
+        let p = &m.parameters;
+        let finite = |key: &str, vals: &[f64]| -> Result<()> {
+            match vals.iter().position(|v| !v.is_finite()) {
+                Some(i) => Err(bad(format!("key '{key}'[{i}] is not finite"))),
+                None => Ok(()),
+            }
+        };
+        for (i, t) in p.joint_error_twists.iter().enumerate() {
+            finite(&format!("parameters.joint_error_twists[{i}]"), t)?;
+        }
+        finite("parameters.zero_offsets", &p.zero_offsets)?;
+        finite(
+            "parameters.t_tracker_base.translation_m",
+            &p.t_tracker_base.translation_m,
+        )?;
+        finite(
+            "parameters.t_tracker_base.rotation",
+            p.t_tracker_base.rotation.as_flattened(),
+        )?;
+        finite("parameters.p_flange_target_m", &p.p_flange_target_m)?;
+        let orthonormal = |key: &str, r: &[[f64; 3]; 3]| -> Result<()> {
+            let m = matrix(r);
+            let e = (m.transpose() * m - Matrix3::identity()).amax();
+            if e > 1e-9 || m.determinant() < 0.0 {
+                return Err(bad(format!(
+                    "key '{key}' is not a rotation matrix (|RᵀR − I| = {e:.1e})"
+                )));
+            }
+            Ok(())
+        };
+        orthonormal(
+            "parameters.t_tracker_base.rotation",
+            &p.t_tracker_base.rotation,
+        )?;
+        if let Some(r) = &p.r_flange_target {
+            finite("parameters.r_flange_target", r.as_flattened())?;
+            orthonormal("parameters.r_flange_target", r)?;
+        }
+        let n = p.joint_error_twists.len();
+        if p.zero_offsets.len() != n {
+            return Err(bad(format!(
+                "key 'parameters.zero_offsets' has {} values for {n} joint error twists",
+                p.zero_offsets.len()
+            )));
+        }
+        Ok(m)
+    }
+
+    /// The embedded robot model (the URDF rebuilt with the stored chain).
+    pub fn robot_model(&self) -> Result<Model> {
+        let spec = ChainSpec {
+            base_link: Some(self.robot.base_link.clone()),
+            tip_link: Some(self.robot.tip_link.clone()),
+        };
+        let model = sim::urdf::load_str(
+            &self.robot.urdf,
+            &format!("embedded robot '{}'", self.robot.name),
+            &spec,
+        )?;
+        if model.nq() != self.parameters.joint_error_twists.len() {
+            return Err(CalibError::ModelFile {
+                file: "embedded robot".into(),
+                message: format!(
+                    "the URDF chain has {} joints but the parameters are for {}",
+                    model.nq(),
+                    self.parameters.joint_error_twists.len()
+                ),
+            });
+        }
+        Ok(model)
+    }
+
+    /// The parameters as a [`KinematicParams`].
+    pub fn params(&self) -> KinematicParams {
+        let p = &self.parameters;
+        let twists: Vec<Vector6<f64>> = p
+            .joint_error_twists
+            .iter()
+            .map(|t| Vector6::from_row_slice(t))
+            .collect();
+        KinematicParams::from_twists(
+            &twists,
+            p.zero_offsets.clone(),
+            pose_from(
+                matrix(&p.t_tracker_base.rotation),
+                Vector3::from(p.t_tracker_base.translation_m),
+            ),
+            Vector3::from(p.p_flange_target_m),
+            p.r_flange_target.as_ref().map(matrix),
+        )
+    }
+}
+
+/// Evaluates a calibrated model.
+#[derive(Clone, Debug)]
+pub struct Predictor {
+    /// The robot.
+    pub model: Model,
+    /// The parameters.
+    pub params: KinematicParams,
+    chain: Chain,
+    scratch: ChainScratch,
+}
+
+/// Predictions for the rows of a table.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Predictions {
+    /// Pose id per row.
+    pub pose: Vec<i64>,
+    /// Predicted target position per row (tracker frame, m).
+    pub position: Vec<[f64; 3]>,
+    /// Predicted target orientation per row (unit quaternion `[qw, qx, qy, qz]`, tracker frame), when the
+    /// model has orientation.
+    pub orientation: Option<Vec<[f64; 4]>>,
+}
+
+impl Predictions {
+    /// CSV text `pose,x,y,z[,qw,qx,qy,qz]`.
+    pub fn to_csv(&self) -> String {
+        let mut header: Vec<String> = ["pose", "x", "y", "z"].map(String::from).to_vec();
+        if self.orientation.is_some() {
+            header.extend(["qw", "qx", "qy", "qz"].map(String::from));
+        }
+        let rows: Vec<(i64, Vec<f64>)> = (0..self.pose.len())
+            .map(|r| {
+                let mut v = self.position[r].to_vec();
+                if let Some(o) = &self.orientation {
+                    v.extend_from_slice(&o[r]);
+                }
+                (self.pose[r], v)
+            })
+            .collect();
+        crate::io::csv_text(&header, &rows)
+    }
+}
+
+impl Predictor {
+    /// A predictor for `model` with `params`.
+    pub fn new(model: Model, params: KinematicParams) -> Self {
+        let chain = Chain::new(&model, &params);
+        let scratch = ChainScratch::new(model.nq());
+        Predictor {
+            model,
+            params,
+            chain,
+            scratch,
+        }
+    }
+
+    /// A predictor for a model file.
+    pub fn from_file(m: &CalibratedModel) -> Result<Self> {
+        Ok(Predictor::new(m.robot_model()?, m.params()))
+    }
+
+    /// Target position (tracker frame, m) and orientation (tracker frame) at the controller's `q`.
+    ///
+    /// # Panics
+    /// If `q` has the wrong length (check tables with [`Predictor::predict_table`]).
+    pub fn predict(&mut self, q: &[f64]) -> (Vector3<f64>, Matrix3<f64>) {
+        self.chain.forward(&mut self.scratch, q);
+        (self.scratch.p_tracker, self.scratch.r_tracker_target)
+    }
+
+    /// Predictions for every row of `table` (its x, y, z are ignored); `file` names it in errors.
+    pub fn predict_table(&mut self, table: &MeasurementTable, file: &str) -> Result<Predictions> {
+        if table.n_joints != self.model.nq() {
+            return Err(CalibError::BadValue {
+                context: file.to_string(),
+                field: "q1..qN".into(),
+                value: format!("{} joint columns", table.n_joints),
+                problem: format!(
+                    "the model's robot '{}' has {} joints",
+                    self.model.name,
+                    self.model.nq()
+                ),
+            });
+        }
+        let orientation = self.params.r_flange_target.is_some();
+        let mut out = Predictions {
+            pose: table.pose.clone(),
+            position: Vec::with_capacity(table.len()),
+            orientation: orientation.then(|| Vec::with_capacity(table.len())),
+        };
+        for r in 0..table.len() {
+            let (p, rot) = self.predict(table.q_row(r));
+            out.position.push(p.into());
+            if let Some(o) = out.orientation.as_mut() {
+                o.push(quaternion_from_rotation(&rot));
+            }
+        }
+        Ok(out)
+    }
+}
+
+fn fmt3(v: &[f64; 3]) -> String {
+    format!("{:?} {:?} {:?}", v[0], v[1], v[2])
+}
+
+fn origin_xml(t: &Pose) -> String {
+    let rpy = rpy_from_rotation(t.rotation.matrix());
+    format!(
+        "<origin xyz=\"{}\" rpy=\"{}\"/>",
+        fmt3(&t.translation.vector.into()),
+        fmt3(&rpy)
+    )
+}
+
+fn xml_escape(s: &str) -> String {
+    s.replace('&', "&amp;")
+        .replace('<', "&lt;")
+        .replace('>', "&gt;")
+        .replace('"', "&quot;")
+}
+
+/// A URDF of the calibrated robot: its forward kinematics from the base link to the tip link equal the
+/// calibrated model's `T_base_flange(q)` (the tracker-to-base transform and the target are not part of
+/// the robot; they are given in a comment).
+///
+/// Joint `i` gets origin `Oᵢ exp([Aᵢ] δqᵢ)` with `Oᵢ = H'ᵢ₋₁⁻¹ H'ᵢ` (`H'ᵢ = Gᵢ Hᵢ`, the calibrated home
+/// pose of joint frame `i`): the calibrated axis in its parent frame, with the zero offset folded in (a
+/// rotation about, or a translation along, the joint's own axis, which commutes with the joint motion).
+/// The tip hangs off the last joint frame by `H'ₙ⁻¹ M`. Axes, limits and link inertials (in the joint
+/// frames, so they move with the calibrated frames by the same sub-millimetre amounts) are the nominal
+/// ones. Fixed joints of the original chain are folded into these origins.
+pub fn calibrated_urdf(model: &Model, params: &KinematicParams) -> String {
+    let n = model.nq();
+    let mut s = String::new();
+    s.push_str("<?xml version=\"1.0\"?>\n");
+    s.push_str(&format!(
+        "<!-- Calibrated by robocal-calib {}: kinematic error model (joint error twists and zero offsets)\n",
+        env!("CARGO_PKG_VERSION")
+    ));
+    let t = &params.t_tracker_base;
+    s.push_str(&format!(
+        "     T_tracker_base: translation (m) {}, rotation rpy (rad) {}\n",
+        fmt3(&t.translation.vector.into()),
+        fmt3(&rpy_from_rotation(t.rotation.matrix()))
+    ));
+    s.push_str(&format!(
+        "     target in the flange frame (m): {} -->\n",
+        fmt3(&params.p_flange_target.into())
+    ));
+    s.push_str(&format!(
+        "<robot name=\"{}\">\n",
+        xml_escape(&format!("{}_calibrated", model.name))
+    ));
+    s.push_str(&format!(
+        "  <link name=\"{}\"/>\n",
+        xml_escape(&model.base_link)
+    ));
+    let mut prev_inv = Pose::identity();
+    let mut parent = model.base_link.clone();
+    for (i, joint) in model.joints.iter().enumerate() {
+        let home = params.joint_error[i] * joint.home;
+        let mut origin = prev_inv * home;
+        prev_inv = home.inverse();
+        let d = params.zero_offset[i];
+        let kind = match joint.kind {
+            JointKind::Revolute => "revolute",
+            JointKind::Continuous => "continuous",
+            JointKind::Prismatic => "prismatic",
+        };
+        if joint.kind == JointKind::Prismatic {
+            origin *= pose_from(Matrix3::identity(), joint.axis * d);
+        } else {
+            origin *= exp_twist(&Vector6::new(
+                joint.axis.x * d,
+                joint.axis.y * d,
+                joint.axis.z * d,
+                0.0,
+                0.0,
+                0.0,
+            ));
+        }
+        let body = &model.bodies[i];
+        let mut child = body
+            .links
+            .first()
+            .cloned()
+            .unwrap_or_else(|| format!("link_{}", i + 1));
+        if i + 1 == n && child == model.tip_link {
+            child = format!("{child}_joint_frame");
+        }
+        s.push_str(&format!(
+            "  <joint name=\"{}\" type=\"{kind}\">\n    <parent link=\"{}\"/>\n    <child link=\"{}\"/>\n    {}\n    <axis xyz=\"{}\"/>\n",
+            xml_escape(&joint.name),
+            xml_escape(&parent),
+            xml_escape(&child),
+            origin_xml(&origin),
+            fmt3(&joint.axis.into())
+        ));
+        if joint.kind != JointKind::Continuous {
+            let l = joint.limits.unwrap_or(sim::JointLimits {
+                lower: 0.0,
+                upper: 0.0,
+                velocity: 0.0,
+                effort: 0.0,
+            });
+            s.push_str(&format!(
+                "    <limit lower=\"{:?}\" upper=\"{:?}\" effort=\"{:?}\" velocity=\"{:?}\"/>\n",
+                l.lower, l.upper, l.effort, l.velocity
+            ));
+        }
+        s.push_str("  </joint>\n");
+        if body.mass > 0.0 {
+            let c = body.com;
+            let it = body.inertia;
+            s.push_str(&format!(
+                "  <link name=\"{}\">\n    <inertial>\n      <origin xyz=\"{}\" rpy=\"0 0 0\"/>\n      <mass value=\"{:?}\"/>\n      <inertia ixx=\"{:?}\" ixy=\"{:?}\" ixz=\"{:?}\" iyy=\"{:?}\" iyz=\"{:?}\" izz=\"{:?}\"/>\n    </inertial>\n  </link>\n",
+                xml_escape(&child),
+                fmt3(&c.into()),
+                body.mass,
+                it[(0, 0)],
+                it[(0, 1)],
+                it[(0, 2)],
+                it[(1, 1)],
+                it[(1, 2)],
+                it[(2, 2)]
+            ));
+        } else {
+            s.push_str(&format!("  <link name=\"{}\"/>\n", xml_escape(&child)));
+        }
+        parent = child;
+    }
+    let flange = prev_inv * model.home_flange;
+    s.push_str(&format!(
+        "  <joint name=\"{}\" type=\"fixed\">\n    <parent link=\"{}\"/>\n    <child link=\"{}\"/>\n    {}\n  </joint>\n  <link name=\"{}\"/>\n</robot>\n",
+        xml_escape(&format!("{}_calibrated_flange", model.tip_link)),
+        xml_escape(&parent),
+        xml_escape(&model.tip_link),
+        origin_xml(&flange),
+        xml_escape(&model.tip_link)
+    ));
+    s
+}
+
+/// How far the flange pose of `urdf` (base link to tip link) is from the calibrated model's
+/// `T_base_flange(q)` over `configs`: the largest position difference (m) or rotation-matrix entry
+/// difference, whichever is larger. For tests and the CLI's self-check after writing a URDF.
+pub fn urdf_deviation(
+    model: &Model,
+    params: &KinematicParams,
+    urdf: &str,
+    configs: &[Vec<f64>],
+) -> Result<f64> {
+    let spec = ChainSpec {
+        base_link: Some(model.base_link.clone()),
+        tip_link: Some(model.tip_link.clone()),
+    };
+    let exported = sim::urdf::load_str(urdf, "calibrated URDF", &spec)?;
+    let mut base_params = params.clone();
+    base_params.t_tracker_base = Pose::identity();
+    base_params.p_flange_target = Vector3::zeros();
+    let chain = Chain::new(model, &base_params);
+    let mut s = ChainScratch::new(model.nq());
+    let mut data = sim::Data::new(&exported);
+    let mut worst = 0.0f64;
+    for q in configs {
+        chain.forward(&mut s, q);
+        let t = sim::flange_pose(&exported, &mut data, q);
+        let dp = (t.translation.vector - s.t_tracker_flange.translation.vector).norm();
+        let dr = (t.rotation.matrix() - s.t_tracker_flange.rotation.matrix()).amax();
+        worst = worst.max(dp).max(dr);
+    }
+    Ok(worst)
+}

@@ -1,0 +1,53 @@
+//! A robot model together with the URDF text it came from, so that calibrated models can embed it.
+
+use crate::error::{CalibError, Result};
+use sim::{ChainSpec, Model, robots, urdf};
+use std::path::Path;
+
+/// A robot model and its source.
+#[derive(Clone, Debug)]
+pub struct Robot {
+    /// The chain, built from `urdf`.
+    pub model: Model,
+    /// The URDF text.
+    pub urdf: String,
+    /// Where it came from: a file path or `built-in robot 'NAME'`.
+    pub source: String,
+}
+
+impl Robot {
+    /// Loads `robot`: a URDF file if such a file exists, otherwise a built-in robot name (as
+    /// [`sim::robots::load_robot`] does), keeping the URDF text.
+    pub fn load(robot: &str, spec: &ChainSpec) -> Result<Self> {
+        let path = Path::new(robot);
+        if path.exists() {
+            let text = std::fs::read_to_string(path).map_err(|e| CalibError::Io {
+                path: robot.to_string(),
+                message: e.to_string(),
+            })?;
+            let model = urdf::load_file(path, spec)?;
+            return Ok(Robot {
+                model,
+                urdf: text,
+                source: robot.to_string(),
+            });
+        }
+        let model = robots::load_robot(robot, spec)?;
+        let text = robots::builtin_urdf(robot)
+            .ok_or_else(|| CalibError::Misuse(format!("robot '{robot}' has no URDF text")))?;
+        Ok(Robot {
+            model,
+            urdf: text.to_string(),
+            source: format!("built-in robot '{robot}'"),
+        })
+    }
+
+    /// Builds the chain from URDF text; `source` names it in errors.
+    pub fn from_urdf_str(text: &str, source: &str, spec: &ChainSpec) -> Result<Self> {
+        Ok(Robot {
+            model: urdf::load_str(text, source, spec)?,
+            urdf: text.to_string(),
+            source: source.to_string(),
+        })
+    }
+}

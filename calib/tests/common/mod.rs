@@ -1,0 +1,176 @@
+//! Synthetic data for the calib tests, built independently of the estimator: the truth is evaluated with
+//! `sim::kinematics::poe_pose` on screws moved by `Ad(exp ξ)` (never with `calib::chain`).
+#![allow(dead_code)]
+
+use nalgebra::{Matrix3, Point3, Vector3, Vector6};
+use rand::rngs::StdRng;
+use rand::{RngExt, SeedableRng};
+use rand_distr::{Distribution, Normal};
+use sim::Model;
+use sim::lie::{Pose, adjoint_apply, exp_twist};
+use sim::measurement_table::{MeasurementTable, OptionalColumns, Row};
+
+/// A hidden "real robot": error twists, zero offsets, base transform and target.
+#[derive(Clone, Debug)]
+pub struct Truth {
+    pub twists: Vec<Vector6<f64>>,
+    pub zero_offsets: Vec<f64>,
+    pub t_tracker_base: Pose,
+    pub p_flange: Vector3<f64>,
+    pub r_flange_target: Option<Matrix3<f64>>,
+}
+
+/// A uniformly random value in [lo, hi] with a random sign.
+fn signed(rng: &mut StdRng, lo: f64, hi: f64) -> f64 {
+    let m = lo + (hi - lo) * rng.random::<f64>();
+    if rng.random::<bool>() { m } else { -m }
+}
+
+/// Random unit vector.
+fn unit(rng: &mut StdRng) -> Vector3<f64> {
+    let n = Normal::new(0.0, 1.0).unwrap();
+    Vector3::new(n.sample(rng), n.sample(rng), n.sample(rng)).normalize()
+}
+
+impl Truth {
+    /// Errors of 0.1–1 mm and 0.1–1 mrad per joint twist (rotation and translation parts of random
+    /// direction), zero offsets of 0.1–1 mrad, a tracker 2–4 m away at an arbitrary rotation, a target
+    /// 5–15 cm from the flange.
+    pub fn random(model: &Model, orientation: bool, rng: &mut StdRng) -> Self {
+        let n = model.nq();
+        let twists = (0..n)
+            .map(|_| {
+                let w = unit(rng) * signed(rng, 1e-4, 1e-3).abs();
+                let v = unit(rng) * signed(rng, 1e-4, 1e-3).abs();
+                Vector6::new(w.x, w.y, w.z, v.x, v.y, v.z)
+            })
+            .collect();
+        let zero_offsets = (0..n).map(|_| signed(rng, 1e-4, 1e-3)).collect();
+        let rot = unit(rng) * (3.0 * rng.random::<f64>());
+        let trans = unit(rng) * (2.0 + 2.0 * rng.random::<f64>());
+        let t_tracker_base = exp_twist(&Vector6::new(rot.x, rot.y, rot.z, 0.0, 0.0, 0.0))
+            * Pose::from_parts(trans.into(), nalgebra::Rotation3::identity());
+        let p_flange = unit(rng) * (0.05 + 0.1 * rng.random::<f64>());
+        let r_flange_target = orientation.then(|| {
+            let w = unit(rng) * 2.0 * rng.random::<f64>();
+            *exp_twist(&Vector6::new(w.x, w.y, w.z, 0.0, 0.0, 0.0))
+                .rotation
+                .matrix()
+        });
+        Truth {
+            twists,
+            zero_offsets,
+            t_tracker_base,
+            p_flange,
+            r_flange_target,
+        }
+    }
+
+    /// The real screws `Ad(exp ξᵢ) Sᵢ`.
+    pub fn screws(&self, model: &Model) -> Vec<Vector6<f64>> {
+        model
+            .joints
+            .iter()
+            .zip(&self.twists)
+            .map(|(j, xi)| adjoint_apply(&exp_twist(xi), &j.screw))
+            .collect()
+    }
+
+    /// True target pose in the tracker frame at controller joint values `q` (product of exponentials).
+    pub fn target(&self, model: &Model, q: &[f64]) -> (Vector3<f64>, Matrix3<f64>) {
+        let th: Vec<f64> = q
+            .iter()
+            .zip(&self.zero_offsets)
+            .map(|(a, b)| a + b)
+            .collect();
+        let t = self.t_tracker_base
+            * sim::kinematics::poe_pose(&self.screws(model), &model.home_flange, &th);
+        let p = (t * Point3::from(self.p_flange)).coords;
+        let r = t.rotation.matrix() * self.r_flange_target.unwrap_or_else(Matrix3::identity);
+        (p, r)
+    }
+}
+
+/// Uniform random configurations within the joint limits (±π for joints without limits).
+pub fn random_configs(model: &Model, n: usize, rng: &mut StdRng) -> Vec<Vec<f64>> {
+    (0..n)
+        .map(|_| {
+            model
+                .joints
+                .iter()
+                .map(|j| {
+                    let (lo, hi) = j
+                        .limits
+                        .map_or((-std::f64::consts::PI, std::f64::consts::PI), |l| {
+                            (l.lower, l.upper)
+                        });
+                    lo + (hi - lo) * rng.random::<f64>()
+                })
+                .collect()
+        })
+        .collect()
+}
+
+/// A measurement table of `configs` (pose ids 0..), measured on `truth` with isotropic Gaussian position
+/// noise `noise_m` (and orientation noise `noise_rad` about a random axis when `orientation`).
+pub fn table(
+    model: &Model,
+    truth: &Truth,
+    configs: &[Vec<f64>],
+    noise_m: f64,
+    noise_rad: f64,
+    rng: &mut StdRng,
+) -> MeasurementTable {
+    table_with(model, truth, configs, noise_m, noise_rad, None, rng)
+}
+
+/// Like [`table`], with a `sigma` column of value `sigma` when given.
+pub fn table_with(
+    model: &Model,
+    truth: &Truth,
+    configs: &[Vec<f64>],
+    noise_m: f64,
+    noise_rad: f64,
+    sigma: Option<f64>,
+    rng: &mut StdRng,
+) -> MeasurementTable {
+    let orientation = truth.r_flange_target.is_some();
+    let cols = OptionalColumns {
+        orientation,
+        sigma: sigma.is_some(),
+        ..OptionalColumns::NONE
+    };
+    let mut t = MeasurementTable::new(model.nq(), cols);
+    let n = Normal::new(0.0, 1.0).unwrap();
+    for (k, q) in configs.iter().enumerate() {
+        let (p, r) = truth.target(model, q);
+        let pm = p + Vector3::new(n.sample(rng), n.sample(rng), n.sample(rng)) * noise_m;
+        let o = orientation.then(|| {
+            let w = Vector3::new(n.sample(rng), n.sample(rng), n.sample(rng)) * noise_rad;
+            let rm = exp_twist(&Vector6::new(w.x, w.y, w.z, 0.0, 0.0, 0.0))
+                .rotation
+                .matrix()
+                * r;
+            let uq = nalgebra::UnitQuaternion::from_rotation_matrix(
+                &nalgebra::Rotation3::from_matrix_unchecked(rm),
+            );
+            [uq.w, uq.i, uq.j, uq.k]
+        });
+        t.push_row(&Row {
+            pose: k as i64,
+            q,
+            position: [pm.x, pm.y, pm.z],
+            orientation: o,
+            sigma,
+            ..Row::default()
+        })
+        .unwrap();
+    }
+    t
+}
+
+/// A seeded RNG; the seed is printed so that a failure can be reproduced.
+pub fn rng(seed: u64) -> StdRng {
+    eprintln!("seed {seed}");
+    StdRng::seed_from_u64(seed)
+}

@@ -1,0 +1,141 @@
+//! The analytic Jacobian of the kinematic error model against central finite differences, and the
+//! prepared chain against the product of exponentials of the moved screws.
+
+mod common;
+
+use calib::chain::{Chain, ChainScratch};
+use calib::lm::LeastSquaresProblem;
+use calib::params::{KinematicParams, ParamLayout};
+use calib::problem::{KinematicProblem, NoiseModel, Observations};
+use common::{Truth, random_configs, rng, table};
+use nalgebra::DMatrix;
+use sim::robots;
+
+fn truth_params(t: &Truth) -> KinematicParams {
+    KinematicParams::from_twists(
+        &t.twists,
+        t.zero_offsets.clone(),
+        t.t_tracker_base,
+        t.p_flange,
+        t.r_flange_target,
+    )
+}
+
+#[test]
+fn chain_equals_product_of_exponentials_of_moved_screws() {
+    for name in ["iiwa7", "ur5", "wam"] {
+        let model = robots::load_builtin(name).unwrap();
+        let mut g = rng(11);
+        let truth = Truth::random(&model, true, &mut g);
+        let chain = Chain::new(&model, &truth_params(&truth));
+        let mut s = ChainScratch::new(model.nq());
+        for q in random_configs(&model, 50, &mut g) {
+            chain.forward(&mut s, &q);
+            let (p, r) = truth.target(&model, &q);
+            assert!(
+                (s.p_tracker - p).amax() < 1e-12,
+                "{name}: {}",
+                (s.p_tracker - p).amax()
+            );
+            assert!((s.r_tracker_target - r).amax() < 1e-13, "{name}");
+        }
+    }
+}
+
+fn check_fd(name: &str, orientation: bool, seed: u64) {
+    let model = robots::load_builtin(name).unwrap();
+    let mut g = rng(seed);
+    let truth = Truth::random(&model, orientation, &mut g);
+    let configs = random_configs(&model, 12, &mut g);
+    let t = table(&model, &truth, &configs, 0.0, 0.0, &mut g);
+    let rows: Vec<usize> = (0..t.len()).collect();
+    let obs = Observations::from_table(&t, &rows, &NoiseModel::default(), "test").unwrap();
+    // Linearise somewhere else than the truth: other joint errors, the base moved by 5 cm and turned by
+    // 0.3 rad, the target turned by 0.3 rad (rotation residuals well away from π, where the logarithm's
+    // curvature would make central differences inaccurate).
+    let mut other = Truth::random(&model, orientation, &mut g);
+    let turn = |w: [f64; 3]| {
+        sim::lie::exp_twist(&nalgebra::Vector6::new(w[0], w[1], w[2], 0.03, -0.04, 0.0))
+    };
+    other.t_tracker_base = turn([0.1, -0.2, 0.2]) * truth.t_tracker_base;
+    other.r_flange_target = truth
+        .r_flange_target
+        .map(|r| r * turn([0.2, 0.2, -0.1]).rotation.matrix());
+    let layout = ParamLayout::new(&model, orientation);
+    let all: Vec<usize> = (0..layout.len()).collect();
+    let mut prob = KinematicProblem::new(&model, &obs, truth_params(&other), all);
+    let (m, p) = (prob.n_residuals(), prob.n_params());
+    let mut j = DMatrix::zeros(m, p);
+    prob.set_params(&vec![0.0; p]);
+    prob.jacobian(&mut j);
+    let coord_max = (0..obs.len())
+        .map(|r| obs.position[r].amax() / obs.sigma[r])
+        .fold(0.0, f64::max);
+    let mut rp = vec![0.0; m];
+    let mut rm = vec![0.0; m];
+    for k in 0..p {
+        let h = 1e-6;
+        let mut step = vec![0.0; p];
+        step[k] = h;
+        prob.set_params(&step);
+        prob.residuals(&mut rp);
+        step[k] = -h;
+        prob.set_params(&step);
+        prob.residuals(&mut rm);
+        let col = j.column(k);
+        let scale = col.amax().max(1.0);
+        let worst = (0..m)
+            .map(|i| ((rp[i] - rm[i]) / (2.0 * h) - col[i]).abs())
+            .fold(0.0, f64::max);
+        // Truncation (h² times the curvature) plus the rounding of coordinates metres away from the
+        // tracker, divided by σ ≈ 1e-5 m and by 2h.
+        assert!(
+            worst < 1e-6 * scale + 4.0 * f64::EPSILON * coord_max / (2.0 * h),
+            "{name} orientation={orientation} column {k} ({}): error {worst:e} of {scale:e}",
+            layout.name(k)
+        );
+    }
+}
+
+#[test]
+fn analytic_jacobian_matches_central_differences_positions() {
+    check_fd("iiwa7", false, 21);
+    check_fd("ur5", false, 22);
+}
+
+#[test]
+fn analytic_jacobian_matches_central_differences_with_orientation() {
+    check_fd("iiwa7", true, 23);
+    check_fd("wam", true, 24);
+}
+
+#[test]
+fn normal_equations_equal_the_jacobian_products() {
+    let model = robots::load_builtin("iiwa7").unwrap();
+    let mut g = rng(31);
+    let truth = Truth::random(&model, true, &mut g);
+    let configs = random_configs(&model, 10, &mut g);
+    let t = table(&model, &truth, &configs, 1e-5, 1e-4, &mut g);
+    let rows: Vec<usize> = (0..t.len()).collect();
+    let obs = Observations::from_table(&t, &rows, &NoiseModel::default(), "test").unwrap();
+    let layout = ParamLayout::new(&model, true);
+    let active: Vec<usize> = (0..layout.len()).filter(|k| k % 3 != 1).collect();
+    let mut prob = KinematicProblem::new(&model, &obs, KinematicParams::nominal(7, true), active);
+    let (m, p) = (prob.n_residuals(), prob.n_params());
+    let scales: Vec<f64> = (0..p).map(|k| 0.5 + k as f64 * 0.01).collect();
+    prob.set_params(&vec![0.0; p]);
+    let mut j = DMatrix::zeros(m, p);
+    prob.jacobian(&mut j);
+    let mut r = vec![0.0; m];
+    prob.residuals(&mut r);
+    let mut gram = DMatrix::zeros(p, p);
+    let mut grad = vec![0.0; p];
+    let cost = prob.normal_equations(&scales, &mut gram, &mut grad);
+    let js = &j * DMatrix::from_diagonal(&nalgebra::DVector::from_vec(scales.clone()));
+    let g2 = js.tr_mul(&js);
+    let rv = nalgebra::DVector::from_vec(r.clone());
+    let gr2 = js.tr_mul(&rv);
+    assert!((gram - &g2).amax() <= 1e-12 * g2.amax());
+    assert!((nalgebra::DVector::from_vec(grad) - &gr2).amax() <= 1e-12 * gr2.amax());
+    assert!((cost - rv.norm_squared()).abs() <= 1e-12 * cost);
+}

@@ -1,0 +1,34 @@
+#!/usr/bin/env bash
+# The whole robocal test suite: the Rust tests plus the independent Python references they are checked
+# against. Sets up a Python venv (.venv, pinned by scripts/requirements.txt) on first use.
+#   ./scripts/test.sh            run everything
+#   ROBOCAL_SKIP_LINT=1 ...      skip cargo fmt/clippy
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+venv=".venv"
+if [ ! -x "$venv/bin/python" ] || ! cmp -s scripts/requirements.txt "$venv/.requirements"; then
+  echo "== setting up the Python venv ($venv) from scripts/requirements.txt" >&2
+  python3 -m venv "$venv"
+  "$venv/bin/pip" install --quiet --disable-pip-version-check -r scripts/requirements.txt
+  cp scripts/requirements.txt "$venv/.requirements"
+fi
+py="$venv/bin/python"
+
+echo "== shipped DH robots against their published tables" >&2
+"$py" scripts/check_dh_urdfs.py
+
+echo "== MuJoCo reference, re-run live and compared with the stored golden files" >&2
+live="target/golden-live"
+mkdir -p "$live"
+"$py" scripts/mujoco_reference.py --out "$live" --compare-to golden
+export ROBOCAL_GOLDEN_LIVE="$PWD/$live"
+
+if [ -z "${ROBOCAL_SKIP_LINT:-}" ]; then
+  echo "== cargo fmt --check and clippy" >&2
+  cargo fmt --all -- --check
+  cargo clippy --workspace --all-targets --quiet -- -D warnings
+fi
+
+echo "== cargo test" >&2
+cargo test --workspace --no-fail-fast

@@ -1,0 +1,819 @@
+//! Measurement campaigns: which joint positions are measured, in which order, when, at which
+//! temperature, after which direction of motion and with which payload.
+//!
+//! A [`CampaignSpec`] is turned into a [`Plan`] by [`plan`]: one row per measurement (pose × repeat),
+//! with everything the controller and the environment impose, but nothing of the truth.
+//!
+//! # Pose sources ([`Sampling`])
+//!
+//! * **random**: every joint uniform within its URDF limits shrunk by a margin (continuous joints in
+//!   [−π, π]), redrawn until the pose passes the [`Reachability`] filter (nominal kinematics): every
+//!   joint frame origin from joint 2 on, the flange and the target above `floor_z_m` (base frame), and
+//!   the target at least `min_axis_distance_m` from the base z axis.
+//! * **iso9283**: the five points of ISO 9283 (pose accuracy and repeatability test): in a cube of side
+//!   `L` centred at `c` (base frame), the plane through the cube edges `y = z = −L/2` and `y = z = +L/2`;
+//!   `P1` is the centre and `P2 … P5` lie on the plane's two diagonals at 10 % of the diagonal length
+//!   (`L√3`) from its corners. Joint positions come from damped-least-squares inverse kinematics
+//!   ([`solve_ik`]) of the target position, the orientation kept from a seed pose; poses cycle
+//!   `P1 → P2 → … → P5 → P1 …` as in the standard's test cycles.
+//! * **grid**: a regular grid in joint space (`points_per_joint[i]` values evenly spaced over the
+//!   shrunk limits, the midpoint for 1), last joint fastest, filtered by [`Reachability`].
+//! * **file**: the joint positions of a measurement table (CSV or Parquet): the `q` of the first row of
+//!   each pose id, in order of first appearance.
+//!
+//! For the list sources (iso9283, grid, file) a pose count cycles through the list (`pose k` uses
+//! entry `k mod len`); without a count the list is used once.
+//!
+//! # Sequencing
+//!
+//! Pose `k` is measured `repeats` times at `t = k · seconds_per_pose + r · seconds_per_repeat` (s); the
+//! temperature is the profile's value at `t` (°C). Approach directions ([`DirectionRule`]):
+//! * `move` (default): `dirᵢ = sign(q_k,i − q_{k−1},i)`, the previous pose of the first being `start_q`;
+//!   a joint that did not move keeps its last direction (its gear stays on the same flank), starting
+//!   from 0 (unknown);
+//! * `random`: ±1 with equal probability, per joint and pose;
+//! * `unknown`: no `dir` columns.
+//!
+//! Payload ([`PayloadRule`]): one fixed mass, or per pose a mass drawn uniformly from a list; the
+//! centre of mass is fixed (flange frame).
+//!
+//! # Random streams
+//!
+//! Every draw comes from a [`rand::rngs::Xoshiro256PlusPlus`] seeded with [`derive_seed`]`(seed,
+//! stream, index)`, a SplitMix64 mix of the campaign seed, a stream id (one per kind of draw) and the
+//! pose (or row) index. Xoshiro256++ is a named algorithm, so its output does not change with the
+//! `rand` version (unlike `StdRng`), and it is cheap to seed once per pose. Draws therefore never depend
+//! on thread scheduling, and changing one kind of draw leaves the others alone.
+
+use crate::effects::thermal_drift::TemperatureProfile;
+use crate::error::{Result, SimError};
+use crate::kinematics::{Data, forward_kinematics, point_jacobian, spatial_jacobian};
+use crate::lie::{Pose, log_pose, pose_from};
+use crate::model::{JointKind, Model};
+use nalgebra::{DMatrix, DVector, Matrix3, Matrix3xX, Vector3};
+use rand::rngs::Xoshiro256PlusPlus;
+use rand::{RngExt, SeedableRng};
+use rayon::prelude::*;
+use std::path::PathBuf;
+
+/// Stream id of the random pose draws (index: pose).
+pub const STREAM_POSES: u64 = 1;
+/// Stream id of the random approach directions (index: pose).
+pub const STREAM_DIRECTIONS: u64 = 2;
+/// Stream id of the payload choices (index: pose).
+pub const STREAM_PAYLOAD: u64 = 3;
+/// Stream id of the tracker noise (index: row).
+pub const STREAM_TRACKER: u64 = 4;
+/// Stream id of the scenario's parameter draws (index: a hash of the key).
+pub const STREAM_PARAMETERS: u64 = 5;
+
+/// SplitMix64 finaliser: a bijective, well-mixing map of 64-bit words (Steele, Lea and Flood 2014).
+#[inline]
+pub fn splitmix64(x: u64) -> u64 {
+    let mut z = x.wrapping_add(0x9E37_79B9_7F4A_7C15);
+    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    z ^ (z >> 31)
+}
+
+/// The seed of item `index` of stream `stream` under the campaign seed `seed`.
+#[inline]
+pub fn derive_seed(seed: u64, stream: u64, index: u64) -> u64 {
+    splitmix64(splitmix64(splitmix64(seed) ^ stream) ^ index)
+}
+
+/// A generator for item `index` of stream `stream` (see the module docs).
+#[inline]
+pub fn rng_for(seed: u64, stream: u64, index: u64) -> Xoshiro256PlusPlus {
+    Xoshiro256PlusPlus::seed_from_u64(derive_seed(seed, stream, index))
+}
+
+/// Which poses a robot can take in the cell (evaluated with the nominal kinematics).
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+pub struct Reachability {
+    /// Floor height in the base frame (m): joint frames 2 … n, the flange and the target stay above it.
+    pub floor_z_m: f64,
+    /// Smallest distance of the target from the base z axis (m).
+    pub min_axis_distance_m: f64,
+}
+
+impl Default for Reachability {
+    /// Floor 5 cm above the base plane, target at least 10 cm from the base axis.
+    fn default() -> Self {
+        Reachability {
+            floor_z_m: 0.05,
+            min_axis_distance_m: 0.10,
+        }
+    }
+}
+
+/// The ISO 9283 test cube (see the module docs).
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct Iso9283 {
+    /// Cube side `L` (m).
+    pub cube_side_m: f64,
+    /// Cube centre in the base frame (m); `None` = the target position at `seed_q`.
+    pub center_base_m: Option<[f64; 3]>,
+    /// Joint positions that seed the inverse kinematics and give the orientation kept at every point
+    /// (rad or m).
+    pub seed_q: Vec<f64>,
+}
+
+/// Where the joint positions come from.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Sampling {
+    /// Uniform in the joint limits shrunk by `joint_margin_rad`, filtered by reachability.
+    Random {
+        /// Margin kept from each limit (rad, or m for prismatic joints).
+        joint_margin_rad: f64,
+        /// Draws per pose before giving up.
+        max_tries_per_pose: usize,
+    },
+    /// The ISO 9283 five-point test.
+    Iso9283(Iso9283),
+    /// A regular grid in joint space.
+    Grid {
+        /// Grid values per joint (≥ 1 each).
+        points_per_joint: Vec<usize>,
+        /// Margin kept from each limit (rad or m).
+        joint_margin_rad: f64,
+    },
+    /// Joint positions from a measurement table.
+    File {
+        /// CSV or Parquet measurement table, as opened.
+        #[serde(skip)]
+        path: PathBuf,
+        /// The path as written in the scenario (recorded in `truth.json`).
+        as_written: String,
+    },
+}
+
+/// How approach directions are set (see the module docs).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum DirectionRule {
+    /// Sign of the move from the previous pose.
+    Move,
+    /// ±1 at random.
+    Random,
+    /// Not recorded (no `dir` columns).
+    Unknown,
+}
+
+/// Mass carried at the flange.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum PayloadRule {
+    /// The same mass at every pose (kg; 0 = none).
+    Fixed(f64),
+    /// Per pose, one of these masses (kg) with equal probability.
+    Choice(Vec<f64>),
+}
+
+/// Everything that decides the rows of a campaign.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct CampaignSpec {
+    /// Number of poses; `None` = 100 for random sampling, 150 (30 cycles) for ISO 9283, the whole list
+    /// for grid and file.
+    pub poses: Option<usize>,
+    /// Measurements per pose (≥ 1).
+    pub repeats: usize,
+    /// Pose source.
+    pub sampling: Sampling,
+    /// Cell constraints for random and grid poses.
+    pub reachability: Reachability,
+    /// Time between successive poses (s).
+    pub seconds_per_pose: f64,
+    /// Time between repeated measurements of one pose (s).
+    pub seconds_per_repeat: f64,
+    /// Approach-direction rule.
+    pub directions: DirectionRule,
+    /// Joint positions before the first pose, for the `move` rule (rad or m); `None` = zero, clamped
+    /// into the limits.
+    pub start_q: Option<Vec<f64>>,
+    /// Payload rule.
+    pub payload: PayloadRule,
+    /// Payload centre of mass in the flange frame (m).
+    pub payload_com_m: [f64; 3],
+    /// Robot temperature over time.
+    pub temperature: TemperatureProfile,
+    /// Target (reflector) position in the flange frame (m), for the reachability filter and ISO 9283.
+    pub p_flange_m: [f64; 3],
+}
+
+impl CampaignSpec {
+    /// A random campaign of `poses` poses with the defaults: one measurement each, 10 s apart,
+    /// `move` directions, no payload, 20 °C, the reflector 5 cm in front of the flange.
+    pub fn random(poses: usize) -> CampaignSpec {
+        CampaignSpec {
+            poses: Some(poses),
+            repeats: 1,
+            sampling: Sampling::Random {
+                joint_margin_rad: 0.05,
+                max_tries_per_pose: 10_000,
+            },
+            reachability: Reachability::default(),
+            seconds_per_pose: 10.0,
+            seconds_per_repeat: 1.0,
+            directions: DirectionRule::Move,
+            start_q: None,
+            payload: PayloadRule::Fixed(0.0),
+            payload_com_m: [0.0; 3],
+            temperature: TemperatureProfile::Constant(20.0),
+            p_flange_m: crate::tracker::DEFAULT_P_FLANGE_M,
+        }
+    }
+}
+
+/// The rows of a campaign: what the controller reports and the environment imposes at each
+/// measurement. Row `r` belongs to pose `r / repeats`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Plan {
+    /// Joints of the robot.
+    pub nq: usize,
+    /// Number of poses.
+    pub n_poses: usize,
+    /// Measurements per pose.
+    pub repeats: usize,
+    /// Pose id per row (0-based pose index).
+    pub pose: Vec<i64>,
+    /// Commanded joint positions per row, row-major `nq` per row (rad or m).
+    pub q: Vec<f64>,
+    /// Time since the start of the campaign per row (s).
+    pub t_s: Vec<f64>,
+    /// Robot temperature per row (°C).
+    pub temp_c: Vec<f64>,
+    /// Approach directions per row, row-major (−1, 0, +1); `None` for [`DirectionRule::Unknown`].
+    pub dir: Option<Vec<i8>>,
+    /// Payload mass per row (kg).
+    pub payload_kg: Vec<f64>,
+    /// Payload centre of mass in the flange frame (m).
+    pub payload_com_m: [f64; 3],
+}
+
+impl Plan {
+    /// Number of rows (measurements).
+    pub fn len(&self) -> usize {
+        self.pose.len()
+    }
+    /// True when there is no row.
+    pub fn is_empty(&self) -> bool {
+        self.pose.is_empty()
+    }
+    /// Joint positions of row `r` (rad or m).
+    pub fn q_row(&self, r: usize) -> &[f64] {
+        &self.q[r * self.nq..(r + 1) * self.nq]
+    }
+    /// Directions of row `r`, if recorded.
+    pub fn dir_row(&self, r: usize) -> Option<&[i8]> {
+        self.dir
+            .as_ref()
+            .map(|d| &d[r * self.nq..(r + 1) * self.nq])
+    }
+}
+
+/// An error about the campaign, reported under the scenario `file` and `key`.
+fn err(file: &str, key: &str, message: String) -> SimError {
+    SimError::Scenario {
+        file: file.to_string(),
+        key: key.to_string(),
+        message,
+    }
+}
+
+/// Sampling interval of joint `i`: the limits shrunk by `margin`, `[−π, π]` for unlimited rotational
+/// joints.
+fn joint_range(model: &Model, i: usize, margin: f64, file: &str, key: &str) -> Result<(f64, f64)> {
+    let j = &model.joints[i];
+    let (lo, hi) = match (j.limits, j.kind) {
+        (Some(l), _) => (l.lower + margin, l.upper - margin),
+        (None, JointKind::Prismatic) => {
+            return Err(err(
+                file,
+                key,
+                format!(
+                    "joint {} ('{}') is prismatic without limits: cannot sample it",
+                    i + 1,
+                    j.name
+                ),
+            ));
+        }
+        (None, _) => (-std::f64::consts::PI, std::f64::consts::PI),
+    };
+    if lo > hi {
+        return Err(err(
+            file,
+            key,
+            format!(
+                "margin {margin} leaves nothing of joint {} ('{}') range",
+                i + 1,
+                j.name
+            ),
+        ));
+    }
+    Ok((lo, hi))
+}
+
+/// True when the nominal robot at the configuration in `data` (after [`forward_kinematics`]) passes
+/// `reach` with the target at `p_flange` (flange frame, m).
+pub fn reachable(data: &Data, p_flange: &Vector3<f64>, reach: &Reachability) -> bool {
+    let floor = reach.floor_z_m;
+    if data
+        .joint_poses
+        .iter()
+        .skip(1)
+        .any(|t| t.translation.z <= floor)
+    {
+        return false;
+    }
+    if data.flange.translation.z <= floor {
+        return false;
+    }
+    let p = data.flange * nalgebra::Point3::from(*p_flange);
+    p.z > floor && p.x.hypot(p.y) >= reach.min_axis_distance_m
+}
+
+/// Damped-least-squares inverse kinematics: joint positions near `q_seed` that put the point
+/// `p_flange` (flange frame, m) at `target_base` (base frame, m) with the flange rotation `r_target`
+/// (base frame). Steps `Δq = Jᵀ (J Jᵀ + λ² I)⁻¹ e` with the 6-row error `e = [log(R_target Rᵀ); Δp]`
+/// until `|e| < 1e-12` (rad and m), at most 500 steps; `λ = 1e-3`. Returns `None` if it does not
+/// converge.
+pub fn solve_ik(
+    model: &Model,
+    q_seed: &[f64],
+    p_flange: &Vector3<f64>,
+    target_base: &Vector3<f64>,
+    r_target: &Matrix3<f64>,
+) -> Option<Vec<f64>> {
+    let n = model.nq();
+    let mut data = Data::new(model);
+    let mut q = q_seed.to_vec();
+    let mut jp = Matrix3xX::zeros(n);
+    let lambda2 = 1e-6;
+    for _ in 0..500 {
+        forward_kinematics(model, &mut data, &q);
+        let p = point_jacobian(model, &data, p_flange, &mut jp);
+        spatial_jacobian(model, &mut data);
+        let r = data.flange.rotation.matrix();
+        let dr: Pose = pose_from(r_target * r.transpose(), Vector3::zeros());
+        let w = log_pose(&dr);
+        let dp = target_base - p;
+        let e = DVector::from_vec(vec![w[0], w[1], w[2], dp.x, dp.y, dp.z]);
+        if e.norm() < 1e-12 {
+            return Some(q);
+        }
+        let mut j = DMatrix::zeros(6, n);
+        for c in 0..n {
+            for k in 0..3 {
+                j[(k, c)] = data.jacobian[(k, c)];
+                j[(3 + k, c)] = jp[(k, c)];
+            }
+        }
+        let a = &j * j.transpose() + DMatrix::identity(6, 6) * lambda2;
+        let y = a.lu().solve(&e)?;
+        let dq = j.transpose() * y;
+        for (qi, d) in q.iter_mut().zip(dq.iter()) {
+            *qi += d;
+        }
+    }
+    None
+}
+
+/// The five ISO 9283 points (base frame, m) of a cube of side `side` centred at `c`, `P1 … P5`.
+pub fn iso9283_points(c: &Vector3<f64>, side: f64) -> [Vector3<f64>; 5] {
+    let h = 0.5 * side;
+    // Corners of the diagonal plane through the edges y = z = −L/2 and y = z = +L/2.
+    let a = c + Vector3::new(-h, -h, -h);
+    let b = c + Vector3::new(h, -h, -h);
+    let cc = c + Vector3::new(h, h, h);
+    let d = c + Vector3::new(-h, h, h);
+    let at = |from: Vector3<f64>, to: Vector3<f64>| from + (to - from) * 0.1;
+    [*c, at(a, cc), at(b, d), at(cc, a), at(d, b)]
+}
+
+fn sign(x: f64) -> i8 {
+    if x > 0.0 {
+        1
+    } else if x < 0.0 {
+        -1
+    } else {
+        0
+    }
+}
+
+/// The joint positions of every pose (row-major, `nq` per pose).
+fn pose_list(model: &Model, spec: &CampaignSpec, seed: u64, file: &str) -> Result<Vec<Vec<f64>>> {
+    let n = model.nq();
+    let p_flange = Vector3::from(spec.p_flange_m);
+    let cycle = |list: Vec<Vec<f64>>, default_all: bool| -> Result<Vec<Vec<f64>>> {
+        if list.is_empty() {
+            return Err(err(file, "campaign", "the pose list is empty".into()));
+        }
+        let count = match spec.poses {
+            Some(c) => c,
+            None if default_all => list.len(),
+            None => 150,
+        };
+        Ok((0..count).map(|k| list[k % list.len()].clone()).collect())
+    };
+    match &spec.sampling {
+        Sampling::Random {
+            joint_margin_rad,
+            max_tries_per_pose,
+        } => {
+            let ranges = (0..n)
+                .map(|i| {
+                    joint_range(
+                        model,
+                        i,
+                        *joint_margin_rad,
+                        file,
+                        "campaign.joint_margin_rad",
+                    )
+                })
+                .collect::<Result<Vec<_>>>()?;
+            let count = spec.poses.unwrap_or(100);
+            let found: Vec<Option<Vec<f64>>> = (0..count)
+                .into_par_iter()
+                .map_init(
+                    || Data::new(model),
+                    |data, k| {
+                        let mut rng = rng_for(seed, STREAM_POSES, k as u64);
+                        let mut q = vec![0.0; n];
+                        for _ in 0..*max_tries_per_pose {
+                            for (qi, (lo, hi)) in q.iter_mut().zip(&ranges) {
+                                let u: f64 = rng.random();
+                                *qi = lo + (hi - lo) * u;
+                            }
+                            forward_kinematics(model, data, &q);
+                            if reachable(data, &p_flange, &spec.reachability) {
+                                return Some(q);
+                            }
+                        }
+                        None
+                    },
+                )
+                .collect();
+            found
+                .into_iter()
+                .enumerate()
+                .map(|(k, q)| {
+                    q.ok_or_else(|| {
+                        err(
+                            file,
+                            "campaign",
+                            format!(
+                                "pose {k}: no configuration passed the reachability filter (floor_z_m = {}, \
+                                 min_axis_distance_m = {}) in {max_tries_per_pose} draws; loosen them",
+                                spec.reachability.floor_z_m, spec.reachability.min_axis_distance_m
+                            ),
+                        )
+                    })
+                })
+                .collect()
+        }
+        Sampling::Iso9283(iso) => {
+            let key = "campaign.iso9283";
+            if iso.seed_q.len() != n {
+                return Err(err(
+                    file,
+                    &format!("{key}.seed_q"),
+                    format!("{} values, but the robot has {n} joints", iso.seed_q.len()),
+                ));
+            }
+            if !(iso.cube_side_m.is_finite() && iso.cube_side_m > 0.0) {
+                return Err(err(
+                    file,
+                    &format!("{key}.cube_side_m"),
+                    format!("{} must be a finite length > 0 m", iso.cube_side_m),
+                ));
+            }
+            model
+                .check_q(&iso.seed_q)
+                .map_err(|e| err(file, &format!("{key}.seed_q"), e.to_string()))?;
+            let mut data = Data::new(model);
+            forward_kinematics(model, &mut data, &iso.seed_q);
+            let r_seed = *data.flange.rotation.matrix();
+            let c = iso
+                .center_base_m
+                .map(Vector3::from)
+                .unwrap_or_else(|| (data.flange * nalgebra::Point3::from(p_flange)).coords);
+            let mut list = Vec::with_capacity(5);
+            for (k, p) in iso9283_points(&c, iso.cube_side_m).iter().enumerate() {
+                let q = solve_ik(model, &iso.seed_q, &p_flange, p, &r_seed).ok_or_else(|| {
+                    err(
+                        file,
+                        key,
+                        format!(
+                            "inverse kinematics did not converge for P{} = ({:.4}, {:.4}, {:.4}) m: the cube \
+                             leaves the workspace; make it smaller or move its centre",
+                            k + 1,
+                            p.x,
+                            p.y,
+                            p.z
+                        ),
+                    )
+                })?;
+                for (i, (j, v)) in model.joints.iter().zip(&q).enumerate() {
+                    if let Some(l) = j.limits
+                        && (*v < l.lower || *v > l.upper)
+                    {
+                        return Err(err(
+                            file,
+                            key,
+                            format!(
+                                "P{}: inverse kinematics gives q{} = {v:.4} outside the limits [{}, {}]; \
+                                 choose another seed_q or a smaller cube",
+                                k + 1,
+                                i + 1,
+                                l.lower,
+                                l.upper
+                            ),
+                        ));
+                    }
+                }
+                list.push(q);
+            }
+            cycle(list, false)
+        }
+        Sampling::Grid {
+            points_per_joint,
+            joint_margin_rad,
+        } => {
+            let key = "campaign.grid.points_per_joint";
+            if points_per_joint.len() != n {
+                return Err(err(
+                    file,
+                    key,
+                    format!(
+                        "{} entries, but the robot has {n} joints",
+                        points_per_joint.len()
+                    ),
+                ));
+            }
+            if let Some(i) = points_per_joint.iter().position(|&c| c == 0) {
+                return Err(err(
+                    file,
+                    &format!("{key}[{i}]"),
+                    "0 points: must be ≥ 1".into(),
+                ));
+            }
+            let total: usize = points_per_joint.iter().product();
+            if total > 10_000_000 {
+                return Err(err(
+                    file,
+                    key,
+                    format!("{total} grid points: more than 10 million"),
+                ));
+            }
+            let ranges = (0..n)
+                .map(|i| {
+                    joint_range(
+                        model,
+                        i,
+                        *joint_margin_rad,
+                        file,
+                        "campaign.grid.joint_margin_rad",
+                    )
+                })
+                .collect::<Result<Vec<_>>>()?;
+            let value = |i: usize, k: usize| {
+                let (lo, hi) = ranges[i];
+                let c = points_per_joint[i];
+                if c == 1 {
+                    0.5 * (lo + hi)
+                } else {
+                    lo + (hi - lo) * k as f64 / (c - 1) as f64
+                }
+            };
+            let mut data = Data::new(model);
+            let mut list = Vec::new();
+            let mut idx = vec![0usize; n];
+            for _ in 0..total {
+                let q: Vec<f64> = (0..n).map(|i| value(i, idx[i])).collect();
+                forward_kinematics(model, &mut data, &q);
+                if reachable(&data, &p_flange, &spec.reachability) {
+                    list.push(q);
+                }
+                // Odometer increment, last joint fastest.
+                for i in (0..n).rev() {
+                    idx[i] += 1;
+                    if idx[i] < points_per_joint[i] {
+                        break;
+                    }
+                    idx[i] = 0;
+                }
+            }
+            if list.is_empty() {
+                return Err(err(
+                    file,
+                    key,
+                    format!("none of the {total} grid points passes the reachability filter"),
+                ));
+            }
+            cycle(list, true)
+        }
+        Sampling::File { path, .. } => {
+            let table = crate::measurement_table::read(path)?;
+            if table.n_joints != n {
+                return Err(err(
+                    file,
+                    "campaign.file.path",
+                    format!(
+                        "{} has {} joint columns, but the robot has {n} joints",
+                        path.display(),
+                        table.n_joints
+                    ),
+                ));
+            }
+            let list = table
+                .rows_by_pose()
+                .into_iter()
+                .map(|(_, rows)| table.q_row(rows[0]).to_vec())
+                .collect();
+            cycle(list, true)
+        }
+    }
+}
+
+/// Turns `spec` into the rows of the campaign for `model`, drawing from `seed` (see the module docs).
+/// `file` names the scenario in errors.
+pub fn plan(model: &Model, spec: &CampaignSpec, seed: u64, file: &str) -> Result<Plan> {
+    let n = model.nq();
+    if spec.repeats == 0 {
+        return Err(err(file, "campaign.repeats", "0: must be ≥ 1".into()));
+    }
+    if spec.poses == Some(0) {
+        return Err(err(file, "campaign.poses", "0: must be ≥ 1".into()));
+    }
+    for (key, v) in [
+        ("campaign.seconds_per_pose", spec.seconds_per_pose),
+        ("campaign.seconds_per_repeat", spec.seconds_per_repeat),
+    ] {
+        if !(v.is_finite() && v >= 0.0) {
+            return Err(err(file, key, format!("{v} must be finite and ≥ 0 s")));
+        }
+    }
+    spec.temperature
+        .validate()
+        .map_err(|e| err(file, "campaign.temperature", e.to_string()))?;
+    let masses: &[f64] = match &spec.payload {
+        PayloadRule::Fixed(m) => std::slice::from_ref(m),
+        PayloadRule::Choice(v) => v,
+    };
+    if masses.is_empty() {
+        return Err(err(file, "campaign.payload.choice_kg", "empty list".into()));
+    }
+    if let Some(m) = masses.iter().find(|m| !(m.is_finite() && **m >= 0.0)) {
+        return Err(err(
+            file,
+            "campaign.payload",
+            format!("mass {m} must be finite and ≥ 0 kg"),
+        ));
+    }
+    let poses = pose_list(model, spec, seed, file)?;
+    let n_poses = poses.len();
+    let rows = n_poses * spec.repeats;
+
+    // Directions per pose.
+    let dirs: Option<Vec<i8>> = match spec.directions {
+        DirectionRule::Unknown => None,
+        DirectionRule::Random => Some(
+            (0..n_poses)
+                .flat_map(|k| {
+                    let mut rng = rng_for(seed, STREAM_DIRECTIONS, k as u64);
+                    (0..n)
+                        .map(move |_| if rng.random::<bool>() { 1 } else { -1 })
+                        .collect::<Vec<i8>>()
+                })
+                .collect(),
+        ),
+        DirectionRule::Move => {
+            let mut prev = match &spec.start_q {
+                Some(s) => {
+                    model
+                        .check_q(s)
+                        .map_err(|e| err(file, "campaign.start_q", e.to_string()))?;
+                    s.clone()
+                }
+                None => model
+                    .joints
+                    .iter()
+                    .map(|j| j.limits.map_or(0.0, |l| 0.0f64.clamp(l.lower, l.upper)))
+                    .collect(),
+            };
+            let mut last = vec![0i8; n];
+            let mut out = Vec::with_capacity(n_poses * n);
+            for q in &poses {
+                for i in 0..n {
+                    let s = sign(q[i] - prev[i]);
+                    if s != 0 {
+                        last[i] = s;
+                    }
+                }
+                out.extend_from_slice(&last);
+                prev.clone_from(q);
+            }
+            Some(out)
+        }
+    };
+
+    let mut plan = Plan {
+        nq: n,
+        n_poses,
+        repeats: spec.repeats,
+        pose: Vec::with_capacity(rows),
+        q: Vec::with_capacity(rows * n),
+        t_s: Vec::with_capacity(rows),
+        temp_c: Vec::with_capacity(rows),
+        dir: dirs.as_ref().map(|_| Vec::with_capacity(rows * n)),
+        payload_kg: Vec::with_capacity(rows),
+        payload_com_m: spec.payload_com_m,
+    };
+    for (k, q) in poses.iter().enumerate() {
+        let mass = match &spec.payload {
+            PayloadRule::Fixed(m) => *m,
+            PayloadRule::Choice(v) => {
+                let mut rng = rng_for(seed, STREAM_PAYLOAD, k as u64);
+                v[rng.random_range(0..v.len())]
+            }
+        };
+        for r in 0..spec.repeats {
+            let t = k as f64 * spec.seconds_per_pose + r as f64 * spec.seconds_per_repeat;
+            plan.pose.push(k as i64);
+            plan.q.extend_from_slice(q);
+            plan.t_s.push(t);
+            plan.temp_c.push(spec.temperature.temp_at(t));
+            if let (Some(out), Some(d)) = (plan.dir.as_mut(), dirs.as_ref()) {
+                out.extend_from_slice(&d[k * n..(k + 1) * n]);
+            }
+            plan.payload_kg.push(mass);
+        }
+    }
+    Ok(plan)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::robots;
+
+    #[test]
+    fn iso9283_points_lie_on_the_plane_diagonals_at_ten_percent() {
+        let c = Vector3::new(0.5, 0.1, 0.4);
+        let l = 0.3;
+        let p = iso9283_points(&c, l);
+        assert_eq!(p[0], c);
+        // Diagonal length L√3; P2..P5 are 0.1·L√3 from a corner and 0.4·L√3 from the centre.
+        for q in &p[1..] {
+            assert!(((q - c).norm() - 0.4 * l * 3f64.sqrt()).abs() < 1e-15);
+            // On the plane y = z (relative to the centre).
+            assert!(((q - c).y - (q - c).z).abs() < 1e-15);
+        }
+        // Hand value of P2: corner (−L/2)(1,1,1) moved 10 % towards (+L/2)(1,1,1): −0.4 L (1,1,1).
+        assert!((p[1] - (c - Vector3::repeat(0.4 * l))).amax() < 1e-15);
+    }
+
+    #[test]
+    fn ik_reaches_the_target_and_keeps_the_orientation() {
+        let m = robots::load_builtin("iiwa7").unwrap();
+        let seed = [0.1, 0.6, 0.0, -1.2, 0.0, 0.8, 0.0];
+        let pf = Vector3::new(0.0, 0.0, 0.05);
+        let mut d = Data::new(&m);
+        forward_kinematics(&m, &mut d, &seed);
+        let r0 = *d.flange.rotation.matrix();
+        let p0 = (d.flange * nalgebra::Point3::from(pf)).coords;
+        let target = p0 + Vector3::new(0.08, -0.05, 0.06);
+        let q = solve_ik(&m, &seed, &pf, &target, &r0).unwrap();
+        forward_kinematics(&m, &mut d, &q);
+        let p = (d.flange * nalgebra::Point3::from(pf)).coords;
+        assert!((p - target).norm() < 1e-11);
+        assert!((d.flange.rotation.matrix() - r0).amax() < 1e-11);
+    }
+
+    #[test]
+    fn move_directions_follow_the_sign_of_the_motion() {
+        let m = robots::load_builtin("iiwa7").unwrap();
+        let mut spec = CampaignSpec::random(30);
+        spec.repeats = 2;
+        let p = plan(&m, &spec, 7, "test").unwrap();
+        assert_eq!(p.len(), 60);
+        let dir = p.dir.as_ref().unwrap();
+        for r in 2..p.len() {
+            let k = r / 2;
+            if k == 0 {
+                continue;
+            }
+            let (q, qp) = (p.q_row(r), p.q_row((k - 1) * 2));
+            for i in 0..7 {
+                let expect = if q[i] > qp[i] { 1 } else { -1 };
+                assert_eq!(dir[r * 7 + i], expect);
+            }
+        }
+        // Repeats share q, dir and payload; time advances by seconds_per_repeat.
+        assert_eq!(p.q_row(4), p.q_row(5));
+        assert_eq!(p.t_s[5] - p.t_s[4], 1.0);
+        assert_eq!(p.t_s[4], 20.0);
+    }
+}

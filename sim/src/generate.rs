@@ -1,0 +1,729 @@
+//! The generator: a resolved scenario ([`crate::scenario::Resolved`]) in, a dataset with its ground
+//! truth out.
+//!
+//! # Pipeline
+//!
+//! 1. [`crate::campaign::plan`]: the rows (pose, q, t, temp, dir, payload).
+//! 2. [`simulate`]: per row, the real robot's flange pose from the analytic truth
+//!    ([`crate::effects::Truth`]) and a tracker reading ([`crate::tracker::Tracker::measure`]). Rows are
+//!    independent and run in parallel (rayon); the tracker noise of pose `k`, repeat `r` comes from its
+//!    own generator seeded by `(seed, k, r)` ([`crate::campaign::derive_seed`]), so the output does not
+//!    depend on the number of threads or their scheduling.
+//! 3. [`write_dataset`]: three files in the output folder, each written atomically (temporary file in
+//!    the same folder, then renamed):
+//!
+//! * `measurements.parquet`: the measurement contract (`shared/spec/measurements.md`) and nothing else:
+//!   `pose, q1..qN, x, y, z, [qw, qx, qy, qz], t, temp, [dir1..dirN], payload, [sigma]`. `qw..qz` only
+//!   with a 6-DoF probe, `dir*` unless the direction rule is `unknown`, `sigma` unless the noise is
+//!   off (scale 0). Never any truth.
+//! * `truth.parquet`: one row per measurement, same order: `pose`, `repeat`; the noise-free target
+//!   `p_tracker_{x,y,z}` (tracker frame, m), `p_base_{x,y,z}` (base frame, m) and the nominal robot's
+//!   target `p_nominal_base_{x,y,z}`; the displacement added by each effect, `{thermal, kinematic,
+//!   backlash, compliance}_{x,y,z}` (base frame, m; they sum to `p_base − p_nominal_base`); the
+//!   link-side joint positions `q_link1..N` and their first-order compliance approximation
+//!   `q_link_first_order1..N` (rad or m); the error added by the tracker `noise_{x,y,z}` (tracker
+//!   frame, m, outliers included), the `outlier` flag, the row's `sigma_radial` and
+//!   `sigma_transverse` (m), and `compliance_iterations`. With a 6-DoF probe also the true
+//!   orientation `qw_true..qz_true` and the rotation error `rot_noise_{x,y,z}` (rad, tracker frame).
+//!   Its column names differ from the contract's (`x`, `q1`, …), so it cannot be read as measurements.
+//! * `truth.json`: every injected parameter resolved to numbers, the scenario (text and parsed form),
+//!   the seed and overrides, the software version, the robot, the tracker placement, reflector offset
+//!   and noise model, the campaign settings, and the summary statistics.
+//!
+//! Same resolved scenario and seed: byte-identical files.
+//!
+//! ```
+//! use sim::scenario::{Overrides, Scenario};
+//! let text = "seed = 3\n[robot]\nname = \"iiwa7\"\n[campaign]\nposes = 20\n\
+//!             [effects.backlash]\ndead_band_rad = 2.9e-4\n";
+//! let res = Scenario::parse(text, "inline.toml", std::path::Path::new("."))
+//!     .unwrap()
+//!     .resolve(&Overrides::default())
+//!     .unwrap();
+//! let plan = sim::generate::plan_of(&res).unwrap();
+//! let truth = sim::effects::Truth::new(&res.model, &res.effects).unwrap();
+//! let out = sim::generate::simulate(&truth, &res.tracker, &res.gravity, &plan, res.seed, None)
+//!     .unwrap();
+//! let table = sim::generate::measurement_table(&plan, &out, &res.tracker);
+//! assert_eq!(table.len(), 20);
+//! // Each joint shifts by half its dead band, so the target moves by at most
+//! // 7 · 1.45e-4 rad · 1.3 m (the iiwa's reach) ≈ 1.3 mm.
+//! for r in &out.rows {
+//!     let b = r.contribution.backlash;
+//!     assert!((b[0] * b[0] + b[1] * b[1] + b[2] * b[2]).sqrt() < 1.4e-3);
+//! }
+//! ```
+
+use crate::campaign::{Plan, STREAM_TRACKER, derive_seed, plan, rng_for};
+use crate::effects::{Conditions, Contributions, Truth};
+use crate::error::{Result, SimError};
+use crate::measurement_table::{self, MeasurementTable, OptionalColumns};
+use crate::scenario::Resolved;
+use crate::statics::Payload;
+use crate::tracker::{Reading, Tracker};
+use arrow_array::{ArrayRef, BooleanArray, Float64Array, Int64Array, RecordBatch};
+use arrow_schema::{DataType, Field, Schema};
+use nalgebra::Vector3;
+use rayon::prelude::*;
+use serde_json::json;
+use std::path::{Path, PathBuf};
+use std::sync::{Arc, Mutex};
+
+/// Software version written into `truth.json`.
+pub const VERSION: &str = env!("CARGO_PKG_VERSION");
+
+/// File names inside the output folder.
+pub const MEASUREMENTS_FILE: &str = "measurements.parquet";
+/// Truth per row.
+pub const TRUTH_PARQUET_FILE: &str = "truth.parquet";
+/// Parameters and provenance.
+pub const TRUTH_JSON_FILE: &str = "truth.json";
+
+/// The simulated truth and reading of one row.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct RowTruth {
+    /// Noise-free target position in the base frame (m).
+    pub p_base: [f64; 3],
+    /// Displacement by each effect (base frame, m).
+    pub contribution: Contributions,
+    /// Newton iterations of the compliance equilibrium.
+    pub compliance_iterations: usize,
+    /// The tracker reading (true and measured target, noise, σ, orientation).
+    pub reading: Reading,
+}
+
+/// The output of [`simulate`]: one [`RowTruth`] per plan row, and the per-joint vectors.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Simulation {
+    /// Joints.
+    pub nq: usize,
+    /// Per row.
+    pub rows: Vec<RowTruth>,
+    /// Link-side joint positions, row-major (rad or m).
+    pub q_link: Vec<f64>,
+    /// First-order link-side joint positions, row-major (rad or m).
+    pub q_link_first_order: Vec<f64>,
+}
+
+/// Per-row progress callback: called with the number of rows just finished.
+pub type Progress<'a> = &'a (dyn Fn(u64) + Sync);
+
+/// Rows between progress callbacks.
+const PROGRESS_EVERY: usize = 4096;
+
+/// Simulates every row of `plan`: truth with `truth` under `gravity` (base frame, m/s²), reading with
+/// `tracker`, noise drawn from `seed` (see the module docs). Runs on the current rayon pool. Fails with
+/// the lowest failing row's error (e.g. a compliance equilibrium that is not found), naming the pose.
+pub fn simulate(
+    truth: &Truth,
+    tracker: &Tracker,
+    gravity: &Vector3<f64>,
+    plan: &Plan,
+    seed: u64,
+    progress: Option<Progress<'_>>,
+) -> Result<Simulation> {
+    let n = plan.len();
+    let nq = plan.nq;
+    let mut rows = vec![RowTruth::default(); n];
+    let mut q_link = vec![0.0; n * nq];
+    let mut q_first = vec![0.0; n * nq];
+    let failure: Mutex<Option<(usize, SimError)>> = Mutex::new(None);
+    let com = plan.payload_com_m;
+    rows.par_iter_mut()
+        .zip(q_link.par_chunks_mut(nq))
+        .zip(q_first.par_chunks_mut(nq))
+        .enumerate()
+        .with_min_len(64)
+        .for_each_init(
+            || truth.scratch(),
+            |scratch, (r, ((row, ql), qf))| {
+                let mass = plan.payload_kg[r];
+                let cond = Conditions {
+                    q: plan.q_row(r),
+                    dir: plan.dir_row(r),
+                    temp_c: plan.temp_c[r],
+                    payload: (mass > 0.0).then_some(Payload { mass, com }),
+                };
+                match truth.target(&cond, &tracker.p_flange, gravity, scratch) {
+                    Ok(tp) => {
+                        let pose = plan.pose[r] as u64;
+                        let repeat = (r % plan.repeats) as u64;
+                        let mut rng = rng_for(
+                            derive_seed(seed, STREAM_TRACKER, pose),
+                            STREAM_TRACKER,
+                            repeat,
+                        );
+                        *row = RowTruth {
+                            p_base: [tp.p_base.x, tp.p_base.y, tp.p_base.z],
+                            contribution: tp.contribution,
+                            compliance_iterations: tp.compliance_iterations,
+                            reading: tracker.measure(&tp.flange, &mut rng),
+                        };
+                        ql.copy_from_slice(scratch.q_link());
+                        qf.copy_from_slice(scratch.q_link_first_order());
+                    }
+                    Err(e) => {
+                        let mut f = failure.lock().unwrap_or_else(|p| p.into_inner());
+                        if f.as_ref().is_none_or(|(fr, _)| r < *fr) {
+                            *f = Some((r, e));
+                        }
+                    }
+                }
+                if let Some(p) = progress
+                    && (r + 1) % PROGRESS_EVERY == 0
+                {
+                    p(PROGRESS_EVERY as u64);
+                }
+            },
+        );
+    if let Some((r, e)) = failure.into_inner().unwrap_or_else(|p| p.into_inner()) {
+        return Err(SimError::Scenario {
+            file: "simulation".into(),
+            key: format!("pose {} (row {})", plan.pose[r], r + 1),
+            message: e.to_string(),
+        });
+    }
+    if let Some(p) = progress {
+        p((n % PROGRESS_EVERY) as u64);
+    }
+    Ok(Simulation {
+        nq,
+        rows,
+        q_link,
+        q_link_first_order: q_first,
+    })
+}
+
+/// The measurement table of a simulation: contract columns only (see the module docs).
+pub fn measurement_table(plan: &Plan, sim: &Simulation, tracker: &Tracker) -> MeasurementTable {
+    let cols = OptionalColumns {
+        orientation: tracker.six_dof,
+        t: true,
+        temp: true,
+        dir: plan.dir.is_some(),
+        payload: true,
+        sigma: tracker.noise_scale > 0.0,
+    };
+    MeasurementTable {
+        n_joints: plan.nq,
+        pose: plan.pose.clone(),
+        q: plan.q.clone(),
+        position: sim.rows.iter().map(|r| r.reading.p_measured).collect(),
+        orientation: cols.orientation.then(|| {
+            sim.rows
+                .iter()
+                .map(|r| r.reading.orientation_measured)
+                .collect()
+        }),
+        t: Some(plan.t_s.clone()),
+        temp: Some(plan.temp_c.clone()),
+        dir: plan.dir.clone(),
+        payload: Some(plan.payload_kg.clone()),
+        sigma: cols
+            .sigma
+            .then(|| sim.rows.iter().map(|r| r.reading.sigma_m).collect()),
+    }
+}
+
+/// Names of the `truth.parquet` columns for `nq` joints (see the module docs).
+pub fn truth_column_names(nq: usize, six_dof: bool) -> Vec<String> {
+    let mut v: Vec<String> = vec!["pose".into(), "repeat".into()];
+    for p in [
+        "p_tracker",
+        "p_base",
+        "p_nominal_base",
+        "thermal",
+        "kinematic",
+        "backlash",
+        "compliance",
+    ] {
+        for a in ["x", "y", "z"] {
+            v.push(format!("{p}_{a}"));
+        }
+    }
+    v.extend((1..=nq).map(|j| format!("q_link{j}")));
+    v.extend((1..=nq).map(|j| format!("q_link_first_order{j}")));
+    v.extend(
+        [
+            "noise_x",
+            "noise_y",
+            "noise_z",
+            "outlier",
+            "sigma_radial",
+            "sigma_transverse",
+        ]
+        .map(String::from),
+    );
+    v.push("compliance_iterations".into());
+    if six_dof {
+        v.extend(
+            [
+                "qw_true",
+                "qx_true",
+                "qy_true",
+                "qz_true",
+                "rot_noise_x",
+                "rot_noise_y",
+                "rot_noise_z",
+            ]
+            .map(String::from),
+        );
+    }
+    v
+}
+
+/// The `truth.parquet` record batch.
+fn truth_batch(plan: &Plan, sim: &Simulation, six_dof: bool) -> Result<RecordBatch> {
+    let nq = plan.nq;
+    let rows = &sim.rows;
+    let f = |v: Vec<f64>| Arc::new(Float64Array::from(v)) as ArrayRef;
+    let col3 = |g: &dyn Fn(&RowTruth) -> [f64; 3]| -> [ArrayRef; 3] {
+        std::array::from_fn(|k| f(rows.iter().map(|r| g(r)[k]).collect()))
+    };
+    let mut arrays: Vec<ArrayRef> = vec![
+        Arc::new(Int64Array::from(plan.pose.clone())),
+        Arc::new(Int64Array::from(
+            (0..plan.len())
+                .map(|r| (r % plan.repeats) as i64)
+                .collect::<Vec<_>>(),
+        )),
+    ];
+    arrays.extend(col3(&|r| r.reading.p_true));
+    arrays.extend(col3(&|r| r.p_base));
+    arrays.extend(col3(&|r| {
+        let t = r.contribution.total();
+        std::array::from_fn(|k| r.p_base[k] - t[k])
+    }));
+    arrays.extend(col3(&|r| r.contribution.thermal));
+    arrays.extend(col3(&|r| r.contribution.kinematic));
+    arrays.extend(col3(&|r| r.contribution.backlash));
+    arrays.extend(col3(&|r| r.contribution.compliance));
+    for j in 0..nq {
+        arrays.push(f((0..plan.len()).map(|r| sim.q_link[r * nq + j]).collect()));
+    }
+    for j in 0..nq {
+        arrays.push(f((0..plan.len())
+            .map(|r| sim.q_link_first_order[r * nq + j])
+            .collect()));
+    }
+    arrays.extend(col3(&|r| r.reading.noise));
+    arrays.push(Arc::new(BooleanArray::from(
+        rows.iter().map(|r| r.reading.outlier).collect::<Vec<_>>(),
+    )));
+    arrays.push(f(rows.iter().map(|r| r.reading.sigma_radial_m).collect()));
+    arrays.push(f(rows
+        .iter()
+        .map(|r| r.reading.sigma_transverse_m)
+        .collect()));
+    arrays.push(Arc::new(Int64Array::from(
+        rows.iter()
+            .map(|r| r.compliance_iterations as i64)
+            .collect::<Vec<_>>(),
+    )));
+    if six_dof {
+        for k in 0..4 {
+            arrays.push(f(rows
+                .iter()
+                .map(|r| r.reading.orientation_true[k])
+                .collect()));
+        }
+        arrays.extend(col3(&|r| r.reading.orientation_noise));
+    }
+    let names = truth_column_names(nq, six_dof);
+    let fields: Vec<Field> = names
+        .iter()
+        .zip(&arrays)
+        .map(|(n, a)| Field::new(n, a.data_type().clone(), false))
+        .collect();
+    debug_assert!(fields.iter().all(|f| matches!(
+        f.data_type(),
+        DataType::Int64 | DataType::Float64 | DataType::Boolean
+    )));
+    RecordBatch::try_new(Arc::new(Schema::new(fields)), arrays).map_err(|e| SimError::Io {
+        path: PathBuf::from(TRUTH_PARQUET_FILE),
+        source: std::io::Error::other(e.to_string()),
+    })
+}
+
+/// Deterministic Parquet bytes of `batch` (writer properties set explicitly, no timestamps).
+fn parquet_bytes(batch: &RecordBatch, path: &Path) -> Result<Vec<u8>> {
+    use parquet::arrow::ArrowWriter;
+    use parquet::basic::Compression;
+    use parquet::file::properties::{
+        DEFAULT_CREATED_BY, EnabledStatistics, WriterProperties, WriterVersion,
+    };
+    let props = WriterProperties::builder()
+        .set_writer_version(WriterVersion::PARQUET_1_0)
+        .set_created_by(DEFAULT_CREATED_BY.to_string())
+        .set_compression(Compression::SNAPPY)
+        .set_max_row_group_row_count(Some(measurement_table::PARQUET_MAX_ROW_GROUP_ROWS))
+        .set_max_row_group_bytes(None)
+        .set_write_batch_size(1024)
+        .set_data_page_size_limit(1024 * 1024)
+        .set_data_page_row_count_limit(20_000)
+        .set_statistics_enabled(EnabledStatistics::Chunk)
+        .set_bloom_filter_enabled(false)
+        .set_key_value_metadata(None)
+        .set_sorting_columns(None)
+        .set_dictionary_enabled(false)
+        .build();
+    let io = |e: &dyn std::fmt::Display| SimError::Io {
+        path: path.to_path_buf(),
+        source: std::io::Error::other(format!("cannot write Parquet: {e}")),
+    };
+    let mut w =
+        ArrowWriter::try_new(Vec::new(), batch.schema(), Some(props)).map_err(|e| io(&e))?;
+    let n = batch.num_rows();
+    let mut start = 0;
+    while start < n {
+        let len = (n - start).min(measurement_table::PARQUET_MAX_ROW_GROUP_ROWS);
+        w.write(&batch.slice(start, len)).map_err(|e| io(&e))?;
+        start += len;
+    }
+    w.into_inner().map_err(|e| io(&e))
+}
+
+/// Writes `bytes` to `path` atomically: a temporary file in the same folder, synced, then renamed.
+pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
+    use std::io::Write;
+    let dir = match path.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+        _ => PathBuf::from("."),
+    };
+    let name = path
+        .file_name()
+        .map_or_else(|| "out".into(), |n| n.to_string_lossy().into_owned());
+    let tmp = dir.join(format!(".{name}.tmp-{}", std::process::id()));
+    let result = (|| {
+        let mut f = std::fs::File::create(&tmp)?;
+        f.write_all(bytes)?;
+        f.sync_all()?;
+        drop(f);
+        std::fs::rename(&tmp, path)
+    })();
+    result.map_err(|source| {
+        let _ = std::fs::remove_file(&tmp);
+        SimError::Io {
+            path: path.to_path_buf(),
+            source,
+        }
+    })
+}
+
+/// Root-mean-square displacement (m) and largest one of one effect over the rows.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct EffectSize {
+    /// Effect name (`thermal_drift`, `kinematic_offsets`, `gear_backlash`, `joint_compliance`).
+    pub effect: &'static str,
+    /// RMS of the displacement length over the rows (m).
+    pub rms_m: f64,
+    /// Largest displacement length (m).
+    pub max_m: f64,
+}
+
+/// What a generation produced, for the summary paragraph and `truth.json`.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct Summary {
+    /// Robot name.
+    pub robot: String,
+    /// Seed in force.
+    pub seed: u64,
+    /// Poses.
+    pub poses: usize,
+    /// Rows (measurements).
+    pub rows: usize,
+    /// The injected effects and their sizes at the target.
+    pub effects: Vec<EffectSize>,
+    /// RMS of the total deviation of the real target from the nominal one (m).
+    pub total_rms_m: f64,
+    /// Noise multiplier.
+    pub noise_scale: f64,
+    /// Median target distance from the tracker (m).
+    pub median_distance_m: f64,
+    /// Radial and transverse σ at the median distance (m, scaled).
+    pub sigma_at_median_m: [f64; 2],
+    /// RMS length of the added noise vector over rows without outliers (m).
+    pub noise_rms_m: f64,
+    /// Rows with a gross outlier.
+    pub outliers: usize,
+    /// Files written (paths as given; not stored in `truth.json`, which must not depend on the output
+    /// folder).
+    #[serde(skip)]
+    pub files: Vec<String>,
+}
+
+fn fmt_len(m: f64) -> String {
+    if m == 0.0 {
+        "0".into()
+    } else if m < 1e-3 {
+        format!("{:.1} µm", m * 1e6)
+    } else {
+        format!("{:.3} mm", m * 1e3)
+    }
+}
+
+impl Summary {
+    /// One human-readable paragraph.
+    pub fn paragraph(&self) -> String {
+        let effects = if self.effects.is_empty() {
+            "no injected effects".to_string()
+        } else {
+            let parts: Vec<String> = self
+                .effects
+                .iter()
+                .map(|e| {
+                    format!(
+                        "{} (RMS {}, max {})",
+                        e.effect,
+                        fmt_len(e.rms_m),
+                        fmt_len(e.max_m)
+                    )
+                })
+                .collect();
+            format!(
+                "effects {}; total RMS deviation {}",
+                parts.join(", "),
+                fmt_len(self.total_rms_m)
+            )
+        };
+        let noise = if self.noise_scale == 0.0 {
+            "noise-free (scale 0)".to_string()
+        } else {
+            format!(
+                "tracker noise ×{}: σ_radial {}, σ_transverse {} at the median distance {:.2} m, RMS |noise| {}, {} outlier row(s)",
+                self.noise_scale,
+                fmt_len(self.sigma_at_median_m[0]),
+                fmt_len(self.sigma_at_median_m[1]),
+                self.median_distance_m,
+                fmt_len(self.noise_rms_m),
+                self.outliers
+            )
+        };
+        format!(
+            "generated {} poses ({} measurements) of robot '{}', seed {}; {}; {}; wrote {}.",
+            self.poses,
+            self.rows,
+            self.robot,
+            self.seed,
+            effects,
+            noise,
+            self.files.join(", ")
+        )
+    }
+}
+
+fn summarize(res: &Resolved, plan: &Plan, sim: &Simulation, files: Vec<String>) -> Summary {
+    let n = sim.rows.len().max(1) as f64;
+    let len = |v: [f64; 3]| (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+    let size = |name: &'static str, g: &dyn Fn(&Contributions) -> [f64; 3]| {
+        let mut s2 = 0.0;
+        let mut mx: f64 = 0.0;
+        for r in &sim.rows {
+            let l = len(g(&r.contribution));
+            s2 += l * l;
+            mx = mx.max(l);
+        }
+        EffectSize {
+            effect: name,
+            rms_m: (s2 / n).sqrt(),
+            max_m: mx,
+        }
+    };
+    let e = &res.effects;
+    let mut effects = Vec::new();
+    if e.thermal.is_some() {
+        effects.push(size("thermal_drift", &|c| c.thermal));
+    }
+    if e.kinematic.is_some() {
+        effects.push(size("kinematic_offsets", &|c| c.kinematic));
+    }
+    if e.backlash.is_some() {
+        effects.push(size("gear_backlash", &|c| c.backlash));
+    }
+    if e.compliance.is_some() {
+        effects.push(size("joint_compliance", &|c| c.compliance));
+    }
+    let total = size("total", &|c| c.total());
+    let mut d: Vec<f64> = sim.rows.iter().map(|r| len(r.reading.p_true)).collect();
+    d.sort_unstable_by(f64::total_cmp);
+    let median = if d.is_empty() { 0.0 } else { d[d.len() / 2] };
+    let (sr, st) = res.tracker.sigmas(median);
+    let (mut s2, mut m) = (0.0, 0usize);
+    for r in sim.rows.iter().filter(|r| !r.reading.outlier) {
+        let l = len(r.reading.noise);
+        s2 += l * l;
+        m += 1;
+    }
+    Summary {
+        robot: res.model.name.clone(),
+        seed: res.seed,
+        poses: plan.n_poses,
+        rows: plan.len(),
+        effects,
+        total_rms_m: total.rms_m,
+        noise_scale: res.tracker.noise_scale,
+        median_distance_m: median,
+        sigma_at_median_m: [sr, st],
+        noise_rms_m: if m > 0 { (s2 / m as f64).sqrt() } else { 0.0 },
+        outliers: sim.rows.iter().filter(|r| r.reading.outlier).count(),
+        files,
+    }
+}
+
+/// A pose as `{xyz_m, rpy_rad, matrix}` for `truth.json`.
+fn pose_json(xyz: [f64; 3], rpy: [f64; 3], t: &crate::lie::Pose) -> serde_json::Value {
+    let m = t.to_homogeneous();
+    json!({
+        "xyz_m": xyz, "rpy_rad": rpy,
+        "matrix": (0..4).map(|r| (0..4).map(|c| m[(r, c)]).collect::<Vec<_>>()).collect::<Vec<_>>(),
+    })
+}
+
+/// The `truth.json` document, top-level keys in reading order (nested objects have sorted keys).
+#[derive(serde::Serialize)]
+struct TruthDoc {
+    software: serde_json::Value,
+    seed: u64,
+    overrides: crate::scenario::Overrides,
+    scenario_file: String,
+    truth_model: crate::scenario::TruthModel,
+    robot: serde_json::Value,
+    gravity_m_per_s2: [f64; 3],
+    effects: serde_json::Value,
+    tracker: serde_json::Value,
+    campaign: serde_json::Value,
+    summary: serde_json::Value,
+    files: serde_json::Value,
+    scenario: serde_json::Value,
+    scenario_text: String,
+}
+
+fn to_value<T: serde::Serialize>(v: &T) -> serde_json::Value {
+    serde_json::to_value(v).unwrap_or(serde_json::Value::Null)
+}
+
+/// The `truth.json` document.
+fn truth_json(res: &Resolved, plan: &Plan, summary: &Summary) -> TruthDoc {
+    let sc = &res.scenario;
+    let tr = &res.tracker;
+    let file_name = Path::new(&sc.label)
+        .file_name()
+        .map_or_else(|| sc.label.clone(), |n| n.to_string_lossy().into_owned());
+    TruthDoc {
+        software: json!({"name": "robocal", "version": VERSION}),
+        seed: res.seed,
+        overrides: res.overrides,
+        scenario_file: file_name,
+        truth_model: res.truth_model,
+        robot: json!({
+            "name": res.model.name, "source": res.robot_source.source,
+            "urdf_fnv1a64": res.robot_source.urdf_fnv1a64,
+            "base_link": res.model.base_link, "tip_link": res.model.tip_link,
+            "joints": res.model.nq(),
+            "joint_names": res.model.joints.iter().map(|j| j.name.clone()).collect::<Vec<_>>(),
+        }),
+        gravity_m_per_s2: [res.gravity.x, res.gravity.y, res.gravity.z],
+        effects: to_value(&res.effects),
+        tracker: json!({
+            "T_tracker_base": pose_json(res.tracker_xyz_m, res.tracker_rpy_rad, &tr.t_tracker_base),
+            "reflector_flange_m": [tr.p_flange.x, tr.p_flange.y, tr.p_flange.z],
+            "six_dof": tr.six_dof,
+            "R_flange_probe": (0..3).map(|r| (0..3).map(|c| tr.r_flange_probe[(r, c)]).collect::<Vec<_>>()).collect::<Vec<_>>(),
+            "noise_model": tr.noise,
+            "noise_scale": tr.noise_scale,
+            "noise_law": "error = s (σ_r n_r u + σ_t (n1 e1 + n2 e2)), σ_r = radial_a_m + radial_b_m_per_m d, σ_t = transverse_a_m + transverse_b_m_per_m d; u line of sight, e1 = z×u/|z×u|, e2 = u×e1; plus, at outlier_rate, s outlier_magnitude_m in a uniform direction",
+            "sigma_column": "sqrt((σ_r² + 2 σ_t²)/3) at the measured distance (RMS of the per-axis σ), scaled by noise_scale; absent when noise_scale = 0",
+        }),
+        campaign: json!({
+            "spec": res.campaign,
+            "poses": plan.n_poses, "repeats": plan.repeats, "rows": plan.len(),
+        }),
+        summary: to_value(summary),
+        files: json!({
+            "measurements": MEASUREMENTS_FILE, "truth_rows": TRUTH_PARQUET_FILE,
+            "truth_rows_columns": truth_column_names(plan.nq, tr.six_dof),
+        }),
+        scenario: to_value(&sc.file),
+        scenario_text: sc.text.clone(),
+    }
+}
+
+/// Plans, simulates and writes the dataset of `res` into `out_dir` (created if missing). Returns the
+/// summary. `progress` is called from worker threads with rows finished (the total is
+/// [`Plan::len`]; use [`plan_of`] first to know it).
+pub fn write_dataset(
+    res: &Resolved,
+    out_dir: &Path,
+    plan: &Plan,
+    progress: Option<Progress<'_>>,
+) -> Result<Summary> {
+    let truth = Truth::new(&res.model, &res.effects).map_err(|e| SimError::Scenario {
+        file: res.scenario.label.clone(),
+        key: "effects".into(),
+        message: e.to_string(),
+    })?;
+    let sim = simulate(&truth, &res.tracker, &res.gravity, plan, res.seed, progress).map_err(
+        |e| match e {
+            SimError::Scenario { key, message, .. } => SimError::Scenario {
+                file: res.scenario.label.clone(),
+                key,
+                message,
+            },
+            other => other,
+        },
+    )?;
+    std::fs::create_dir_all(out_dir).map_err(|source| SimError::Io {
+        path: out_dir.to_path_buf(),
+        source,
+    })?;
+    let m_path = out_dir.join(MEASUREMENTS_FILE);
+    let t_path = out_dir.join(TRUTH_PARQUET_FILE);
+    let j_path = out_dir.join(TRUTH_JSON_FILE);
+    let table = measurement_table(plan, &sim, &res.tracker);
+    measurement_table::write(&m_path, &table)?;
+    let batch = truth_batch(plan, &sim, res.tracker.six_dof)?;
+    write_atomic(&t_path, &parquet_bytes(&batch, &t_path)?)?;
+    let files = [&m_path, &t_path, &j_path]
+        .iter()
+        .map(|p| p.display().to_string())
+        .collect();
+    let summary = summarize(res, plan, &sim, files);
+    let doc = truth_json(res, plan, &summary);
+    let mut text = serde_json::to_string_pretty(&doc).map_err(|e| SimError::Io {
+        path: j_path.clone(),
+        source: std::io::Error::other(e.to_string()),
+    })?;
+    text.push('\n');
+    write_atomic(&j_path, text.as_bytes())?;
+    Ok(summary)
+}
+
+/// The campaign rows of a resolved scenario (step 1 of the pipeline).
+pub fn plan_of(res: &Resolved) -> Result<Plan> {
+    plan(&res.model, &res.campaign, res.seed, &res.scenario.label)
+}
+
+/// The whole pipeline: plan, simulate, write. See [`write_dataset`].
+pub fn generate(res: &Resolved, out_dir: &Path, progress: Option<Progress<'_>>) -> Result<Summary> {
+    let p = plan_of(res)?;
+    write_dataset(res, out_dir, &p, progress)
+}
+
+/// Column names of a Parquet file, in file order (to check what a file holds without interpreting it).
+pub fn parquet_column_names(path: &Path) -> Result<Vec<String>> {
+    let io = |e: &dyn std::fmt::Display| SimError::Io {
+        path: path.to_path_buf(),
+        source: std::io::Error::other(e.to_string()),
+    };
+    let f = std::fs::File::open(path).map_err(|source| SimError::Io {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    let b = parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(f)
+        .map_err(|e| io(&e))?;
+    Ok(b.schema()
+        .fields()
+        .iter()
+        .map(|f| f.name().clone())
+        .collect())
+}

@@ -1,0 +1,276 @@
+//! Checks of a measurement table against the robot it claims to measure (the contract's bad-input rules
+//! that need the robot: joint count, URDF limits, units that look wrong).
+
+use super::{MeasurementTable, QUATERNION_NORM_WARNING, table_err};
+use crate::error::Result;
+use crate::model::{JointKind, Model};
+use std::f64::consts::PI;
+use std::path::Path;
+
+/// How far a joint value may lie outside its URDF limits before it is an error (rad for rotational
+/// joints, m for prismatic ones); values outside by less are a warning.
+pub const LIMIT_TOLERANCE: f64 = 0.1;
+
+/// Positions are taken for millimetres when their median distance from their median point exceeds
+/// this many times the robot's reach (plus a tool allowance of 0.5 m) …
+const MM_SPREAD_FACTOR: f64 = 10.0;
+/// … or when their median distance from the tracker origin exceeds this (m).
+const MM_DISTANCE: f64 = 100.0;
+/// Allowance for the unknown target offset from the flange when judging reach (m).
+const TOOL_ALLOWANCE: f64 = 0.5;
+/// A median `sigma` above this (m) is more than any laser tracker's uncertainty: probably millimetres.
+const SIGMA_LARGE: f64 = 0.01;
+/// Plausible robot temperatures (°C).
+const TEMP_RANGE: (f64, f64) = (-50.0, 150.0);
+
+/// An upper bound on the distance from the base origin to the flange over all configurations (m): the
+/// sum of the distances between consecutive joint origins at home, the flange offset, and the travel
+/// of prismatic joints.
+pub fn reach_bound(model: &Model) -> f64 {
+    let mut prev = nalgebra::Vector3::zeros();
+    let mut sum = 0.0;
+    for j in &model.joints {
+        let p = j.home.translation.vector;
+        sum += (p - prev).norm();
+        prev = p;
+        if j.kind == JointKind::Prismatic {
+            sum += j.limits.map_or(1.0, |l| l.lower.abs().max(l.upper.abs()));
+        }
+    }
+    sum + (model.home_flange.translation.vector - prev).norm()
+}
+
+fn median(mut v: Vec<f64>) -> f64 {
+    if v.is_empty() {
+        return 0.0;
+    }
+    v.sort_unstable_by(f64::total_cmp);
+    let m = v.len() / 2;
+    if v.len() % 2 == 1 {
+        v[m]
+    } else {
+        0.5 * (v[m - 1] + v[m])
+    }
+}
+
+/// Checks `table` against the robot `model`; `file` names the table in messages. Returns the warnings
+/// (one line each), or the first error:
+///
+/// * everything [`MeasurementTable::validate`] checks (finite values — `t` included —, non-negative
+///   `sigma` and `payload`, `dir` values, shapes);
+/// * the joint count must equal the robot's (the error says how many each has);
+/// * a joint value outside its URDF limits by more than [`LIMIT_TOLERANCE`] is an error naming row,
+///   column, value and limits; outside by less, one warning per joint column (rows counted, worst row);
+/// * degrees: a rotational joint column is taken for degrees when its largest |q| exceeds 2π + 0.1
+///   and every value × π/180 lies within the joint's limits (± tolerance), or, for a joint without
+///   limits (continuous), when its largest |q| exceeds 4π. Such a column gets a warning, and the hint
+///   is added to a limit error. Prismatic columns likewise for millimetres (× 1/1000);
+/// * millimetres in `x, y, z`: warned when the median distance of the points from their
+///   coordinate-wise median exceeds 10 × (reach + 0.5 m), [`reach_bound`], or their median distance from
+///   the tracker origin exceeds 100 m. Medians make one stray point irrelevant;
+/// * quaternion norms off 1 by more than [`QUATERNION_NORM_WARNING`] (use
+///   [`MeasurementTable::unit_orientation`]), `sigma` of zero or a median `sigma` above 1 cm
+///   (millimetres?), `temp` outside −50…150 °C (kelvin?): warnings.
+pub fn check_against_model(
+    table: &MeasurementTable,
+    model: &Model,
+    file: &Path,
+) -> Result<Vec<String>> {
+    let name = file.display().to_string();
+    table.validate_named(&name)?;
+    let nq = model.nq();
+    if table.n_joints != nq {
+        let joints: Vec<&str> = model.joints.iter().map(|j| j.name.as_str()).collect();
+        return Err(table_err(
+            &name,
+            None,
+            None,
+            format!(
+                "the file has {} joint columns (q1..q{}), but robot '{}' has {nq} joints ({})",
+                table.n_joints,
+                table.n_joints,
+                model.name,
+                joints.join(", ")
+            ),
+        ));
+    }
+    let mut warnings = Vec::new();
+    let n = table.len();
+    let column = |j: usize| (0..n).map(move |r| table.q[r * nq + j]);
+
+    // Units of joint columns.
+    let mut hints: Vec<Option<String>> = vec![None; nq];
+    for (j, joint) in model.joints.iter().enumerate() {
+        let max_abs = column(j).fold(0.0f64, |m, v| m.max(v.abs()));
+        let fits = |scale: f64| {
+            joint.limits.is_some_and(|l| {
+                column(j).all(|v| {
+                    let s = v * scale;
+                    s >= l.lower - LIMIT_TOLERANCE && s <= l.upper + LIMIT_TOLERANCE
+                })
+            })
+        };
+        let hint = match joint.kind {
+            JointKind::Revolute | JointKind::Continuous => {
+                let deg = if joint.limits.is_some() {
+                    max_abs > 2.0 * PI + LIMIT_TOLERANCE && fits(PI / 180.0)
+                } else {
+                    max_abs > 4.0 * PI
+                };
+                deg.then(|| {
+                    format!("values up to {max_abs} look like degrees, but radians are expected")
+                })
+            }
+            JointKind::Prismatic => {
+                let mm = if let Some(l) = joint.limits {
+                    max_abs > l.lower.abs().max(l.upper.abs()) + LIMIT_TOLERANCE && fits(1e-3)
+                } else {
+                    max_abs > 10.0
+                };
+                mm.then(|| {
+                    format!("values up to {max_abs} look like millimetres, but metres are expected")
+                })
+            }
+        };
+        hints[j] = hint;
+    }
+
+    // URDF limits.
+    let mut outside: Vec<(usize, f64, usize)> = vec![(0, 0.0, 0); nq]; // (count, worst excess, worst row)
+    for r in 0..n {
+        for (j, joint) in model.joints.iter().enumerate() {
+            let Some(l) = joint.limits else { continue };
+            let v = table.q[r * nq + j];
+            let excess = (l.lower - v).max(v - l.upper);
+            if excess <= 0.0 {
+                continue;
+            }
+            let unit = joint.kind.unit();
+            if excess > LIMIT_TOLERANCE {
+                let hint = hints[j]
+                    .as_ref()
+                    .map(|h| format!(" (the column's {h})"))
+                    .unwrap_or_default();
+                return Err(table_err(
+                    &name,
+                    Some(r + 1),
+                    Some(&format!("q{}", j + 1)),
+                    format!(
+                        "{v:?} {unit} is outside the limits [{}, {}] {unit} of joint '{}' by {excess:.4} {unit}, \
+                         more than the {LIMIT_TOLERANCE} {unit} tolerance{hint}",
+                        l.lower, l.upper, joint.name
+                    ),
+                ));
+            }
+            let o = &mut outside[j];
+            o.0 += 1;
+            if excess > o.1 {
+                o.1 = excess;
+                o.2 = r + 1;
+            }
+        }
+    }
+    for (j, &(count, worst, row)) in outside.iter().enumerate() {
+        if count > 0 {
+            let joint = &model.joints[j];
+            let l = joint.limits.expect("only joints with limits count");
+            let unit = joint.kind.unit();
+            warnings.push(format!(
+                "{name}: column q{}: {count} row(s) outside the limits [{}, {}] {unit} of joint '{}' by up \
+                 to {worst:.4} {unit} (row {row}), within the {LIMIT_TOLERANCE} {unit} tolerance",
+                j + 1,
+                l.lower,
+                l.upper,
+                joint.name
+            ));
+        }
+    }
+    for (j, h) in hints.iter().enumerate() {
+        if let Some(h) = h {
+            warnings.push(format!("{name}: column q{}: {h}", j + 1));
+        }
+    }
+
+    // Positions in millimetres?
+    let centre: Vec<f64> = (0..3)
+        .map(|k| median(table.position.iter().map(|p| p[k]).collect()))
+        .collect();
+    let spread = median(
+        table
+            .position
+            .iter()
+            .map(|p| {
+                ((p[0] - centre[0]).powi(2)
+                    + (p[1] - centre[1]).powi(2)
+                    + (p[2] - centre[2]).powi(2))
+                .sqrt()
+            })
+            .collect(),
+    );
+    let distance = median(
+        table
+            .position
+            .iter()
+            .map(|p| (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt())
+            .collect(),
+    );
+    let reach = reach_bound(model);
+    if spread > MM_SPREAD_FACTOR * (reach + TOOL_ALLOWANCE) || distance > MM_DISTANCE {
+        warnings.push(format!(
+            "{name}: columns x, y, z: the points lie a median {spread:.4} from their median point and \
+             {distance:.4} from the tracker origin, but robot '{}' reaches about {reach:.3} m: the \
+             positions look like millimetres, but metres are expected",
+            model.name
+        ));
+    }
+
+    // Quaternion norms.
+    if let Some(o) = &table.orientation {
+        let mut count = 0;
+        let (mut worst, mut worst_row) = (0.0f64, 0);
+        for (r, q) in o.iter().enumerate() {
+            let dev = (q.iter().map(|v| v * v).sum::<f64>().sqrt() - 1.0).abs();
+            if dev > QUATERNION_NORM_WARNING {
+                count += 1;
+                if dev > worst {
+                    worst = dev;
+                    worst_row = r + 1;
+                }
+            }
+        }
+        if count > 0 {
+            warnings.push(format!(
+                "{name}: columns qw, qx, qy, qz: {count} row(s) are not unit quaternions within \
+                 {QUATERNION_NORM_WARNING} (norm off by up to {worst:.2e}, row {worst_row}); they are \
+                 normalised before use"
+            ));
+        }
+    }
+
+    if let Some(s) = &table.sigma {
+        let zeros = s.iter().filter(|&&v| v == 0.0).count();
+        if zeros > 0 {
+            warnings.push(format!(
+                "{name}: column sigma: {zeros} row(s) have sigma = 0, which gives them infinite weight"
+            ));
+        }
+        let med = median(s.clone());
+        if med > SIGMA_LARGE {
+            warnings.push(format!(
+                "{name}: column sigma: the median sigma is {med} m, more than any laser tracker's \
+                 uncertainty: millimetres? metres are expected"
+            ));
+        }
+    }
+    if let Some(t) = &table.temp {
+        let lo = t.iter().copied().fold(f64::INFINITY, f64::min);
+        let hi = t.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        if lo < TEMP_RANGE.0 || hi > TEMP_RANGE.1 {
+            warnings.push(format!(
+                "{name}: column temp: values from {lo} to {hi} are implausible robot temperatures in °C \
+                 (kelvin or fahrenheit?); degrees Celsius are expected"
+            ));
+        }
+    }
+    Ok(warnings)
+}

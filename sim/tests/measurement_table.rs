@@ -1,0 +1,1132 @@
+//! Tests of the measurement table I/O (`sim::measurement_table`): exact round trips, one-line errors
+//! naming file, row and column, checks against a robot, the real data files, deterministic Parquet.
+
+mod common;
+
+use rand::rngs::StdRng;
+use rand::{RngExt, SeedableRng};
+use sim::SimError;
+use sim::measurement_table::{
+    self as mt, MeasurementTable, OptionalColumns, Row, check_against_model, read_csv_str,
+    write_csv_string, write_parquet_bytes,
+};
+use std::path::{Path, PathBuf};
+
+/// A fresh empty folder under the system temp dir for one test.
+fn temp_dir(tag: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("robocal_mt_{tag}_{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+/// Finite doubles that stress formatting: signed zeros, subnormals, extremes, ordinary values.
+const EXTREMES: &[f64] = &[
+    0.0,
+    -0.0,
+    5e-324,
+    -5e-324,
+    2.225_073_858_507_201e-308, // largest subnormal
+    2.2250738585072014e-308,    // smallest normal
+    1e300,
+    -1e300,
+    f64::MAX,
+    f64::MIN,
+    0.1,
+    1.0 / 3.0,
+    123456789.0,
+    1e16,
+    1e-5,
+    1e23,                                  // not exact: the double nearest to 10²³
+    f64::from_bits(0x44B5_2D02_C7E1_4AF7), // the next double up
+];
+
+/// A random finite double: one of the extremes, or random bits with a non-maximal exponent.
+fn any_f64(rng: &mut StdRng) -> f64 {
+    if rng.random_bool(0.3) {
+        EXTREMES[rng.random_range(0..EXTREMES.len())]
+    } else {
+        loop {
+            let v = f64::from_bits(rng.random::<u64>());
+            if v.is_finite() {
+                return v;
+            }
+        }
+    }
+}
+
+fn nonneg_f64(rng: &mut StdRng) -> f64 {
+    let v = any_f64(rng);
+    if v < 0.0 { -v } else { v } // keeps -0.0, which is not negative
+}
+
+/// A random table with the given optional columns (`None`: each drawn at random).
+fn random_table(rng: &mut StdRng, cols: Option<OptionalColumns>) -> MeasurementTable {
+    let nq = rng.random_range(1..=8usize);
+    let rows = rng.random_range(1..=60usize);
+    let cols = cols.unwrap_or_else(|| OptionalColumns {
+        orientation: rng.random_bool(0.5),
+        t: rng.random_bool(0.5),
+        temp: rng.random_bool(0.5),
+        dir: rng.random_bool(0.5),
+        payload: rng.random_bool(0.5),
+        sigma: rng.random_bool(0.5),
+    });
+    let mut t = MeasurementTable::new(nq, cols);
+    for _ in 0..rows {
+        let pose = match rng.random_range(0..4) {
+            0 => i64::MIN,
+            1 => i64::MAX,
+            _ => rng.random_range(-5..1000),
+        };
+        let q: Vec<f64> = (0..nq).map(|_| any_f64(rng)).collect();
+        let dir: Vec<i8> = (0..nq).map(|_| rng.random_range(-1..=1)).collect();
+        let quat = {
+            let v: [f64; 4] = std::array::from_fn(|_| rng.random::<f64>() - 0.5);
+            let n = v.iter().map(|x| x * x).sum::<f64>().sqrt();
+            v.map(|x| x / n)
+        };
+        t.push_row(&Row {
+            pose,
+            q: &q,
+            position: [any_f64(rng), any_f64(rng), any_f64(rng)],
+            orientation: cols.orientation.then_some(quat),
+            t: cols.t.then(|| any_f64(rng)),
+            temp: cols.temp.then(|| any_f64(rng)),
+            dir: cols.dir.then_some(&dir[..]),
+            payload: cols.payload.then(|| nonneg_f64(rng)),
+            sigma: cols.sigma.then(|| nonneg_f64(rng)),
+        })
+        .unwrap();
+    }
+    t
+}
+
+/// Bit-for-bit equality of two tables (`==` would call -0.0 and 0.0 equal).
+fn assert_bit_equal(a: &MeasurementTable, b: &MeasurementTable, what: &str) {
+    fn bits(v: impl IntoIterator<Item = f64>) -> Vec<u64> {
+        v.into_iter().map(f64::to_bits).collect()
+    }
+    fn opt(v: &Option<Vec<f64>>) -> Option<Vec<u64>> {
+        v.as_ref().map(|v| bits(v.iter().copied()))
+    }
+    assert_eq!(a.n_joints, b.n_joints, "{what}: n_joints");
+    assert_eq!(a.pose, b.pose, "{what}: pose");
+    assert_eq!(
+        bits(a.q.iter().copied()),
+        bits(b.q.iter().copied()),
+        "{what}: q"
+    );
+    assert_eq!(
+        bits(a.position.iter().flatten().copied()),
+        bits(b.position.iter().flatten().copied()),
+        "{what}: position"
+    );
+    assert_eq!(
+        a.orientation
+            .as_ref()
+            .map(|o| bits(o.iter().flatten().copied())),
+        b.orientation
+            .as_ref()
+            .map(|o| bits(o.iter().flatten().copied())),
+        "{what}: orientation"
+    );
+    assert_eq!(opt(&a.t), opt(&b.t), "{what}: t");
+    assert_eq!(opt(&a.temp), opt(&b.temp), "{what}: temp");
+    assert_eq!(a.dir, b.dir, "{what}: dir");
+    assert_eq!(opt(&a.payload), opt(&b.payload), "{what}: payload");
+    assert_eq!(opt(&a.sigma), opt(&b.sigma), "{what}: sigma");
+}
+
+#[test]
+fn csv_parquet_csv_round_trip_is_bit_exact() {
+    let dir = temp_dir("roundtrip");
+    let mut rng = StdRng::seed_from_u64(20250611);
+    for case in 0..60 {
+        let cols = match case {
+            0 => Some(OptionalColumns::NONE),
+            1 => Some(OptionalColumns::ALL),
+            _ => None,
+        };
+        let table = random_table(&mut rng, cols);
+        let csv1 = write_csv_string(&table).unwrap();
+        let from_csv = read_csv_str(&csv1, "mem.csv").unwrap();
+        assert_bit_equal(&table, &from_csv, &format!("case {case}: CSV"));
+
+        let pq = dir.join(format!("t{case}.parquet"));
+        mt::write(&pq, &from_csv).unwrap();
+        let from_pq = mt::read(&pq).unwrap();
+        assert_bit_equal(&table, &from_pq, &format!("case {case}: CSV -> Parquet"));
+
+        let csv_path = dir.join(format!("t{case}.csv"));
+        mt::write(&csv_path, &from_pq).unwrap();
+        let csv2 = std::fs::read_to_string(&csv_path).unwrap();
+        assert_eq!(
+            csv1, csv2,
+            "case {case}: CSV -> Parquet -> CSV text differs"
+        );
+        assert_bit_equal(
+            &table,
+            &mt::read(&csv_path).unwrap(),
+            &format!("case {case}: file"),
+        );
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn csv_text_is_as_specified() {
+    // Hand-written expectation: shortest round-trip decimals, always with '.' or an exponent.
+    let mut t = MeasurementTable::new(
+        2,
+        OptionalColumns {
+            dir: true,
+            sigma: true,
+            ..OptionalColumns::NONE
+        },
+    );
+    t.push_row(&Row {
+        pose: -3,
+        q: &[1.0, -0.0],
+        position: [0.1, 1e300, 5e-324],
+        dir: Some(&[-1, 1]),
+        sigma: Some(1e-5),
+        ..Default::default()
+    })
+    .unwrap();
+    t.push_row(&Row {
+        pose: 7,
+        q: &[0.30000000000000004, 2.5],
+        position: [-123.456, 1e16, 1e15],
+        dir: Some(&[0, 0]),
+        sigma: Some(0.0),
+        ..Default::default()
+    })
+    .unwrap();
+    let expected = "pose,q1,q2,x,y,z,dir1,dir2,sigma\n\
+                    -3,1.0,-0.0,0.1,1e300,5e-324,-1,1,1e-5\n\
+                    7,0.30000000000000004,2.5,-123.456,1e16,1000000000000000.0,0,0,0.0\n";
+    assert_eq!(write_csv_string(&t).unwrap(), expected);
+}
+
+#[test]
+fn csv_reader_tolerates_bom_blanks_quotes_crlf_and_extra_columns() {
+    let text = "\u{feff} note , pose,z ,y,x,q2,q1,\"dir1\",dir2\r\n\
+                \r\n\
+                \"a, b\",  4 , 3.0, 2 ,1,  -0.5,0.25,-1,+1\r\n\
+                \n\
+                \"multi\nline\",5,6e0,7,8,9,10,0,1\n";
+    let t = read_csv_str(text, "tolerant.csv").unwrap();
+    assert_eq!(t.n_joints, 2);
+    assert_eq!(t.pose, vec![4, 5]);
+    assert_eq!(t.q, vec![0.25, -0.5, 10.0, 9.0]);
+    assert_eq!(t.position, vec![[1.0, 2.0, 3.0], [8.0, 7.0, 6.0]]);
+    assert_eq!(t.dir, Some(vec![-1, 1, 0, 1]));
+    assert_eq!(
+        t.columns(),
+        OptionalColumns {
+            dir: true,
+            ..OptionalColumns::NONE
+        }
+    );
+    // Bytes that are not UTF-8 are fine in an ignored column, and an error in a used one.
+    let dir = temp_dir("latin1");
+    let p = dir.join("latin1.csv");
+    std::fs::write(&p, b"pose,q1,x,y,z,note\n1,0.5,1,2,3,caf\xe9\n").unwrap();
+    assert_eq!(mt::read(&p).unwrap().q, vec![0.5]);
+    std::fs::write(&p, b"pose,q1,x,y,z\n1,0.5,1,2\xe9,3\n").unwrap();
+    let e = mt::read(&p).unwrap_err().to_string();
+    assert!(
+        e.ends_with("latin1.csv: row 1 (line 2), column y: '2\u{fffd}' is not a number"),
+        "{e}"
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+    // An integral float is accepted as a pose id.
+    let t = read_csv_str("pose,q1,x,y,z\n12.0,0,0,0,0\n", "f.csv").unwrap();
+    assert_eq!(t.pose, vec![12]);
+}
+
+/// Checks a CSV error: one line, and each expected fragment present.
+fn csv_error(text: &str, expect: &[&str]) {
+    let e = read_csv_str(text, "data.csv").expect_err(&format!("no error for:\n{text}"));
+    let msg = e.to_string();
+    assert!(matches!(e, SimError::Table { .. }), "{msg}");
+    assert!(!msg.contains('\n'), "not one line: {msg}");
+    for part in expect {
+        assert!(msg.contains(part), "'{part}' missing in: {msg}");
+    }
+}
+
+/// A valid CSV with `rows` rows of 3 joints, with `cell` put at `(row, column)` (1-based row).
+fn csv_with(rows: usize, at: Option<(usize, &str, &str)>) -> String {
+    let header = ["pose", "q1", "q2", "q3", "x", "y", "z"];
+    let mut s = header.join(",") + "\n";
+    for r in 1..=rows {
+        let cells: Vec<String> = header
+            .iter()
+            .map(|&h| match at {
+                Some((row, col, val)) if row == r && col == h => val.to_string(),
+                _ if h == "pose" => r.to_string(),
+                _ => "0.5".to_string(),
+            })
+            .collect();
+        s += &(cells.join(",") + "\n");
+    }
+    s
+}
+
+#[test]
+fn bad_csv_cells_give_one_line_errors_with_row_line_and_column() {
+    csv_error(
+        &csv_with(20, Some((17, "q3", "abc"))),
+        &["data.csv: row 17 (line 18), column q3: 'abc' is not a number"],
+    );
+    csv_error(
+        &csv_with(5, Some((2, "y", "inf"))),
+        &["data.csv: row 2 (line 3), column y: 'inf' is not finite"],
+    );
+    csv_error(
+        &csv_with(5, Some((4, "x", "NaN"))),
+        &["row 4 (line 5), column x: 'NaN' is not finite"],
+    );
+    csv_error(
+        &csv_with(5, Some((3, "q1", ""))),
+        &["row 3 (line 4), column q1: empty cell"],
+    );
+    csv_error(
+        &csv_with(5, Some((5, "pose", "1.5"))),
+        &["row 5 (line 6), column pose: '1.5' is not an integer"],
+    );
+    // A blank line shifts the line number but not the row number.
+    let text = csv_with(3, Some((3, "z", "1,5"))).replacen("\n", "\n\n", 1);
+    csv_error(
+        &text,
+        &["data.csv: row 3 (line 5): 8 cells, but the header has 7 (a decimal comma?"],
+    );
+    csv_error(
+        "pose,q1,x,y,z\n1,0,0,0\n",
+        &["data.csv: row 1 (line 2): 4 cells, but the header has 5"],
+    );
+    csv_error(
+        "pose,q1,x,y,z,dir1\n1,0,0,0,0,1\n2,0,0,0,0,2\n",
+        &["data.csv: row 2 (line 3), column dir1: '2' is not a direction (-1, 0 or +1)"],
+    );
+    csv_error(
+        "pose,q1,x,y,z,sigma\n1,0,0,0,0,1e-5\n2,0,0,0,0,-1e-5\n",
+        &["data.csv: row 2 (line 3), column sigma: -1e-5 m is negative"],
+    );
+    csv_error(
+        "pose,q1,x,y,z,payload\n1,0,0,0,0,-2.5\n",
+        &["data.csv: row 1 (line 2), column payload: -2.5 kg is negative"],
+    );
+    // Found in validation after parsing: the line number is still given, blank lines counted.
+    csv_error(
+        "pose,q1,x,y,z,qw,qx,qy,qz\n\n1,0,0,0,0,1,0,0,0\n2,0,0,0,0,2,0,0,0\n",
+        &[
+            "data.csv: row 2 (line 4), column qw:",
+            "norm 2.000000, not a unit quaternion",
+        ],
+    );
+    csv_error(
+        "pose,q1,x,y,z\n1,\"0,0,0,0\n",
+        &["data.csv: row 1 (line 2): a quoted cell is not closed"],
+    );
+}
+
+#[test]
+fn bad_csv_structure_gives_one_line_errors_naming_the_column() {
+    csv_error(
+        "pose,q1,q2,x,y\n1,0,0,0,0\n",
+        &["data.csv: column z: missing required column 'z' (columns found: pose, q1, q2, x, y)"],
+    );
+    csv_error(
+        "Pose,q1,x,y,z\n1,0,0,0,0\n",
+        &[
+            "column pose: missing required column 'pose'",
+            "there is 'Pose', but names are case-sensitive",
+        ],
+    );
+    csv_error(
+        "pose,x,y,z\n1,0,0,0\n",
+        &["data.csv: column q1: missing required column 'q1'"],
+    );
+    csv_error(
+        "pose,q1,q2,q4,x,y,z\n1,0,0,0,0,0,0\n",
+        &[
+            "data.csv: column q3: missing: joint columns must run q1..qN without a gap (found q1, q2, q4)",
+        ],
+    );
+    csv_error(
+        "pose,q0,q1,x,y,z\n1,0,0,0,0,0\n",
+        &["data.csv: column q0: joint columns are numbered q1, q2"],
+    );
+    csv_error(
+        "pose,q1,q2,q3,x,y,z,dir1,dir2\n1,0,0,0,0,0,0,1,1\n",
+        &["data.csv: column dir3: missing: direction columns must be dir1..dir3"],
+    );
+    csv_error(
+        "pose,q1,x,y,z,dir1,dir2\n1,0,0,0,0,1,1\n",
+        &["data.csv: column dir2: there is no joint 2: the file has 1 joint columns"],
+    );
+    csv_error(
+        "pose,q1,x,y,z,qw,qx\n1,0,0,0,0,1,0\n",
+        &[
+            "data.csv: column qy: missing: an orientation needs all of qw, qx, qy, qz (absent: qy, qz)",
+        ],
+    );
+    csv_error(
+        "pose,q1,x,y,z,q1\n1,0,0,0,0,0\n",
+        &["data.csv: column q1: the column name appears twice (columns 2 and 6 of the header)"],
+    );
+    csv_error("pose,q1,x,y,z\n", &["data.csv: no data rows"]);
+    csv_error("pose,q1,x,y,z\n\n  \n", &["data.csv: no data rows"]);
+    csv_error("", &["data.csv: the file is empty"]);
+}
+
+#[test]
+fn file_format_follows_the_extension() {
+    let dir = temp_dir("ext");
+    let t = read_csv_str("pose,q1,x,y,z\n1,0.5,1,2,3\n", "m.csv").unwrap();
+    let e = mt::write(&dir.join("out.txt"), &t).unwrap_err().to_string();
+    assert!(e.contains("out.txt: unknown table format"), "{e}");
+    let e = mt::read(Path::new("some/where/data.xlsx"))
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.starts_with("some/where/data.xlsx: unknown table format"),
+        "{e}"
+    );
+    // Upper-case extensions are accepted.
+    mt::write(&dir.join("UP.PARQUET"), &t).unwrap();
+    assert_eq!(mt::read(&dir.join("UP.PARQUET")).unwrap(), t);
+    // A missing file is an I/O error naming it.
+    let e = mt::read(&dir.join("absent.csv")).unwrap_err().to_string();
+    assert!(e.contains("absent.csv: cannot read"), "{e}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn writes_are_atomic_and_refuse_invalid_tables() {
+    let dir = temp_dir("atomic");
+    let path = dir.join("m.csv");
+    std::fs::write(&path, "old contents").unwrap();
+    let mut t = read_csv_str("pose,q1,x,y,z\n1,0.5,1,2,3\n", "m.csv").unwrap();
+    mt::write(&path, &t).unwrap();
+    assert_eq!(
+        std::fs::read_to_string(&path).unwrap(),
+        "pose,q1,x,y,z\n1,0.5,1.0,2.0,3.0\n"
+    );
+    // An invalid table is not written and the old file stays.
+    t.q[0] = f64::NAN;
+    let e = mt::write(&path, &t).unwrap_err().to_string();
+    assert!(
+        e.contains("m.csv: row 1, column q1: NaN is not finite"),
+        "{e}"
+    );
+    assert_eq!(
+        std::fs::read_to_string(&path).unwrap(),
+        "pose,q1,x,y,z\n1,0.5,1.0,2.0,3.0\n"
+    );
+    // No temporary files are left behind.
+    let names: Vec<String> = std::fs::read_dir(&dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    assert_eq!(names, vec!["m.csv".to_string()]);
+    // Writing into a folder that does not exist fails cleanly.
+    t.q[0] = 0.5;
+    let e = mt::write(&dir.join("no/such/dir/m.parquet"), &t).unwrap_err();
+    assert!(matches!(e, SimError::Io { .. }), "{e}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn parquet_bytes_are_deterministic_and_typed_as_specified() {
+    use parquet::file::reader::{FileReader, SerializedFileReader};
+    let mut rng = StdRng::seed_from_u64(7);
+    let table = random_table(&mut rng, Some(OptionalColumns::ALL));
+    let a = write_parquet_bytes(&table).unwrap();
+    let b = write_parquet_bytes(&table.clone()).unwrap();
+    assert_eq!(a, b);
+    let dir = temp_dir("determinism");
+    let p1 = dir.join("a.parquet");
+    let p2 = dir.join("b.parquet");
+    mt::write(&p1, &table).unwrap();
+    std::thread::sleep(std::time::Duration::from_millis(1100)); // a timestamp would now differ
+    mt::write(&p2, &table).unwrap();
+    assert_eq!(std::fs::read(&p1).unwrap(), a);
+    assert_eq!(std::fs::read(&p2).unwrap(), a);
+
+    let reader = SerializedFileReader::new(std::fs::File::open(&p1).unwrap()).unwrap();
+    let meta = reader.metadata();
+    assert_eq!(meta.num_row_groups(), 1);
+    let schema = meta.file_metadata().schema_descr();
+    for (i, col) in schema.columns().iter().enumerate() {
+        let name = col.name();
+        let (physical, logical) = (col.physical_type(), col.logical_type_ref().cloned());
+        let expect = if name == "pose" {
+            "INT64"
+        } else if name.starts_with("dir") {
+            "INT32" // Int8 is INT32 with the INT(8, signed) logical type
+        } else {
+            "DOUBLE"
+        };
+        assert_eq!(physical.to_string(), expect, "column {name}");
+        if name.starts_with("dir") {
+            assert_eq!(
+                logical,
+                Some(parquet::basic::LogicalType::Integer(
+                    parquet::basic::IntType {
+                        bit_width: 8,
+                        is_signed: true
+                    }
+                )),
+                "column {name}"
+            );
+        }
+        assert_eq!(
+            meta.row_group(0).column(i).compression(),
+            parquet::basic::Compression::SNAPPY,
+            "column {name}"
+        );
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn large_tables_are_split_into_row_groups_and_csv_chunks() {
+    use parquet::file::reader::{FileReader, SerializedFileReader};
+    let n = mt::PARQUET_MAX_ROW_GROUP_ROWS + 1000;
+    let mut t = MeasurementTable::with_capacity(1, OptionalColumns::NONE, n);
+    let mut csv = String::from("pose,q1,x,y,z\n");
+    for r in 0..n {
+        let v = r as f64 * 1e-3;
+        csv += &format!("{r},{v:?},{v:?},{:?},0.5\n", -v);
+        t.push_row(&Row {
+            pose: r as i64,
+            q: &[v],
+            position: [v, -v, 0.5],
+            ..Default::default()
+        })
+        .unwrap();
+    }
+    let dir = temp_dir("rowgroups");
+    let p = dir.join("big.parquet");
+    mt::write(&p, &t).unwrap();
+    let meta = SerializedFileReader::new(std::fs::File::open(&p).unwrap()).unwrap();
+    let rg: Vec<i64> = (0..meta.metadata().num_row_groups())
+        .map(|i| meta.metadata().row_group(i).num_rows())
+        .collect();
+    assert_eq!(rg, vec![mt::PARQUET_MAX_ROW_GROUP_ROWS as i64, 1000]);
+    let back = mt::read(&p).unwrap();
+    assert_bit_equal(&t, &back, "row groups");
+    // The CSV is written in parallel chunks of rows; the text is the rows in order.
+    let p = dir.join("big.csv");
+    mt::write(&p, &t).unwrap();
+    assert!(
+        std::fs::read_to_string(&p).unwrap() == csv,
+        "CSV text differs"
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// Writes a Parquet file with arbitrary Arrow columns (name, array).
+fn write_arrow(path: &Path, cols: Vec<(&str, arrow_array::ArrayRef)>) {
+    use arrow_schema::{Field, Schema};
+    let fields: Vec<Field> = cols
+        .iter()
+        .map(|(n, a)| Field::new(*n, a.data_type().clone(), true))
+        .collect();
+    let batch = arrow_array::RecordBatch::try_new(
+        std::sync::Arc::new(Schema::new(fields)),
+        cols.into_iter().map(|(_, a)| a).collect(),
+    )
+    .unwrap();
+    let f = std::fs::File::create(path).unwrap();
+    let mut w = parquet::arrow::ArrowWriter::try_new(f, batch.schema(), None).unwrap();
+    w.write(&batch).unwrap();
+    w.close().unwrap();
+}
+
+#[test]
+fn parquet_reader_accepts_exact_conversions_and_names_bad_cells() {
+    use arrow_array::{
+        ArrayRef, Float32Array, Float64Array, Int32Array, Int64Array, StringArray, UInt8Array,
+    };
+    use std::sync::Arc;
+    let dir = temp_dir("pqread");
+    let f64a = |v: Vec<Option<f64>>| Arc::new(Float64Array::from(v)) as ArrayRef;
+    let p = dir.join("ok.parquet");
+    write_arrow(
+        &p,
+        vec![
+            (
+                "comment",
+                Arc::new(StringArray::from(vec!["a", "b"])) as ArrayRef,
+            ),
+            ("x", Arc::new(Float32Array::from(vec![0.1f32, -2.5]))),
+            ("pose", Arc::new(Int32Array::from(vec![3, -4]))),
+            ("q1", Arc::new(UInt8Array::from(vec![1u8, 2]))),
+            ("y", Arc::new(Int64Array::from(vec![-7i64, 1 << 53]))),
+            ("z", f64a(vec![Some(0.25), Some(-0.0)])),
+            ("dir1", Arc::new(Float64Array::from(vec![-1.0, 1.0]))),
+        ],
+    );
+    let t = mt::read(&p).unwrap();
+    assert_eq!(t.pose, vec![3, -4]);
+    assert_eq!(t.q, vec![1.0, 2.0]);
+    // 0.1f32 widened exactly is 0.100000001490116119384765625, whose shortest f64 form is this:
+    assert_eq!(t.position[0], [0.10000000149011612, -7.0, 0.25]);
+    assert_eq!(t.position[1][1], 9007199254740992.0);
+    assert_eq!(t.position[1][2].to_bits(), (-0.0f64).to_bits());
+    assert_eq!(t.dir, Some(vec![-1, 1]));
+
+    type Case<'a> = (&'a str, Vec<(&'a str, ArrayRef)>, &'a str);
+    let cases: Vec<Case> = vec![
+        (
+            "null",
+            vec![
+                ("pose", Arc::new(Int64Array::from(vec![1, 2, 3]))),
+                ("q1", f64a(vec![Some(0.0), Some(0.0), Some(0.0)])),
+                ("x", f64a(vec![Some(0.0), Some(0.0), Some(0.0)])),
+                ("y", f64a(vec![Some(0.0), None, Some(0.0)])),
+                ("z", f64a(vec![Some(0.0), Some(0.0), Some(0.0)])),
+            ],
+            "null.parquet: row 2, column y: missing value (null)",
+        ),
+        (
+            "nan",
+            vec![
+                ("pose", Arc::new(Int64Array::from(vec![1, 2, 3]))),
+                ("q1", f64a(vec![Some(0.0), Some(0.0), Some(0.0)])),
+                ("x", f64a(vec![Some(0.0), Some(0.0), Some(0.0)])),
+                ("y", f64a(vec![Some(0.0), Some(0.0), Some(0.0)])),
+                ("z", f64a(vec![Some(0.0), Some(0.0), Some(f64::NAN)])),
+            ],
+            "nan.parquet: row 3, column z: NaN is not finite",
+        ),
+        (
+            "fractional_pose",
+            vec![
+                ("pose", f64a(vec![Some(1.0), Some(2.5)])),
+                ("q1", f64a(vec![Some(0.0), Some(0.0)])),
+                ("x", f64a(vec![Some(0.0), Some(0.0)])),
+                ("y", f64a(vec![Some(0.0), Some(0.0)])),
+                ("z", f64a(vec![Some(0.0), Some(0.0)])),
+            ],
+            "fractional_pose.parquet: row 2, column pose: 2.5 is not an integer",
+        ),
+        (
+            "text_joint",
+            vec![
+                ("pose", Arc::new(Int64Array::from(vec![1]))),
+                ("q1", Arc::new(StringArray::from(vec!["0.5"]))),
+                ("x", f64a(vec![Some(0.0)])),
+                ("y", f64a(vec![Some(0.0)])),
+                ("z", f64a(vec![Some(0.0)])),
+            ],
+            "text_joint.parquet: column q1: has Arrow type Utf8; an integer or floating-point type is required",
+        ),
+        (
+            "inexact",
+            vec![
+                ("pose", Arc::new(Int64Array::from(vec![1]))),
+                ("q1", Arc::new(Int64Array::from(vec![(1i64 << 53) + 1]))),
+                ("x", f64a(vec![Some(0.0)])),
+                ("y", f64a(vec![Some(0.0)])),
+                ("z", f64a(vec![Some(0.0)])),
+            ],
+            "inexact.parquet: row 1, column q1: 9007199254740993 cannot be represented exactly",
+        ),
+        (
+            "missing",
+            vec![
+                ("pose", Arc::new(Int64Array::from(vec![1]))),
+                ("q1", f64a(vec![Some(0.0)])),
+                ("x", f64a(vec![Some(0.0)])),
+                ("z", f64a(vec![Some(0.0)])),
+            ],
+            "missing.parquet: column y: missing required column 'y'",
+        ),
+        (
+            "empty",
+            vec![
+                ("pose", Arc::new(Int64Array::from(Vec::<i64>::new()))),
+                ("q1", f64a(vec![])),
+                ("x", f64a(vec![])),
+                ("y", f64a(vec![])),
+                ("z", f64a(vec![])),
+            ],
+            "empty.parquet: no data rows",
+        ),
+    ];
+    for (name, cols, expect) in cases {
+        let p = dir.join(format!("{name}.parquet"));
+        write_arrow(&p, cols);
+        let msg = mt::read(&p).unwrap_err().to_string();
+        assert!(!msg.contains('\n'), "{msg}");
+        assert!(msg.contains(expect), "expected '{expect}' in: {msg}");
+    }
+    let p = dir.join("garbage.parquet");
+    std::fs::write(&p, "pose,q1,x,y,z\n").unwrap();
+    let msg = mt::read(&p).unwrap_err().to_string();
+    assert!(
+        msg.contains("garbage.parquet: not a readable Parquet file"),
+        "{msg}"
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn builder_and_pose_helpers() {
+    let mut t = MeasurementTable::new(
+        2,
+        OptionalColumns {
+            t: true,
+            ..OptionalColumns::NONE
+        },
+    );
+    for (pose, q0) in [(5, 0.1), (2, 0.2), (5, 0.3), (9, 0.4), (2, 0.5)] {
+        t.push_row(&Row {
+            pose,
+            q: &[q0, -q0],
+            position: [q0, 0.0, 1.0],
+            t: Some(q0 * 10.0),
+            ..Default::default()
+        })
+        .unwrap();
+    }
+    assert_eq!(t.len(), 5);
+    assert!(!t.is_empty());
+    assert_eq!(t.q_row(2), &[0.3, -0.3]);
+    assert_eq!(t.dir_row(2), None);
+    assert_eq!(t.pose_ids(), vec![5, 2, 9]);
+    assert_eq!(t.n_poses(), 3);
+    assert_eq!(
+        t.rows_by_pose(),
+        vec![(5, vec![0, 2]), (2, vec![1, 4]), (9, vec![3])]
+    );
+    let s = t.select_rows(&[4, 0]);
+    assert_eq!(s.pose, vec![2, 5]);
+    assert_eq!(s.q, vec![0.5, -0.5, 0.1, -0.1]);
+    assert_eq!(s.t, Some(vec![5.0, 1.0]));
+    assert_eq!(t.payload_or_zero(0), 0.0);
+    t.validate_shape().unwrap();
+
+    // Mismatched rows are refused and leave the table unchanged.
+    let e = t
+        .push_row(&Row {
+            q: &[0.0],
+            t: Some(0.0),
+            ..Default::default()
+        })
+        .unwrap_err();
+    assert!(
+        e.to_string()
+            .contains("row 6, column q: 1 joint values for a table of 2 joints"),
+        "{e}"
+    );
+    let e = t
+        .push_row(&Row {
+            q: &[0.0, 0.0],
+            ..Default::default()
+        })
+        .unwrap_err();
+    assert!(
+        e.to_string()
+            .contains("column t: the table has this column but the row gives no value"),
+        "{e}"
+    );
+    let e = t
+        .push_row(&Row {
+            q: &[0.0, 0.0],
+            t: Some(1.0),
+            sigma: Some(1.0),
+            ..Default::default()
+        })
+        .unwrap_err();
+    assert!(
+        e.to_string()
+            .contains("column sigma: the row gives a value but the table has no such column"),
+        "{e}"
+    );
+    assert_eq!(t.len(), 5);
+    t.validate_shape().unwrap();
+    t.q.pop();
+    let e = t.validate_shape().unwrap_err().to_string();
+    assert_eq!(
+        e,
+        "<measurement table>: column q: 9 values, but 5 rows of 2 joints need 10"
+    );
+
+    // Orientation normalisation.
+    let o = read_csv_str(
+        "pose,q1,x,y,z,qw,qx,qy,qz\n1,0,0,0,0,0.6,0,0,0.8001\n",
+        "o.csv",
+    )
+    .unwrap();
+    let u = o.unit_orientation(0).unwrap();
+    let n = (0.36f64 + 0.8001 * 0.8001).sqrt();
+    assert_eq!(u, [0.6 / n, 0.0, 0.0, 0.8001 / n]);
+}
+
+/// A CSV for iiwa7 (7 joints) with all joints at `q` in every row, positions `p`.
+fn iiwa_csv(rows: &[([f64; 7], [f64; 3])]) -> String {
+    let mut s = String::from("pose,q1,q2,q3,q4,q5,q6,q7,x,y,z\n");
+    for (r, (q, p)) in rows.iter().enumerate() {
+        let q: Vec<String> = q.iter().map(|v| v.to_string()).collect();
+        s += &format!("{r},{},{},{},{}\n", q.join(","), p[0], p[1], p[2]);
+    }
+    s
+}
+
+#[test]
+fn check_against_model_applies_the_contract_rules() {
+    let iiwa = sim::robots::load_builtin("iiwa7").unwrap();
+    let file = Path::new("m.csv");
+    let check =
+        |text: &str| check_against_model(&read_csv_str(text, "m.csv").unwrap(), &iiwa, file);
+    let p = [0.5, 0.1, 0.8];
+    let ok = [0.1, -0.2, 0.3, -0.4, 0.5, -0.6, 0.7];
+    // A plausible table gives no warning.
+    assert_eq!(
+        check(&iiwa_csv(&[(ok, p), (ok, [0.4, 0.0, 0.9])])).unwrap(),
+        Vec::<String>::new()
+    );
+
+    // Joint count.
+    let e = check("pose,q1,q2,q3,q4,q5,q6,x,y,z\n1,0,0,0,0,0,0,0,0,0\n")
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.starts_with("m.csv: the file has 6 joint columns (q1..q6), but robot"),
+        "{e}"
+    );
+    assert!(e.contains("has 7 joints"), "{e}");
+
+    // Limits of A2 are ±2.0943951023931953 rad (±120°, iiwa7.urdf). 0.15 rad beyond: error.
+    let mut bad = ok;
+    bad[1] = 2.0943951023931953 + 0.15;
+    let e = check(&iiwa_csv(&[(ok, p), (bad, p)]))
+        .unwrap_err()
+        .to_string();
+    assert!(!e.contains('\n'));
+    assert!(
+        e.starts_with(
+            "m.csv: row 2, column q2: 2.244395102393195 rad is outside the limits \
+             [-2.0943951023931953, 2.0943951023931953] rad of joint 'iiwa7_A2' by 0.1500 rad"
+        ),
+        "{e}"
+    );
+    // 0.05 rad beyond: one warning for the column, counting rows and naming the worst.
+    let mut near = ok;
+    near[1] = -2.0943951023931953 - 0.05;
+    let mut nearer = ok;
+    nearer[1] = -2.0943951023931953 - 0.01;
+    let w = check(&iiwa_csv(&[(nearer, p), (near, p), (ok, p)])).unwrap();
+    assert_eq!(w.len(), 1, "{w:?}");
+    assert!(
+        w[0].starts_with("m.csv: column q2: 2 row(s) outside the limits")
+            && w[0].contains("by up to 0.0500 rad (row 2)"),
+        "{w:?}"
+    );
+
+    // Degrees: the same configurations in degrees (30°, 45°, …) are out of limits, with the hint.
+    let deg = |q: [f64; 7]| q.map(f64::to_degrees);
+    let e = check(&iiwa_csv(&[
+        (deg([0.5, 0.6, 0.7, 0.8, 0.9, 1.0, 1.1]), p),
+        (deg(ok), p),
+    ]))
+    .unwrap_err()
+    .to_string();
+    assert!(
+        e.contains("row 1, column q1:")
+            && e.contains("look like degrees, but radians are expected"),
+        "{e}"
+    );
+
+    // Millimetres: the same points × 1000.
+    let w = check(&iiwa_csv(&[
+        (ok, [500.0, 100.0, 800.0]),
+        (ok, [400.0, 0.0, 900.0]),
+        (ok, [450.0, -50.0, 850.0]),
+    ]))
+    .unwrap();
+    assert_eq!(w.len(), 1, "{w:?}");
+    assert!(
+        w[0].contains("columns x, y, z") && w[0].contains("look like millimetres"),
+        "{w:?}"
+    );
+    // A tracker frame a few metres away is not millimetres.
+    let far = |d: [f64; 3]| [d[0] + 4.0, d[1] - 3.0, d[2] + 1.5];
+    let w = check(&iiwa_csv(&[
+        (ok, far([0.5, 0.1, 0.8])),
+        (ok, far([0.4, 0.0, 0.9])),
+    ]))
+    .unwrap();
+    assert!(w.is_empty(), "{w:?}");
+
+    // Optional columns: sigma and payload negative are errors (found by validation), temperatures in
+    // kelvin and sigma in millimetres are warnings, quaternions off unit by 1e-5 a warning.
+    let head = "pose,q1,q2,q3,q4,q5,q6,q7,x,y,z";
+    let row = "0,0.1,0.1,0.1,0.1,0.1,0.1,0.1,0.5,0.1,0.8";
+    let mut t = read_csv_str(
+        &format!("{head},payload,sigma\n{row},0,1e-5\n{row},0,1e-5\n"),
+        "m.csv",
+    )
+    .unwrap();
+    t.sigma.as_mut().unwrap()[1] = -1e-5;
+    let e = check_against_model(&t, &iiwa, file)
+        .unwrap_err()
+        .to_string();
+    assert_eq!(e, "m.csv: row 2, column sigma: -1e-5 m is negative");
+    t.sigma.as_mut().unwrap()[1] = 1e-5;
+    t.payload.as_mut().unwrap()[0] = -0.5;
+    let e = check_against_model(&t, &iiwa, file)
+        .unwrap_err()
+        .to_string();
+    assert_eq!(e, "m.csv: row 1, column payload: -0.5 kg is negative");
+    let w = check(&format!("{head},temp,sigma\n{row},296.15,0.02\n")).unwrap();
+    assert_eq!(w.len(), 2, "{w:?}");
+    assert!(
+        w[0].contains("column sigma") && w[0].contains("millimetres"),
+        "{w:?}"
+    );
+    assert!(
+        w[1].contains("column temp") && w[1].contains("kelvin"),
+        "{w:?}"
+    );
+    let w = check(&format!(
+        "{head},qw,qx,qy,qz\n{row},1.00001,0,0,0\n{row},1,0,0,0\n"
+    ))
+    .unwrap();
+    assert_eq!(w.len(), 1, "{w:?}");
+    assert!(
+        w[0].contains("1 row(s) are not unit quaternions") && w[0].contains("row 1"),
+        "{w:?}"
+    );
+    // An in-memory table with a non-finite t is refused.
+    let mut t = read_csv_str(&format!("{head},t\n{row},0.5\n"), "m.csv").unwrap();
+    t.t.as_mut().unwrap()[0] = f64::INFINITY;
+    let e = check_against_model(&t, &iiwa, file)
+        .unwrap_err()
+        .to_string();
+    assert_eq!(e, "m.csv: row 1, column t: inf is not finite");
+}
+
+#[test]
+fn continuous_joint_in_degrees_is_a_warning() {
+    // A two-joint planar arm whose first joint is continuous (no limits).
+    let urdf = r#"<robot name="planar">
+      <link name="base"/><link name="l1"/><link name="l2"/>
+      <joint name="j1" type="continuous"><parent link="base"/><child link="l1"/>
+        <origin xyz="0 0 0.1"/><axis xyz="0 0 1"/></joint>
+      <joint name="j2" type="revolute"><parent link="l1"/><child link="l2"/>
+        <origin xyz="0.3 0 0"/><axis xyz="0 0 1"/><limit lower="-3" upper="3" effort="1" velocity="1"/></joint>
+    </robot>"#;
+    let model = sim::urdf::load_str(urdf, "planar.urdf", &sim::ChainSpec::default()).unwrap();
+    let t = read_csv_str(
+        "pose,q1,q2,x,y,z\n1,90,0.5,0.3,0,0.1\n2,-45,0.5,0.2,0.2,0.1\n",
+        "c.csv",
+    )
+    .unwrap();
+    let w = check_against_model(&t, &model, Path::new("c.csv")).unwrap();
+    assert_eq!(
+        w,
+        vec!["c.csv: column q1: values up to 90 look like degrees, but radians are expected"]
+    );
+    // Two turns in radians are plausible for a continuous joint.
+    let t = read_csv_str("pose,q1,q2,x,y,z\n1,12.5,0.5,0.3,0,0.1\n", "c.csv").unwrap();
+    assert!(
+        check_against_model(&t, &model, Path::new("c.csv"))
+            .unwrap()
+            .is_empty()
+    );
+}
+
+#[test]
+fn real_ur5_and_wam_files_read_and_fit_their_robots() {
+    let real = common::shared_dir().join("data").join("real");
+    // UR5: 1000 rows, 6 joints; first and last rows as printed in the file (hand-copied).
+    let ur5 = mt::read(&real.join("ur5_jacobi2025_grid.csv")).unwrap();
+    assert_eq!((ur5.len(), ur5.n_joints, ur5.n_poses()), (1000, 6, 1000));
+    assert_eq!(ur5.columns(), OptionalColumns::NONE);
+    assert_eq!(ur5.pose[0], 0);
+    assert_eq!(
+        ur5.q_row(0),
+        &[
+            -0.400261541178,
+            -0.763043215642,
+            2.36313822612,
+            -1.65353053576,
+            0.967205357283,
+            -0.0969046022443
+        ]
+    );
+    assert_eq!(ur5.position[0], [-0.432471963, -0.009795327, -0.097822432]);
+    let model = sim::robots::load_builtin("ur5").unwrap();
+    let w = check_against_model(&ur5, &model, Path::new("ur5_jacobi2025_grid.csv")).unwrap();
+    assert!(w.is_empty(), "{w:?}");
+    // The same data in millimetres is flagged.
+    let mut mm = ur5.clone();
+    mm.position
+        .iter_mut()
+        .for_each(|p| *p = p.map(|v| v * 1000.0));
+    let w = check_against_model(&mm, &model, Path::new("ur5_mm.csv")).unwrap();
+    assert!(
+        w.len() == 1 && w[0].contains("look like millimetres"),
+        "{w:?}"
+    );
+
+    // WAM: 216 rows, 7 joints.
+    let wam = mt::read(&real.join("wam_jacobi2025_grid.csv")).unwrap();
+    assert_eq!((wam.len(), wam.n_joints, wam.n_poses()), (216, 7, 216));
+    assert_eq!(
+        wam.q_row(0),
+        &[
+            1.938569199,
+            -1.533883625,
+            -1.621763769,
+            2.106329388,
+            -0.037957505,
+            -1.075866419,
+            0.006945619
+        ]
+    );
+    assert_eq!(wam.position[0], [0.571861043, -0.309193192, 0.004519900]);
+    let model = sim::robots::load_builtin("wam").unwrap();
+    let w = check_against_model(&wam, &model, Path::new("wam_jacobi2025_grid.csv")).unwrap();
+    assert!(w.is_empty(), "{w:?}");
+    // The other robot does not fit.
+    let e = check_against_model(
+        &wam,
+        &sim::robots::load_builtin("ur5").unwrap(),
+        Path::new("w.csv"),
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(
+        e.contains("the file has 7 joint columns (q1..q7), but robot")
+            && e.contains("has 6 joints"),
+        "{e}"
+    );
+
+    // Parquet round trip of real data.
+    let dir = temp_dir("real");
+    let p = dir.join("wam.parquet");
+    mt::write(&p, &wam).unwrap();
+    assert_bit_equal(&wam, &mt::read(&p).unwrap(), "wam parquet");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// Writes `$TMPDIR/robocal_table.{csv,parquet}` (all optional columns, extreme values) for
+/// `scripts/check_readers.py`: `cargo test -p sim --test measurement_table -- --ignored`.
+#[test]
+#[ignore]
+fn write_files_for_check_readers() {
+    let mut rng = StdRng::seed_from_u64(99);
+    let mut table = random_table(&mut rng, Some(OptionalColumns::ALL));
+    while table.len() < 40 {
+        table = random_table(&mut rng, Some(OptionalColumns::ALL));
+    }
+    let base = std::env::temp_dir();
+    mt::write(&base.join("robocal_table.parquet"), &table).unwrap();
+    mt::write(&base.join("robocal_table.csv"), &table).unwrap();
+    let real = common::shared_dir().join("data/real/ur5_jacobi2025_grid.csv");
+    let ur5 = mt::read(&real).unwrap();
+    mt::write(&base.join("robocal_ur5.parquet"), &ur5).unwrap();
+    mt::write(&base.join("robocal_ur5.csv"), &ur5).unwrap();
+    eprintln!(
+        "wrote {}/robocal_table.{{csv,parquet}} and robocal_ur5.{{csv,parquet}}",
+        base.display()
+    );
+}
+
+/// A large CSV (several MiB, so it is parsed in parallel chunks) with blank lines and CRLF line ends;
+/// returns the text, the expected table, and the 1-based line of every data row, counted while writing.
+fn big_csv(rows: usize, bad_row: Option<usize>) -> (String, MeasurementTable, Vec<usize>) {
+    let mut rng = StdRng::seed_from_u64(3);
+    let mut text = String::from("pose,q1,q2,x,y,z,comment\r\n");
+    let mut line = 2;
+    let mut lines = Vec::with_capacity(rows);
+    let mut t = MeasurementTable::new(2, OptionalColumns::NONE);
+    for r in 1..=rows {
+        if rng.random_bool(0.01) {
+            text.push_str("\r\n");
+            line += 1;
+        }
+        let q = [rng.random::<f64>(), -rng.random::<f64>()];
+        let p = [rng.random::<f64>(), 1.0, rng.random_range(-1e6..1e6)];
+        let q2 = if bad_row == Some(r) {
+            "0.5.5".to_string()
+        } else {
+            format!("{:?}", q[1])
+        };
+        text += &format!(
+            "{},{:?},{q2},{:?},{:?},{:?},note {r}\r\n",
+            r / 2,
+            q[0],
+            p[0],
+            p[1],
+            p[2]
+        );
+        lines.push(line);
+        line += 1;
+        t.push_row(&Row {
+            pose: (r / 2) as i64,
+            q: &q,
+            position: p,
+            ..Default::default()
+        })
+        .unwrap();
+    }
+    (text, t, lines)
+}
+
+#[test]
+fn large_csv_is_read_in_parallel_chunks_with_exact_rows_and_lines() {
+    let (text, expected, _) = big_csv(60_000, None);
+    assert!(
+        text.len() > 4 << 20,
+        "{} bytes: too small to be split",
+        text.len()
+    );
+    let t = read_csv_str(&text, "big.csv").unwrap();
+    assert_bit_equal(&expected, &t, "big CSV");
+    for bad in [1, 29_999, 59_999] {
+        let (text, _, lines) = big_csv(60_000, Some(bad));
+        let e = read_csv_str(&text, "big.csv").unwrap_err().to_string();
+        let want = format!(
+            "big.csv: row {bad} (line {}), column q2: '0.5.5' is not a number",
+            lines[bad - 1]
+        );
+        assert_eq!(e, want);
+    }
+    // An error found after parsing (negative sigma) is located by rescanning: same line numbers.
+    let (text, _, lines) = big_csv(60_000, None);
+    let mut out = String::new();
+    for (i, l) in text.split_inclusive('\n').enumerate() {
+        if i == 0 {
+            out += &l.replace("comment", "sigma");
+        } else if l.trim().is_empty() {
+            out += l;
+        } else {
+            let cut = l.rfind(',').unwrap();
+            let row: usize = l[cut + 6..].trim().parse().unwrap();
+            out += &l[..cut];
+            out += if row == 45_678 {
+                ",-1.0\r\n"
+            } else {
+                ",1e-5\r\n"
+            };
+        }
+    }
+    let e = read_csv_str(&out, "big.csv").unwrap_err().to_string();
+    assert_eq!(
+        e,
+        format!(
+            "big.csv: row 45678 (line {}), column sigma: -1.0 m is negative",
+            lines[45_677]
+        )
+    );
+}

@@ -1,0 +1,265 @@
+//! Loading URDFs as users have them, and refusing bad ones with a clear message.
+
+mod common;
+
+use nalgebra::Vector3;
+use sim::{ChainSpec, Data, SimError, flange_pose, gravity_torques, urdf};
+
+fn load(text: &str) -> Result<sim::Model, SimError> {
+    urdf::load_str(text, "test.urdf", &ChainSpec::default())
+}
+
+fn msg(r: Result<sim::Model, SimError>) -> String {
+    match r {
+        Ok(m) => panic!("expected an error, loaded '{}'", m.name),
+        Err(e) => e.to_string(),
+    }
+}
+
+const LINK: &str = r#"<inertial><mass value="1"/><inertia ixx="0.01" ixy="0" ixz="0" iyy="0.01" iyz="0" izz="0.01"/></inertial>"#;
+
+fn revolute(name: &str, parent: &str, child: &str, xyz: &str) -> String {
+    format!(
+        r#"<joint name="{name}" type="revolute"><parent link="{parent}"/><child link="{child}"/>
+        <origin xyz="{xyz}"/><axis xyz="0 0 1"/><limit lower="-1" upper="1" effort="1" velocity="1"/></joint>"#
+    )
+}
+
+fn link(name: &str) -> String {
+    format!(r#"<link name="{name}">{LINK}</link>"#)
+}
+
+#[test]
+fn third_party_iiwa_exports_give_the_independent_reference_flange() {
+    // Reference computed independently with Pinocchio 4.1 (shared/data/robots/README.md), 12 decimals.
+    let expected = Vector3::new(0.586678450550, -0.065874910531, 0.766998508288);
+    let q = [0.1, 0.2, -0.3, -1.2, 0.4, 0.5, -0.6];
+    for file in ["iiwa_stack_iiwa7.urdf", "lbr_stack_iiwa7.urdf"] {
+        let path = common::shared_dir().join("data/robots").join(file);
+        let model = urdf::load_file(&path, &ChainSpec::default()).unwrap();
+        assert_eq!(model.nq(), 7, "{file}");
+        let mut data = Data::new(&model);
+        let home = flange_pose(&model, &mut data, &[0.0; 7]);
+        assert!(
+            (home.translation.vector - Vector3::new(0.0, 0.0, 1.266)).norm() < 1e-12,
+            "{file}"
+        );
+        let t = flange_pose(&model, &mut data, &q);
+        assert!(
+            (t.translation.vector - expected).norm() < 1e-11,
+            "{file}: {}",
+            t.translation.vector
+        );
+        assert!(model.massless_links.is_empty(), "{file}");
+    }
+}
+
+#[test]
+fn shipped_iiwa7_agrees_with_both_third_party_exports() {
+    let ours = sim::robots::load_builtin("iiwa7").unwrap();
+    let theirs = urdf::load_file(
+        &common::shared_dir().join("data/robots/lbr_stack_iiwa7.urdf"),
+        &ChainSpec::default(),
+    )
+    .unwrap();
+    let (mut a, mut b) = (Data::new(&ours), Data::new(&theirs));
+    for k in 0..100 {
+        let q: Vec<f64> = (0..7)
+            .map(|i| ((k * 7 + i) as f64 * 0.618034).fract() * 3.0 - 1.5)
+            .collect();
+        let ta = flange_pose(&ours, &mut a, &q);
+        let tb = flange_pose(&theirs, &mut b, &q);
+        assert!((ta.translation.vector - tb.translation.vector).norm() < 1e-12);
+        assert!((ta.rotation.matrix() - tb.rotation.matrix()).amax() < 1e-12);
+    }
+    // Same CAD inertials, so the same gravity torques.
+    let g = Vector3::new(0.0, 0.0, -9.81);
+    let q = [0.3, 0.9, -0.4, -1.1, 0.7, 1.2, 0.1];
+    gravity_torques(&ours, &mut a, &q, &g, None).unwrap();
+    gravity_torques(&theirs, &mut b, &q, &g, None).unwrap();
+    assert!((&a.gravity_torque - &b.gravity_torque).amax() < 1e-9);
+}
+
+#[test]
+fn xacro_is_refused_with_a_hint() {
+    let text = r#"<robot name="r" xmlns:xacro="http://www.ros.org/wiki/xacro"><xacro:include filename="x.xacro"/></robot>"#;
+    let m = msg(load(text));
+    assert!(m.contains("xacro") && m.contains("test.urdf"), "{m}");
+    let dir = std::env::temp_dir().join(format!("robocal-xacro-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("robot.urdf.xacro");
+    std::fs::write(&path, "<robot name=\"r\"><link name=\"a\"/></robot>").unwrap();
+    let e = urdf::load_file(&path, &ChainSpec::default())
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("xacro") && e.contains("robot.urdf.xacro"), "{e}");
+}
+
+#[test]
+fn empty_or_non_urdf_text_is_refused() {
+    assert!(msg(load(r#"<robot name="empty"/>"#)).contains("no links"));
+    assert!(msg(load("hello")).contains("not a valid URDF"));
+    assert!(msg(load("<robot name=\"x\"><link name=\"a\"></robot>")).contains("not a valid URDF"));
+}
+
+#[test]
+fn a_chain_without_movable_joints_is_refused() {
+    let text = format!(
+        r#"<robot name="r">{}{}<joint name="f" type="fixed"><parent link="a"/><child link="b"/></joint></robot>"#,
+        link("a"),
+        link("b")
+    );
+    assert!(msg(load(&text)).contains("no movable joint"));
+}
+
+#[test]
+fn a_branching_tree_needs_a_tip_link() {
+    let text = format!(
+        r#"<robot name="r">{}{}{}{}{}{}{}</robot>"#,
+        link("base"),
+        link("mid"),
+        link("left"),
+        link("right"),
+        revolute("j1", "base", "mid", "0 0 1"),
+        revolute("jl", "mid", "left", "0 0 1"),
+        revolute("jr", "mid", "right", "0 0 2"),
+    );
+    let m = msg(load(&text));
+    assert!(
+        m.contains("branches")
+            && m.contains("left")
+            && m.contains("right")
+            && m.contains("--tip-link"),
+        "{m}"
+    );
+    let spec = ChainSpec {
+        base_link: None,
+        tip_link: Some("right".into()),
+    };
+    let model = urdf::load_str(&text, "test.urdf", &spec).unwrap();
+    assert_eq!(model.joints[1].name, "jr");
+    // The other branch moves, so its mass is not folded into 'mid'; the user is told.
+    assert!(
+        model.notes.iter().any(|n| n.contains("'jl'")),
+        "{:?}",
+        model.notes
+    );
+    assert_eq!(model.bodies[0].mass, 1.0);
+    let bad = ChainSpec {
+        base_link: None,
+        tip_link: Some("nope".into()),
+    };
+    assert!(
+        urdf::load_str(&text, "test.urdf", &bad)
+            .unwrap_err()
+            .to_string()
+            .contains("'nope' does not exist")
+    );
+}
+
+#[test]
+fn package_mesh_paths_are_never_touched() {
+    let text = format!(
+        r#"<robot name="r"><link name="a"><visual><geometry><mesh filename="package://nowhere/m.dae"/></geometry></visual></link>
+        {}{}</robot>"#,
+        link("b"),
+        revolute("j", "a", "b", "0 0 1")
+    );
+    let model = load(&text).unwrap();
+    assert_eq!(model.nq(), 1);
+}
+
+#[test]
+fn missing_inertial_is_reported_when_statics_are_asked_for() {
+    let text = format!(
+        r#"<robot name="r"><link name="a"/><link name="b"/>{}</robot>"#,
+        revolute("j", "a", "b", "0 0 1")
+    );
+    let model = load(&text).unwrap();
+    assert_eq!(model.massless_links, vec!["b".to_string()]);
+    let mut data = Data::new(&model);
+    let e = gravity_torques(
+        &model,
+        &mut data,
+        &[0.0],
+        &Vector3::new(0.0, 0.0, -9.81),
+        None,
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(e.contains("inertial") && e.contains('b'), "{e}");
+}
+
+#[test]
+fn nan_and_zero_axis_are_refused_with_the_element_and_field() {
+    let text = format!(
+        r#"<robot name="r">{}{}{}</robot>"#,
+        link("a"),
+        link("b"),
+        revolute("j", "a", "b", "0 nan 1")
+    );
+    let m = msg(load(&text));
+    assert!(
+        m.contains("joint 'j'") && m.contains("origin xyz") && m.contains("NaN"),
+        "{m}"
+    );
+    let text = format!(
+        r#"<robot name="r"><link name="a"/><link name="b"><inertial><mass value="nan"/><inertia ixx="1" ixy="0" ixz="0" iyy="1" iyz="0" izz="1"/></inertial></link>{}</robot>"#,
+        revolute("j", "a", "b", "0 0 1")
+    );
+    let m = msg(load(&text));
+    assert!(m.contains("link 'b'") && m.contains("mass"), "{m}");
+    let text = format!(
+        r#"<robot name="r">{}{}<joint name="j" type="revolute"><parent link="a"/><child link="b"/><axis xyz="0 0 0"/><limit lower="-1" upper="1" effort="1" velocity="1"/></joint></robot>"#,
+        link("a"),
+        link("b")
+    );
+    assert!(msg(load(&text)).contains("zero-length axis"));
+}
+
+#[test]
+fn unsupported_joint_types_and_broken_trees_are_refused() {
+    let text = format!(
+        r#"<robot name="r">{}{}<joint name="free" type="floating"><parent link="a"/><child link="b"/></joint></robot>"#,
+        link("a"),
+        link("b")
+    );
+    let m = msg(load(&text));
+    assert!(m.contains("'free'") && m.contains("Floating"), "{m}");
+    let text = format!(
+        r#"<robot name="r">{}{}{}</robot>"#,
+        link("a"),
+        link("b"),
+        revolute("j", "a", "ghost", "0 0 1")
+    );
+    assert!(msg(load(&text)).contains("'ghost', which does not exist"));
+    let text = format!(
+        r#"<robot name="r">{}{}{}{}</robot>"#,
+        link("a"),
+        link("b"),
+        revolute("j1", "a", "b", "0 0 1"),
+        revolute("j2", "a", "b", "0 0 1")
+    );
+    assert!(msg(load(&text)).contains("child of two joints"));
+}
+
+#[test]
+fn fixed_links_are_merged_with_parallel_axis_theorem() {
+    // Two 1 kg point-like links 0.2 m apart along x, rigidly joined: COM in the middle,
+    // inertia about z grows by 2 · 1 kg · (0.1 m)².
+    let text = format!(
+        r#"<robot name="r"><link name="a"/>{}{}{}
+        <joint name="weld" type="fixed"><parent link="b"/><child link="c"/><origin xyz="0.2 0 0"/></joint></robot>"#,
+        link("b"),
+        link("c"),
+        revolute("j", "a", "b", "0 0 1")
+    );
+    let model = load(&text).unwrap();
+    let body = &model.bodies[0];
+    assert_eq!(body.mass, 2.0);
+    assert!((body.com - Vector3::new(0.1, 0.0, 0.0)).norm() < 1e-15);
+    assert!((body.inertia[(2, 2)] - (0.02 + 2.0 * 0.01)).abs() < 1e-15);
+    assert!((body.inertia[(0, 0)] - 0.02).abs() < 1e-15);
+    assert_eq!(model.tip_link, "c");
+    assert!((model.flange_offset.translation.vector - Vector3::new(0.2, 0.0, 0.0)).norm() < 1e-15);
+}
