@@ -53,25 +53,76 @@ pub enum Frame {
 /// If `q.len() != model.nq()`; check user input with [`Model::check_q`] first.
 pub fn forward_kinematics(model: &Model, data: &mut Data, q: &[f64]) {
     assert_eq!(q.len(), model.nq(), "joint vector length");
-    let mut r = Matrix3::identity();
-    let mut p = Vector3::zeros();
+    // Columns of R_base_joint and the origin p_base_joint, as plain arrays: the 3×3 updates below
+    // are a few dozen multiply-adds per joint and must not go through generic matrix code.
+    let mut r = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
+    let mut p = [0.0; 3];
     for ((joint, &qi), out) in model.joints.iter().zip(q).zip(data.joint_poses.iter_mut()) {
         let po = &joint.origin.translation.vector;
-        p += r * po;
-        match joint.kind {
-            JointKind::Revolute | JointKind::Continuous => {
+        for (a, pa) in p.iter_mut().enumerate() {
+            *pa += r[0][a] * po.x + r[1][a] * po.y + r[2][a] * po.z;
+        }
+        match (joint.kind, joint.aligned_axis) {
+            (JointKind::Revolute | JointKind::Continuous, Some((k, sign))) => {
+                // r · R_k(sign q): only the two columns orthogonal to e_k turn.
+                let (s, c) = crate::trig::sin_cos(qi);
+                let s = sign * s;
+                // Constant column indices per axis keep `r` in registers (a run-time index would
+                // send it through memory and stall store forwarding).
+                match k {
+                    0 => turn::<1, 2>(&mut r, s, c),
+                    1 => turn::<2, 0>(&mut r, s, c),
+                    _ => turn::<0, 1>(&mut r, s, c),
+                }
+            }
+            (JointKind::Revolute | JointKind::Continuous, None) => {
                 let (s, c) = crate::trig::sin_cos(qi);
                 let [k0, k1, k2] = &joint.rotation_terms;
-                r *= k0 + k1 * c + k2 * s;
+                r = times(&r, &(k0 + k1 * c + k2 * s));
             }
-            JointKind::Prismatic => {
-                r *= joint.origin.rotation.matrix();
-                p += r * (joint.axis * qi);
+            (JointKind::Prismatic, _) => {
+                r = times(&r, joint.origin.rotation.matrix());
+                let d = joint.axis * qi;
+                for (a, pa) in p.iter_mut().enumerate() {
+                    *pa += r[0][a] * d.x + r[1][a] * d.y + r[2][a] * d.z;
+                }
             }
         }
-        *out = pose_from(r, p);
+        *out = pose_from(
+            Matrix3::new(
+                r[0][0], r[1][0], r[2][0], r[0][1], r[1][1], r[2][1], r[0][2], r[1][2], r[2][2],
+            ),
+            Vector3::new(p[0], p[1], p[2]),
+        );
     }
     data.flange = data.joint_poses[model.nq() - 1] * model.flange_offset;
+}
+
+/// Turns columns `I` and `J` of `r` (given by its columns) by the angle with sine `s` and cosine `c`:
+/// `r · R_k` for the rotation `R_k` about the third axis `k`, with `(k, I, J)` cyclic.
+#[inline(always)]
+fn turn<const I: usize, const J: usize>(r: &mut [[f64; 3]; 3], s: f64, c: f64) {
+    let (ci, cj) = (r[I], r[J]);
+    r[I] = [
+        ci[0] * c + cj[0] * s,
+        ci[1] * c + cj[1] * s,
+        ci[2] * c + cj[2] * s,
+    ];
+    r[J] = [
+        cj[0] * c - ci[0] * s,
+        cj[1] * c - ci[1] * s,
+        cj[2] * c - ci[2] * s,
+    ];
+}
+
+/// `r · m` for `r` given by its columns.
+#[inline]
+fn times(r: &[[f64; 3]; 3], m: &Matrix3<f64>) -> [[f64; 3]; 3] {
+    std::array::from_fn(|col| {
+        std::array::from_fn(|a| {
+            r[0][a] * m[(0, col)] + r[1][a] * m[(1, col)] + r[2][a] * m[(2, col)]
+        })
+    })
 }
 
 /// `T_base_flange` at `q` (m); also fills `data` like [`forward_kinematics`].
@@ -161,7 +212,10 @@ mod tests {
         (0..n)
             .map(|k| {
                 (0..model.nq())
-                    .map(|i| ((k as f64 + 1.0) * (0.754877666 + 0.569840291 * i as f64)).fract() * 4.0 - 2.0)
+                    .map(|i| {
+                        ((k as f64 + 1.0) * (0.754877666 + 0.569840291 * i as f64)).fract() * 4.0
+                            - 2.0
+                    })
                     .collect()
             })
             .collect()
@@ -208,10 +262,16 @@ mod tests {
                 assert!((xs - js.column(i)).amax() < 1e-8, "spatial col {i}");
                 assert!((xb - jb.column(i)).amax() < 1e-8, "body col {i}");
                 let dp = (tp.translation.vector - tm.translation.vector) / (2.0 * h);
-                assert!((dp - jl.fixed_view::<3, 1>(3, i)).amax() < 1e-8, "lwa col {i}");
+                assert!(
+                    (dp - jl.fixed_view::<3, 1>(3, i)).amax() < 1e-8,
+                    "lwa col {i}"
+                );
                 let pp = tp * nalgebra::Point3::from(tool);
                 let pm = tm * nalgebra::Point3::from(tool);
-                assert!(((pp - pm) / (2.0 * h) - jp.column(i)).amax() < 1e-8, "point col {i}");
+                assert!(
+                    ((pp - pm) / (2.0 * h) - jp.column(i)).amax() < 1e-8,
+                    "point col {i}"
+                );
             }
             // Identity: Ad(T⁻¹) J_s = J_b.
             let inv = t0.inverse();

@@ -65,9 +65,38 @@ pub struct Joint {
     /// `[C, A - C, B]` with `A = R_o`, `B = R_o [a]`, `C = R_o a aᵀ` (`R_o` the origin rotation, `a` the
     /// axis), so that the joint's local rotation is `C + cos q (A - C) + sin q B` (Rodrigues, folded).
     pub rotation_terms: [Matrix3<f64>; 3],
+    /// `Some((k, sign))` when the origin rotation is exactly the identity and the axis is exactly
+    /// `sign · e_k` (k = 0, 1, 2 for x, y, z), as in most URDFs: forward kinematics then turns two
+    /// columns instead of multiplying 3×3 matrices. Derived from `origin.rotation` and `axis` like
+    /// [`Joint::rotation_terms`]; recompute both with [`Joint::refresh_derived`] after changing them.
+    pub aligned_axis: Option<(usize, f64)>,
 }
 
 impl Joint {
+    /// Recomputes [`Joint::rotation_terms`] and [`Joint::aligned_axis`] from `origin` and `axis`.
+    pub fn refresh_derived(&mut self) {
+        self.rotation_terms = Joint::rotation_terms_for(&self.origin, &self.axis);
+        self.aligned_axis = Joint::aligned_axis_for(&self.origin, &self.axis);
+    }
+
+    /// See [`Joint::aligned_axis`].
+    pub fn aligned_axis_for(origin: &Pose, axis: &Vector3<f64>) -> Option<(usize, f64)> {
+        if *origin.rotation.matrix() != Matrix3::identity() {
+            return None;
+        }
+        (0..3).find_map(|k| {
+            let mut unit = Vector3::zeros();
+            unit[k] = 1.0;
+            if *axis == unit {
+                Some((k, 1.0))
+            } else if *axis == -unit {
+                Some((k, -1.0))
+            } else {
+                None
+            }
+        })
+    }
+
     /// Precomputes [`Joint::rotation_terms`] from the origin and unit axis.
     pub fn rotation_terms_for(origin: &Pose, axis: &Vector3<f64>) -> [Matrix3<f64>; 3] {
         let a = origin.rotation.matrix();

@@ -313,6 +313,7 @@ impl<'a> Builder<'a> {
                 screw,
                 limits,
                 rotation_terms: Joint::rotation_terms_for(&origin, &axis),
+                aligned_axis: Joint::aligned_axis_for(&origin, &axis),
             });
             body_links.push(vec![j.child.link.as_str()]);
             link_in_body.insert(j.child.link.as_str(), Pose::identity());
