@@ -90,6 +90,7 @@ pub mod chain;
 pub mod error;
 pub mod identifiability;
 pub mod io;
+pub mod learned;
 pub mod lie3;
 pub mod lm;
 pub mod model_file;

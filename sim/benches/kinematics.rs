@@ -8,7 +8,11 @@ use std::hint::black_box;
 
 fn configs() -> Vec<[f64; 7]> {
     (0..64)
-        .map(|k| std::array::from_fn(|i| ((k as f64 + 1.0) * (0.618034 + 0.414214 * i as f64)).fract() * 4.0 - 2.0))
+        .map(|k| {
+            std::array::from_fn(|i| {
+                ((k as f64 + 1.0) * (0.618034 + 0.414214 * i as f64)).fract() * 4.0 - 2.0
+            })
+        })
         .collect()
 }
 

@@ -180,7 +180,11 @@ fn table_location(row: &Option<usize>, line: &Option<usize>, column: &Option<Str
         }
     }
     if let Some(c) = column {
-        s.push_str(if row.is_some() { ", column " } else { ": column " });
+        s.push_str(if row.is_some() {
+            ", column "
+        } else {
+            ": column "
+        });
         s.push_str(c);
     }
     s

@@ -55,17 +55,18 @@ pub fn exp_twist(xi: &Vector6<f64>) -> Pose {
     };
     let r = Matrix3::identity() + k * a + k2 * b;
     let p = (Matrix3::identity() + k * b + k2 * c) * v;
-    Pose::from_parts(
-        Translation3::from(p),
-        Rotation3::from_matrix_unchecked(r),
-    )
+    Pose::from_parts(Translation3::from(p), Rotation3::from_matrix_unchecked(r))
 }
 
 /// Logarithm of a pose: the twist `ξ = [ω; v]` with `exp(ξ) = T` and `|ω| ≤ π` (rad, m).
 pub fn log_pose(t: &Pose) -> Vector6<f64> {
     let r = t.rotation.matrix();
     let p = t.translation.vector;
-    let w_hat = Vector3::new(r[(2, 1)] - r[(1, 2)], r[(0, 2)] - r[(2, 0)], r[(1, 0)] - r[(0, 1)]);
+    let w_hat = Vector3::new(
+        r[(2, 1)] - r[(1, 2)],
+        r[(0, 2)] - r[(2, 0)],
+        r[(1, 0)] - r[(0, 1)],
+    );
     // atan2 keeps θ accurate near 0 and π, where acos of the trace loses half the digits.
     let th = (0.5 * w_hat.norm()).atan2((r.trace() - 1.0) * 0.5);
     let w = if th < 1e-6 {
@@ -172,17 +173,35 @@ mod tests {
 
     #[test]
     fn log_inverts_exp_including_small_and_near_pi_angles() {
-        for (k, th) in [1e-12, 1e-7, 1e-3, 0.5, 2.0, 3.0, std::f64::consts::PI - 1e-8]
-            .iter()
-            .enumerate()
+        for (k, th) in [
+            1e-12,
+            1e-7,
+            1e-3,
+            0.5,
+            2.0,
+            3.0,
+            std::f64::consts::PI - 1e-8,
+        ]
+        .iter()
+        .enumerate()
         {
             let w = Vector3::new(0.3, -0.5 + k as f64 * 0.1, 0.8).normalize() * *th;
             let xi = Vector6::new(w.x, w.y, w.z, 0.2, -0.1, 0.4 + k as f64);
             let t = exp_twist(&xi);
             let back = log_pose(&t);
-            assert!((back - xi).amax() < 1e-9, "theta {th}: {} {}", back.transpose(), xi.transpose());
+            assert!(
+                (back - xi).amax() < 1e-9,
+                "theta {th}: {} {}",
+                back.transpose(),
+                xi.transpose()
+            );
             let e = exp_twist(&back);
-            assert!(close(&e, &t, 1e-12), "theta {th}: {} {}", (e.rotation.matrix() - t.rotation.matrix()).amax(), (e.translation.vector - t.translation.vector).amax());
+            assert!(
+                close(&e, &t, 1e-12),
+                "theta {th}: {} {}",
+                (e.rotation.matrix() - t.rotation.matrix()).amax(),
+                (e.translation.vector - t.translation.vector).amax()
+            );
         }
     }
 
@@ -200,7 +219,8 @@ mod tests {
     #[test]
     fn rpy_matches_product_of_elementary_rotations() {
         let (r, p, y) = (0.3, -1.1, 2.5);
-        let expect = exp_so3(&Vector3::z(), y) * exp_so3(&Vector3::y(), p) * exp_so3(&Vector3::x(), r);
+        let expect =
+            exp_so3(&Vector3::z(), y) * exp_so3(&Vector3::y(), p) * exp_so3(&Vector3::x(), r);
         assert!((rotation_from_rpy(r, p, y) - expect).amax() < 1e-15);
     }
 }

@@ -27,7 +27,11 @@ pub fn builtin_urdf(name: &str) -> Option<&'static str> {
 /// Loads a built-in robot with its default chain.
 pub fn load_builtin(name: &str) -> Result<Model> {
     let text = builtin_urdf(name).ok_or_else(|| unknown(name))?;
-    load_str(text, &format!("built-in robot '{name}'"), &ChainSpec::default())
+    load_str(
+        text,
+        &format!("built-in robot '{name}'"),
+        &ChainSpec::default(),
+    )
 }
 
 /// Loads `robot`: a URDF file path if such a file exists, otherwise a built-in robot's name.
@@ -51,6 +55,10 @@ pub fn load_robot(robot: &str, spec: &ChainSpec) -> Result<Model> {
 fn unknown(name: &str) -> SimError {
     SimError::UnknownRobot {
         name: name.to_string(),
-        known: BUILTIN.iter().map(|(n, _)| *n).collect::<Vec<_>>().join(", "),
+        known: BUILTIN
+            .iter()
+            .map(|(n, _)| *n)
+            .collect::<Vec<_>>()
+            .join(", "),
     }
 }

@@ -91,7 +91,10 @@ mod tests {
         assert!((d.gravity_torque[1] - -(9.81 * 0.25)).abs() < 1e-12);
         assert!((d.gravity_torque[0] - -(9.81 * (1.0 + 1.25))).abs() < 1e-12);
         // Payload 3 kg at the tip (x = 1.5): adds 3 g 1.5 to τ1 and 3 g 0.5 to τ2.
-        let pl = Payload { mass: 3.0, com: [0.0, 0.0, 0.0] };
+        let pl = Payload {
+            mass: 3.0,
+            com: [0.0, 0.0, 0.0],
+        };
         gravity_torques(&m, &mut d, &[0.0, 0.0], &g, Some(&pl)).unwrap();
         assert!((d.gravity_torque[1] - -(9.81 * (0.25 + 1.5))).abs() < 1e-12);
         assert!((d.gravity_torque[0] - -(9.81 * (2.25 + 4.5))).abs() < 1e-12);
@@ -106,7 +109,10 @@ mod tests {
         let m = crate::robots::load_builtin("iiwa7").unwrap();
         let mut d = Data::new(&m);
         let g = Vector3::from(DEFAULT_GRAVITY);
-        let pl = Payload { mass: 1.7, com: [0.01, -0.02, 0.08] };
+        let pl = Payload {
+            mass: 1.7,
+            com: [0.01, -0.02, 0.08],
+        };
         let potential = |d: &mut Data, q: &[f64]| {
             forward_kinematics(&m, d, q);
             let mut v = 0.0;
@@ -124,7 +130,11 @@ mod tests {
             qp[i] += h;
             qm[i] -= h;
             let fd = (potential(&mut d, &qp) - potential(&mut d, &qm)) / (2.0 * h);
-            assert!((fd - tau[i]).abs() < 1e-7 * (1.0 + tau[i].abs()), "joint {i}: {fd} vs {}", tau[i]);
+            assert!(
+                (fd - tau[i]).abs() < 1e-7 * (1.0 + tau[i].abs()),
+                "joint {i}: {fd} vs {}",
+                tau[i]
+            );
         }
     }
 }

@@ -40,9 +40,7 @@ pub fn load_file(path: &Path, spec: &ChainSpec) -> Result<Model> {
 pub fn load_str(text: &str, source_name: &str, spec: &ChainSpec) -> Result<Model> {
     let src = || source_name.to_string();
     if text.contains("xmlns:xacro") || text.contains("<xacro:") {
-        return Err(SimError::Xacro {
-            source_name: src(),
-        });
+        return Err(SimError::Xacro { source_name: src() });
     }
     if !text.contains("<robot") {
         return Err(SimError::Parse {
@@ -172,9 +170,9 @@ impl<'a> Builder<'a> {
                     link = j.parent.link.as_str();
                 }
                 None => {
-                    return Err(self.structure(format!(
-                        "tip link '{tip}' is not below base link '{base}'"
-                    )));
+                    return Err(
+                        self.structure(format!("tip link '{tip}' is not below base link '{base}'"))
+                    );
                 }
             }
             if joints.len() > self.robot.joints.len() {
@@ -195,7 +193,9 @@ impl<'a> Builder<'a> {
                 break;
             }
             match self.child_joints.get(l) {
-                Some(js) if !js.is_empty() => stack.extend(js.iter().map(|j| j.child.link.as_str())),
+                Some(js) if !js.is_empty() => {
+                    stack.extend(js.iter().map(|j| j.child.link.as_str()))
+                }
                 _ => out.push(l),
             }
         }
@@ -241,7 +241,11 @@ impl<'a> Builder<'a> {
                 .unwrap_or(0)
         };
         let best = leaves.iter().map(|l| movable(l)).max().unwrap_or(0);
-        let top: Vec<&str> = leaves.iter().copied().filter(|l| movable(l) == best).collect();
+        let top: Vec<&str> = leaves
+            .iter()
+            .copied()
+            .filter(|l| movable(l) == best)
+            .collect();
         if top.len() == 1 && best > 0 {
             Ok(top[0])
         } else {
@@ -452,11 +456,21 @@ impl<'a> Builder<'a> {
             Ok(Some(JointLimits {
                 lower: l.lower,
                 upper: l.upper,
-                velocity: if l.velocity.is_finite() { l.velocity } else { 0.0 },
+                velocity: if l.velocity.is_finite() {
+                    l.velocity
+                } else {
+                    0.0
+                },
                 effort: if l.effort.is_finite() { l.effort } else { 0.0 },
             }))
         } else if l.lower > l.upper {
-            Err(self.bad("joint", &j.name, "limit lower", l.lower, "above the upper limit"))
+            Err(self.bad(
+                "joint",
+                &j.name,
+                "limit lower",
+                l.lower,
+                "above the upper limit",
+            ))
         } else {
             Ok(None)
         }

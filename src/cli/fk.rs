@@ -22,7 +22,11 @@ fn parse_q(text: &str) -> Result<Vec<f64>, CliError> {
         .enumerate()
         .map(|(i, s)| {
             s.trim().parse::<f64>().map_err(|_| {
-                CliError::Input(format!("--q: value {} ('{}') is not a number", i + 1, s.trim()))
+                CliError::Input(format!(
+                    "--q: value {} ('{}') is not a number",
+                    i + 1,
+                    s.trim()
+                ))
             })
         })
         .collect()
@@ -53,7 +57,9 @@ pub fn run(args: Args) -> CliResult {
     let p = t.translation.vector;
     let r = t.rotation.matrix();
     if args.json {
-        let rows: Vec<Vec<f64>> = (0..3).map(|i| (0..3).map(|j| r[(i, j)]).collect()).collect();
+        let rows: Vec<Vec<f64>> = (0..3)
+            .map(|i| (0..3).map(|j| r[(i, j)]).collect())
+            .collect();
         return print_json(&json!({
             "robot": model.name, "base_link": model.base_link, "tip_link": model.tip_link,
             "q": q, "position_m": [p.x, p.y, p.z], "rotation": rows,
@@ -63,7 +69,12 @@ pub fn run(args: Args) -> CliResult {
     eprintln!("  position (m): {:.9} {:.9} {:.9}", p.x, p.y, p.z);
     eprintln!("  rotation:");
     for i in 0..3 {
-        eprintln!("    {:+.12} {:+.12} {:+.12}", r[(i, 0)], r[(i, 1)], r[(i, 2)]);
+        eprintln!(
+            "    {:+.12} {:+.12} {:+.12}",
+            r[(i, 0)],
+            r[(i, 1)],
+            r[(i, 2)]
+        );
     }
     Ok(())
 }
