@@ -14,12 +14,15 @@
 
 use crate::chain::{Chain, ChainScratch};
 use crate::error::{CalibError, Result};
+use crate::extensions::thermal_drift::WARM_UP_TAUS_S;
+use crate::extensions::{ExtensionSettings, ModelSpec, Regressors, ThermalInput, predict_row};
 use crate::identifiability::{NullSpaceReport, Observability, describe_null_space};
+use crate::learned::LearnedResidual;
 use crate::lie3::{left_jacobian_inverse, log_rotation};
 use crate::lm::{LmOptions, LmWorkspace, MinimizationReport, Subspace, minimize};
 use crate::params::{KinematicParams, ParamKind, ParamLayout, ParameterScales};
 use crate::problem::{KinematicProblem, NoiseModel, Observations};
-use crate::stats::{ResidualStats, residual_stats};
+use crate::stats::{ResidualStats, position_errors, residual_stats, stats_of_errors};
 use nalgebra::{DMatrix, DVector, Matrix3, Matrix3x6, Vector3};
 use sim::Model;
 use sim::lie::{Pose, pose_from, skew};
@@ -61,6 +64,19 @@ impl RobustLoss {
     }
 }
 
+/// The learned residual correction of a `learned:` model: what it is and what it does on the data.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct LearnedStage {
+    /// Its one-line description (kind, selected hyperparameters, cross-validated RMS).
+    pub description: String,
+    /// Whether cross-validation kept it (otherwise it predicts zero).
+    pub active: bool,
+    /// Errors of the physical model plus the correction on the training rows.
+    pub train: ResidualStats,
+    /// The same on the test rows.
+    pub test: Option<ResidualStats>,
+}
+
 /// Settings of [`calibrate`].
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct CalibrationOptions {
@@ -79,6 +95,8 @@ pub struct CalibrationOptions {
     /// of its own σ from the noise model, so that rounding-level residuals of noise-free data are never
     /// outliers. Default 5.
     pub outlier_threshold: f64,
+    /// Seed of the learned models' cross-validation folds.
+    pub learned_seed: u64,
 }
 
 impl Default for CalibrationOptions {
@@ -89,6 +107,7 @@ impl Default for CalibrationOptions {
             lm: LmOptions::default(),
             robust: None,
             outlier_threshold: 5.0,
+            learned_seed: 0,
         }
     }
 }
@@ -219,6 +238,8 @@ pub struct CalibrationReport {
     pub outliers: Vec<Outlier>,
     /// IRLS summary when a robust loss was used.
     pub robust: Option<RobustSummary>,
+    /// The learned residual correction on top of the physical model, with a `learned:` model.
+    pub learned: Option<LearnedStage>,
     /// Things a user should know (data-specific unidentifiable parameters, weak combinations, …).
     pub warnings: Vec<String>,
 }
@@ -366,6 +387,10 @@ pub struct Calibration {
     pub subspace: Subspace,
     /// The report.
     pub report: CalibrationReport,
+    /// Settings of the model extensions (what their regressors are made from), if any.
+    pub extensions: Option<ExtensionSettings>,
+    /// The learned residual correction fitted after the physical model, if asked for.
+    pub learned: Option<LearnedResidual>,
 }
 
 /// Rigid transform `T` with `dst ≈ T src` in the least-squares sense (Kabsch / Horn).
@@ -460,6 +485,7 @@ pub fn generic_rank(model: &Model, orientation: bool, options: &CalibrationOptio
         weight: vec![1.0; poses],
         pose: (0..poses as i64).collect(),
         source_row: (0..poses).collect(),
+        ext: Regressors::none(),
     };
     let all: Vec<usize> = (0..layout.len()).collect();
     let mut prob = KinematicProblem::new(model, &obs, params, all);
@@ -517,6 +543,123 @@ pub fn calibrate(
     test: Option<&Dataset<'_>>,
     options: &CalibrationOptions,
 ) -> Result<Calibration> {
+    calibrate_with(model, train, test, options, None)
+}
+
+/// Calibrates the model `spec` (kinematic, extensions identified jointly with it, then an optional
+/// learned residual correction fitted on the training residuals) on `train`, validating on `test`.
+///
+/// Extensions take their regressor settings from the training rows ([`ExtensionSettings::for_data`]);
+/// thermal drift from time stamps alone searches the warm-up time constant over
+/// [`WARM_UP_TAUS_S`] and keeps the one with the smallest training `χ²`. Errors as [`calibrate`], and
+/// for an extension the data cannot feed (thermal drift without `temp` or `t`, compliance on a robot
+/// without inertials).
+pub fn calibrate_model(
+    model: &Model,
+    train: &Dataset<'_>,
+    test: Option<&Dataset<'_>>,
+    spec: &ModelSpec,
+    options: &CalibrationOptions,
+) -> Result<Calibration> {
+    let mut cal = if spec.causes.is_empty() {
+        calibrate_with(model, train, test, options, None)?
+    } else {
+        let settings = |tau| {
+            ExtensionSettings::for_data(
+                model,
+                &spec.causes,
+                train.table,
+                &train.rows,
+                tau,
+                &train.name,
+            )
+        };
+        let first = settings(None)?;
+        if matches!(first.thermal, Some(ThermalInput::WarmUp { .. })) {
+            let mut best: Option<Calibration> = None;
+            for tau in WARM_UP_TAUS_S {
+                let cal = calibrate_with(model, train, test, options, Some(&settings(Some(tau))?))?;
+                if best.as_ref().is_none_or(|b| {
+                    cal.report.after.solver.cost_final < b.report.after.solver.cost_final
+                }) {
+                    best = Some(cal);
+                }
+            }
+            best.expect("at least one time constant")
+        } else {
+            calibrate_with(model, train, test, options, Some(&first))?
+        }
+    };
+    cal.report.model = spec.name();
+    if let Some(kind) = &spec.learned {
+        add_learned(model, &mut cal, kind, train, test, options)?;
+    }
+    Ok(cal)
+}
+
+/// Fits the learned correction `kind` to the training residuals of `cal` and records its statistics.
+fn add_learned(
+    model: &Model,
+    cal: &mut Calibration,
+    kind: &str,
+    train: &Dataset<'_>,
+    test: Option<&Dataset<'_>>,
+    options: &CalibrationOptions,
+) -> Result<()> {
+    let obs = observations(model, train, options, cal.extensions.as_ref())?;
+    let residual: Vec<Vector3<f64>> = position_errors(model, &cal.params, &obs)
+        .iter()
+        .map(|e| -e)
+        .collect();
+    let learned = crate::learned::fit(kind, &obs.q, model.nq(), &residual, options.learned_seed)?;
+    let stats_with = |o: &Observations| {
+        let corrected: Vec<Vector3<f64>> = position_errors(model, &cal.params, o)
+            .iter()
+            .enumerate()
+            .map(|(r, e)| e + learned.predict(o.q_row(r)))
+            .collect();
+        stats_of_errors(&corrected, o)
+    };
+    let test_stats = match test {
+        Some(t) if !t.rows.is_empty() => Some(stats_with(&observations(
+            model,
+            t,
+            options,
+            cal.extensions.as_ref(),
+        )?)),
+        _ => None,
+    };
+    cal.report.learned = Some(LearnedStage {
+        description: learned.describe(),
+        active: learned.is_active(),
+        train: stats_with(&obs),
+        test: test_stats,
+    });
+    cal.learned = Some(learned);
+    Ok(())
+}
+
+/// The rows of `data` prepared for the solver, with the extensions' regressors under `extensions`.
+pub fn observations(
+    model: &Model,
+    data: &Dataset<'_>,
+    options: &CalibrationOptions,
+    extensions: Option<&ExtensionSettings>,
+) -> Result<Observations> {
+    let mut obs = Observations::from_table(data.table, &data.rows, &options.noise, &data.name)?;
+    if let Some(s) = extensions {
+        obs.ext = Regressors::build(model, s, data.table, &data.rows, &data.name)?;
+    }
+    Ok(obs)
+}
+
+fn calibrate_with(
+    model: &Model,
+    train: &Dataset<'_>,
+    test: Option<&Dataset<'_>>,
+    options: &CalibrationOptions,
+    extensions: Option<&ExtensionSettings>,
+) -> Result<Calibration> {
     for d in std::iter::once(train).chain(test) {
         if d.table.n_joints != model.nq() {
             return Err(CalibError::BadValue {
@@ -535,14 +678,9 @@ pub fn calibrate(
             problem: "no rows to calibrate on".into(),
         });
     }
-    let mut obs = Observations::from_table(train.table, &train.rows, &options.noise, &train.name)?;
+    let mut obs = observations(model, train, options, extensions)?;
     let test_obs = match test {
-        Some(t) if !t.rows.is_empty() => Some(Observations::from_table(
-            t.table,
-            &t.rows,
-            &options.noise,
-            &t.name,
-        )?),
+        Some(t) if !t.rows.is_empty() => Some(observations(model, t, options, extensions)?),
         _ => None,
     };
     let orientation = obs.orientation.is_some();
@@ -558,7 +696,7 @@ pub fn calibrate(
                     .into(),
         });
     }
-    let layout = ParamLayout::new(model, orientation);
+    let layout = ParamLayout::new(model, orientation).with_extensions(obs.ext.params.clone());
     let p = layout.len();
     let dim = obs.dim();
     let n_poses = obs.n_poses();
@@ -581,7 +719,8 @@ pub fn calibrate(
     let mut warnings = Vec::new();
 
     // Before: base and target only.
-    let start = initial_params(model, &obs);
+    let mut start = initial_params(model, &obs);
+    start.extension = vec![0.0; obs.ext.len()];
     let bt = layout.base_and_target();
     let bt_scales: Vec<f64> = bt.iter().map(|&k| scales[k]).collect();
     let mut ws = LmWorkspace::new(obs.len() * dim, bt.len());
@@ -706,18 +845,27 @@ pub fn calibrate(
     let t = normalised_norms(&norms, &obs.weight, dim);
     let chain = Chain::new(model, &params);
     let mut s = ChainScratch::new(model.nq());
+    let mut q_buf = vec![0.0; model.nq()];
     let mut outliers = Vec::new();
     for (r, &tv) in t.iter().enumerate() {
         // Also beyond the noise model itself: residuals at rounding level (noise-free data) are no
         // outliers however they compare with each other.
         let raw = norms[r] / obs.weight[r].max(f64::MIN_POSITIVE).sqrt();
         if tv > options.outlier_threshold && raw > options.outlier_threshold / 10.0 {
-            chain.forward(&mut s, obs.q_row(r));
+            let (p, _, _) = predict_row(
+                &chain,
+                &mut s,
+                &params,
+                &obs.ext,
+                r,
+                obs.q_row(r),
+                &mut q_buf,
+            );
             outliers.push(Outlier {
                 row: obs.source_row[r] + 1,
                 pose: obs.pose[r],
                 normalised_residual: tv,
-                error_m: (s.p_tracker - obs.position[r]).norm(),
+                error_m: (p - obs.position[r]).norm(),
             });
         }
     }
@@ -752,6 +900,7 @@ pub fn calibrate(
         unidentifiable: null,
         outliers,
         robust: robust_summary,
+        learned: None,
         warnings,
     };
     Ok(Calibration {
@@ -761,6 +910,8 @@ pub fn calibrate(
         covariance,
         subspace: sub,
         report,
+        extensions: extensions.cloned(),
+        learned: None,
     })
 }
 
@@ -864,6 +1015,10 @@ fn estimates(
             }
             push(format!("target rotation φ_{axis}"), "rad", phi[a], f);
         }
+    }
+    for (e, x) in params.extension.iter().enumerate() {
+        let k = layout.extension(e);
+        push(layout.name(k), layout.unit(k), *x, unit_vec(k));
     }
     debug_assert!(matches!(layout.kind(0), ParamKind::JointTwist { .. }));
     out

@@ -88,6 +88,7 @@
 pub mod calibrate;
 pub mod chain;
 pub mod error;
+pub mod extensions;
 pub mod identifiability;
 pub mod io;
 pub mod learned;

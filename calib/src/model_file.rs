@@ -25,6 +25,8 @@
 use crate::calibrate::Calibration;
 use crate::chain::{Chain, ChainScratch};
 use crate::error::{CalibError, Result};
+use crate::extensions::{Cause, ExtensionSettings, ModelSpec, Regressors, predict_row};
+use crate::learned::LearnedResidual;
 use crate::lie3::{quaternion_from_rotation, rpy_from_rotation};
 use crate::params::KinematicParams;
 use crate::robot::Robot;
@@ -110,7 +112,7 @@ pub struct CalibratedModel {
     pub format_version: u32,
     /// Software that wrote it.
     pub software: String,
-    /// Model name: `kinematic`.
+    /// Model name: `kinematic`, or a `+`-joined extension such as `kinematic+joint_compliance`.
     pub model: String,
     /// The robot.
     pub robot: EmbeddedRobot,
@@ -118,6 +120,26 @@ pub struct CalibratedModel {
     pub parameters: ModelParameters,
     /// Their covariance, when known.
     pub covariance: Option<CovarianceJson>,
+    /// The model extensions: settings and identified values.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub extensions: Option<ExtensionsJson>,
+    /// The learned residual correction.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub learned: Option<LearnedResidual>,
+}
+
+/// The model extensions of a calibrated model.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ExtensionsJson {
+    /// What the regressors are made from.
+    pub settings: ExtensionSettings,
+    /// Parameter names, in order (for people; checked against the settings on load).
+    pub names: Vec<String>,
+    /// Parameter units, in order.
+    pub units: Vec<String>,
+    /// Identified values, in order (units as `units`).
+    pub values: Vec<f64>,
 }
 
 impl CalibratedModel {
@@ -134,7 +156,7 @@ impl CalibratedModel {
             format: FORMAT.into(),
             format_version: FORMAT_VERSION,
             software: format!("robocal-calib {}", env!("CARGO_PKG_VERSION")),
-            model: "kinematic".into(),
+            model: cal.report.model.clone(),
             robot: EmbeddedRobot {
                 name: robot.model.name.clone(),
                 source: robot.source.clone(),
@@ -164,6 +186,23 @@ impl CalibratedModel {
                     .collect(),
                 variance_factor: vf,
             }),
+            extensions: cal.extensions.as_ref().map(|settings| ExtensionsJson {
+                settings: settings.clone(),
+                names: cal
+                    .layout
+                    .extensions
+                    .iter()
+                    .map(|e| e.name.clone())
+                    .collect(),
+                units: cal
+                    .layout
+                    .extensions
+                    .iter()
+                    .map(|e| e.unit.clone())
+                    .collect(),
+                values: p.extension.clone(),
+            }),
+            learned: cal.learned.clone(),
         }
     }
 
@@ -205,12 +244,6 @@ impl CalibratedModel {
                 m.format_version
             )));
         }
-        if m.model != "kinematic" {
-            return Err(bad(format!(
-                "key 'model' is '{}': this version predicts with the 'kinematic' model only",
-                m.model
-            )));
-        }
         let p = &m.parameters;
         let finite = |key: &str, vals: &[f64]| -> Result<()> {
             match vals.iter().position(|v| !v.is_finite()) {
@@ -218,6 +251,44 @@ impl CalibratedModel {
                 None => Ok(()),
             }
         };
+        let spec = ModelSpec::parse(&m.model).map_err(|e| bad(format!("key 'model': {e}")))?;
+        let stored: Vec<Cause> = m
+            .extensions
+            .as_ref()
+            .map_or(Vec::new(), |e| e.settings.causes.clone());
+        if spec.causes != stored {
+            return Err(bad(format!(
+                "key 'model' is '{}' but key 'extensions' holds [{}]",
+                m.model,
+                stored
+                    .iter()
+                    .map(|c| c.name())
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            )));
+        }
+        if spec.learned.is_some() != m.learned.is_some() {
+            return Err(bad(format!(
+                "key 'model' is '{}' but key 'learned' is {}",
+                m.model,
+                if m.learned.is_some() {
+                    "present"
+                } else {
+                    "absent"
+                }
+            )));
+        }
+        if let Some(e) = &m.extensions {
+            finite("extensions.values", &e.values)?;
+            if e.values.len() != e.names.len() || e.units.len() != e.names.len() {
+                return Err(bad(format!(
+                    "key 'extensions': {} names, {} units and {} values",
+                    e.names.len(),
+                    e.units.len(),
+                    e.values.len()
+                )));
+            }
+        }
         for (i, t) in p.joint_error_twists.iter().enumerate() {
             finite(&format!("parameters.joint_error_twists[{i}]"), t)?;
         }
@@ -283,7 +354,7 @@ impl CalibratedModel {
         Ok(model)
     }
 
-    /// The parameters as a [`KinematicParams`].
+    /// The parameters as a [`KinematicParams`] (extension values included).
     pub fn params(&self) -> KinematicParams {
         let p = &self.parameters;
         let twists: Vec<Vector6<f64>> = p
@@ -301,6 +372,11 @@ impl CalibratedModel {
             Vector3::from(p.p_flange_target_m),
             p.r_flange_target.as_ref().map(matrix),
         )
+        .with_extension(
+            self.extensions
+                .as_ref()
+                .map_or(Vec::new(), |e| e.values.clone()),
+        )
     }
 }
 
@@ -311,6 +387,10 @@ pub struct Predictor {
     pub model: Model,
     /// The parameters.
     pub params: KinematicParams,
+    /// Settings of the model extensions, if any.
+    pub extensions: Option<ExtensionSettings>,
+    /// Learned residual correction, if any.
+    pub learned: Option<LearnedResidual>,
     chain: Chain,
     scratch: ChainScratch,
 }
@@ -355,6 +435,8 @@ impl Predictor {
         Predictor {
             model,
             params,
+            extensions: None,
+            learned: None,
             chain,
             scratch,
         }
@@ -362,16 +444,38 @@ impl Predictor {
 
     /// A predictor for a model file.
     pub fn from_file(m: &CalibratedModel) -> Result<Self> {
-        Ok(Predictor::new(m.robot_model()?, m.params()))
+        let mut p = Predictor::new(m.robot_model()?, m.params());
+        p.extensions = m.extensions.as_ref().map(|e| e.settings.clone());
+        p.learned = m.learned.clone();
+        if let Some(s) = &p.extensions
+            && s.params(&p.model).len() != p.params.extension.len()
+        {
+            return Err(CalibError::ModelFile {
+                file: "model".into(),
+                message: format!(
+                    "key 'extensions' has {} values; its causes need {}",
+                    p.params.extension.len(),
+                    s.params(&p.model).len()
+                ),
+            });
+        }
+        Ok(p)
     }
 
-    /// Target position (tracker frame, m) and orientation (tracker frame) at the controller's `q`.
+    /// Target position (tracker frame, m) and orientation (tracker frame) at the controller's `q`, for the
+    /// kinematic part of the model only (extensions need a row's payload, directions and temperature:
+    /// use [`Predictor::predict_table`]), learned correction included.
     ///
     /// # Panics
     /// If `q` has the wrong length (check tables with [`Predictor::predict_table`]).
     pub fn predict(&mut self, q: &[f64]) -> (Vector3<f64>, Matrix3<f64>) {
         self.chain.forward(&mut self.scratch, q);
-        (self.scratch.p_tracker, self.scratch.r_tracker_target)
+        let p = self.scratch.p_tracker
+            + self
+                .learned
+                .as_ref()
+                .map_or(Vector3::zeros(), |l| l.predict(q));
+        (p, self.scratch.r_tracker_target)
     }
 
     /// Predictions for every row of `table` (its x, y, z are ignored); `file` names it in errors.
@@ -394,8 +498,30 @@ impl Predictor {
             position: Vec::with_capacity(table.len()),
             orientation: orientation.then(|| Vec::with_capacity(table.len())),
         };
+        let rows: Vec<usize> = (0..table.len()).collect();
+        let regs = match &self.extensions {
+            Some(s) => {
+                s.check_table(table, file)?;
+                Regressors::build(&self.model, s, table, &rows, file)?
+            }
+            None => Regressors::none(),
+        };
+        let mut q_buf = vec![0.0; self.model.nq()];
         for r in 0..table.len() {
-            let (p, rot) = self.predict(table.q_row(r));
+            let q = table.q_row(r);
+            let (mut p, _, _) = predict_row(
+                &self.chain,
+                &mut self.scratch,
+                &self.params,
+                &regs,
+                r,
+                q,
+                &mut q_buf,
+            );
+            if let Some(l) = &self.learned {
+                p += l.predict(q);
+            }
+            let rot = self.scratch.r_tracker_target;
             out.position.push(p.into());
             if let Some(o) = out.orientation.as_mut() {
                 o.push(quaternion_from_rotation(&rot));

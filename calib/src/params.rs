@@ -4,8 +4,10 @@
 //! Step vector layout (length [`ParamLayout::len`]): for each joint `i` (0-based) seven entries
 //! `[ξᵢ (ω_x, ω_y, ω_z, v_x, v_y, v_z), δqᵢ]`, then the tracker-to-base twist `β` (6, tracker frame),
 //! the target position `p_flange` (3, flange frame) and, with orientation measurements, the target
-//! rotation `ρ` (3, target frame).
+//! rotation `ρ` (3, target frame), and last the parameters of any model extension
+//! ([`crate::extensions`], in [`ParamLayout::extensions`] order).
 
+use crate::extensions::ExtensionParam;
 use crate::lie3::exp_rotation;
 use nalgebra::{DVector, Matrix3, Vector3, Vector6};
 use sim::lie::{Pose, exp_twist, log_pose};
@@ -44,10 +46,15 @@ pub enum ParamKind {
         /// 0 = x, 1 = y, 2 = z.
         axis: usize,
     },
+    /// Parameter `index` of the model extensions ([`ParamLayout::extensions`]).
+    Extension {
+        /// Index into [`ParamLayout::extensions`].
+        index: usize,
+    },
 }
 
 /// Layout of the parameter (step) vector for one robot.
-#[derive(Clone, Debug, PartialEq, Eq)]
+#[derive(Clone, Debug, PartialEq)]
 pub struct ParamLayout {
     /// Number of joints `n`.
     pub n_joints: usize,
@@ -55,6 +62,8 @@ pub struct ParamLayout {
     pub orientation: bool,
     /// Per joint: true for prismatic joints (zero offset in m).
     pub prismatic: Vec<bool>,
+    /// Parameters of the model extensions, after the kinematic ones (empty for the kinematic model).
+    pub extensions: Vec<ExtensionParam>,
 }
 
 impl ParamLayout {
@@ -68,7 +77,26 @@ impl ParamLayout {
                 .iter()
                 .map(|j| j.kind == JointKind::Prismatic)
                 .collect(),
+            extensions: Vec::new(),
         }
+    }
+
+    /// The same layout with `extensions` appended.
+    pub fn with_extensions(mut self, extensions: Vec<ExtensionParam>) -> Self {
+        self.extensions = extensions;
+        self
+    }
+
+    /// Number of kinematic parameters: `7 n + 9`, or `7 n + 12` with orientation.
+    #[inline]
+    pub fn kinematic_len(&self) -> usize {
+        7 * self.n_joints + if self.orientation { 12 } else { 9 }
+    }
+
+    /// Index of extension parameter `e`.
+    #[inline]
+    pub fn extension(&self, e: usize) -> usize {
+        self.kinematic_len() + e
     }
 
     /// Index of component 0 of joint `i`'s error twist.
@@ -101,10 +129,10 @@ impl ParamLayout {
         self.orientation.then_some(7 * self.n_joints + 9)
     }
 
-    /// Number of parameters: `7 n + 9`, or `7 n + 12` with orientation.
+    /// Number of parameters: the kinematic ones and the extensions'.
     #[inline]
     pub fn len(&self) -> usize {
-        7 * self.n_joints + if self.orientation { 12 } else { 9 }
+        self.kinematic_len() + self.extensions.len()
     }
 
     /// Always false: a layout has at least the base and target parameters.
@@ -116,7 +144,11 @@ impl ParamLayout {
     /// What entry `k` is.
     pub fn kind(&self, k: usize) -> ParamKind {
         let nj = 7 * self.n_joints;
-        if k < nj {
+        if k >= self.kinematic_len() {
+            ParamKind::Extension {
+                index: k - self.kinematic_len(),
+            }
+        } else if k < nj {
             let (joint, c) = (k / 7, k % 7);
             if c == 6 {
                 ParamKind::ZeroOffset { joint }
@@ -148,11 +180,12 @@ impl ParamLayout {
             }
             ParamKind::TargetPosition { axis } => format!("target p_{}", AXES[axis]),
             ParamKind::TargetOrientation { axis } => format!("target rotation ρ_{}", AXES[axis]),
+            ParamKind::Extension { index } => self.extensions[index].name.clone(),
         }
     }
 
-    /// Unit of entry `k`: `rad` or `m`.
-    pub fn unit(&self, k: usize) -> &'static str {
+    /// Unit of entry `k`: `rad` or `m` (extensions: their own, e.g. `rad/(N m)`).
+    pub fn unit(&self, k: usize) -> &str {
         match self.kind(k) {
             ParamKind::JointTwist { component, .. } | ParamKind::BaseTwist { component } => {
                 if component < 3 {
@@ -170,12 +203,13 @@ impl ParamLayout {
             }
             ParamKind::TargetPosition { .. } => "m",
             ParamKind::TargetOrientation { .. } => "rad",
+            ParamKind::Extension { index } => &self.extensions[index].unit,
         }
     }
 
     /// Indices of the tracker-to-base and target parameters (the "base and tool" fit).
     pub fn base_and_target(&self) -> Vec<usize> {
-        (self.base()..self.len()).collect()
+        (self.base()..self.kinematic_len()).collect()
     }
 }
 
@@ -246,6 +280,7 @@ impl ParameterScales {
             }
             ParamKind::TargetPosition { .. } => self.target_position_m,
             ParamKind::TargetOrientation { .. } => self.target_rotation_rad,
+            ParamKind::Extension { index } => layout.extensions[index].scale,
         })
     }
 }
@@ -266,6 +301,9 @@ pub struct KinematicParams {
     pub p_flange_target: Vector3<f64>,
     /// Target orientation in the flange frame, when orientation is measured.
     pub r_flange_target: Option<Matrix3<f64>>,
+    /// Values of the extension parameters ([`ParamLayout::extensions`] order and units; empty for the
+    /// kinematic model).
+    pub extension: Vec<f64>,
 }
 
 impl KinematicParams {
@@ -277,6 +315,7 @@ impl KinematicParams {
             t_tracker_base: Pose::identity(),
             p_flange_target: Vector3::zeros(),
             r_flange_target: orientation.then(Matrix3::identity),
+            extension: Vec::new(),
         }
     }
 
@@ -294,7 +333,14 @@ impl KinematicParams {
             t_tracker_base,
             p_flange_target,
             r_flange_target,
+            extension: Vec::new(),
         }
+    }
+
+    /// The same parameters with extension values `extension` ([`ParamLayout::extensions`] order).
+    pub fn with_extension(mut self, extension: Vec<f64>) -> Self {
+        self.extension = extension;
+        self
     }
 
     /// Error twist `ξᵢ = log(Gᵢ)` of joint `i` (base frame; rad, m).
@@ -324,6 +370,13 @@ impl KinematicParams {
         if let (Some(o), Some(r)) = (layout.target_orientation(), self.r_flange_target.as_mut()) {
             let rho = Vector3::from_column_slice(&step[o..o + 3]);
             *r *= exp_rotation(&rho);
+        }
+        for (x, &d) in self
+            .extension
+            .iter_mut()
+            .zip(&step[layout.kinematic_len()..])
+        {
+            *x += d;
         }
     }
 }

@@ -9,6 +9,7 @@
 
 use crate::chain::{Chain, ChainScratch};
 use crate::error::{CalibError, Result};
+use crate::extensions::{Regressors, Term, predict_row};
 use crate::lie3::{left_jacobian_inverse, log_rotation, rotation_from_quaternion};
 use crate::lm::LeastSquaresProblem;
 use crate::params::{KinematicParams, ParamLayout};
@@ -66,6 +67,8 @@ pub struct Observations {
     pub pose: Vec<i64>,
     /// 0-based index of each row in the source table.
     pub source_row: Vec<usize>,
+    /// Regressors of the model extensions per row ([`Regressors::none`] for the kinematic model).
+    pub ext: Regressors,
 }
 
 impl Observations {
@@ -120,6 +123,7 @@ impl Observations {
             weight: vec![1.0; rows.len()],
             pose: rows.iter().map(|&r| table.pose[r]).collect(),
             source_row: rows.to_vec(),
+            ext: Regressors::none(),
         })
     }
 
@@ -156,6 +160,29 @@ impl Observations {
     }
 }
 
+/// Fills the extension columns of a 3-row Jacobian block (row-major, `layout.len()` columns) whose
+/// kinematic columns are set: a joint-angle term is the joint's zero-offset column times its regressor,
+/// the growth term `lever` times its regressor. (With growth `γ ≠ 0` the kinematic columns would carry
+/// a factor `1 + γ`, about `1 + 2·10⁻⁴`; leaving it out slows no convergence and moves no solution.)
+fn extension_columns(
+    layout: &ParamLayout,
+    coef: &[f64],
+    lever: &Vector3<f64>,
+    rows: usize,
+    block: &mut [f64],
+) {
+    let np = layout.len();
+    for (e, (p, &g)) in layout.extensions.iter().zip(coef).enumerate() {
+        let ke = layout.extension(e);
+        for row in 0..rows {
+            block[row * np + ke] = match p.term {
+                Term::JointAngle { joint } => block[row * np + layout.zero_offset(joint)] * g,
+                Term::Growth => lever[row] * g,
+            };
+        }
+    }
+}
+
 /// The kinematic calibration problem over `active` parameters of a [`ParamLayout`].
 #[derive(Clone, Debug)]
 pub struct KinematicProblem<'a> {
@@ -165,6 +192,8 @@ pub struct KinematicProblem<'a> {
     active: Vec<usize>,
     lin: KinematicParams,
     trial: KinematicParams,
+    /// Effective joint values of the current row (extensions applied).
+    q_eff: Vec<f64>,
     chain: Chain,
     scratch: ChainScratch,
     step_full: Vec<f64>,
@@ -182,6 +211,7 @@ fn copy_params(dst: &mut KinematicParams, src: &KinematicParams) {
     dst.t_tracker_base = src.t_tracker_base;
     dst.p_flange_target = src.p_flange_target;
     dst.r_flange_target = src.r_flange_target;
+    dst.extension.copy_from_slice(&src.extension);
 }
 
 impl<'a> KinematicProblem<'a> {
@@ -195,7 +225,8 @@ impl<'a> KinematicProblem<'a> {
         start: KinematicParams,
         active: Vec<usize>,
     ) -> Self {
-        let layout = ParamLayout::new(model, obs.orientation.is_some());
+        let layout = ParamLayout::new(model, obs.orientation.is_some())
+            .with_extensions(obs.ext.params.clone());
         assert_eq!(obs.n_joints, model.nq(), "joint count of the observations");
         assert!(active.iter().all(|&k| k < layout.len()), "active index");
         assert_eq!(
@@ -203,6 +234,7 @@ impl<'a> KinematicProblem<'a> {
             layout.orientation,
             "orientation parameters"
         );
+        assert_eq!(start.extension.len(), obs.ext.len(), "extension parameters");
         let np = layout.len();
         let dim = obs.dim();
         KinematicProblem {
@@ -210,6 +242,7 @@ impl<'a> KinematicProblem<'a> {
             obs,
             chain: Chain::new(model, &start),
             scratch: ChainScratch::new(model.nq()),
+            q_eff: vec![0.0; model.nq()],
             trial: start.clone(),
             lin: start,
             step_full: vec![0.0; np],
@@ -245,15 +278,30 @@ impl<'a> KinematicProblem<'a> {
     /// residuals (first `dim` entries used) at the trial point.
     fn row_block(&mut self, r: usize, with_jacobian: bool) -> [f64; 6] {
         let obs = self.obs;
-        self.chain.forward(&mut self.scratch, obs.q_row(r));
+        let (p, lever, _) = predict_row(
+            &self.chain,
+            &mut self.scratch,
+            &self.trial,
+            &obs.ext,
+            r,
+            obs.q_row(r),
+            &mut self.q_eff,
+        );
         let sw = obs.weight[r].sqrt();
         let sp = sw / obs.sigma[r];
-        let dp = self.scratch.p_tracker - obs.position[r];
+        let dp = p - obs.position[r];
         let mut res = [dp.x * sp, dp.y * sp, dp.z * sp, 0.0, 0.0, 0.0];
         let np = self.layout.len();
         if with_jacobian {
             self.chain
                 .position_jacobian(&self.scratch, &self.layout, &mut self.block[..3 * np]);
+            extension_columns(
+                &self.layout,
+                obs.ext.row(r),
+                &lever,
+                3,
+                &mut self.block[..3 * np],
+            );
             for v in &mut self.block[..3 * np] {
                 *v *= sp;
             }
@@ -267,6 +315,13 @@ impl<'a> KinematicProblem<'a> {
             if with_jacobian {
                 self.chain
                     .orientation_jacobian(&self.scratch, &self.layout, &mut self.rot);
+                extension_columns(
+                    &self.layout,
+                    obs.ext.row(r),
+                    &Vector3::zeros(),
+                    3,
+                    &mut self.rot,
+                );
                 let jl = left_jacobian_inverse(&e);
                 for row in 0..3 {
                     for k in 0..np {

@@ -2,9 +2,11 @@
 //! train/test split by pose.
 
 use crate::chain::{Chain, ChainScratch};
+use crate::extensions::predict_row;
 use crate::lie3::log_rotation;
 use crate::params::KinematicParams;
 use crate::problem::Observations;
+use nalgebra::Vector3;
 use rand::SeedableRng;
 use rand::seq::SliceRandom;
 use sim::Model;
@@ -40,20 +42,47 @@ pub fn residual_stats(
     params: &KinematicParams,
     obs: &Observations,
 ) -> ResidualStats {
-    let chain = Chain::new(model, params);
-    let mut s = ChainScratch::new(model.nq());
+    let mut st = stats_of_errors(&position_errors(model, params, obs), obs);
+    if let Some(o) = &obs.orientation {
+        let chain = Chain::new(model, params);
+        let mut s = ChainScratch::new(model.nq());
+        let mut q_buf = vec![0.0; model.nq()];
+        let (mut sum2r, mut maxr) = (0.0, 0.0f64);
+        for r in 0..obs.len() {
+            predict_row(
+                &chain,
+                &mut s,
+                params,
+                &obs.ext,
+                r,
+                obs.q_row(r),
+                &mut q_buf,
+            );
+            let a = log_rotation(&(s.r_tracker_target * o[r].transpose())).norm();
+            sum2r += a * a;
+            maxr = maxr.max(a);
+        }
+        if !obs.is_empty() {
+            st.rms_rad = Some((sum2r / obs.len() as f64).sqrt());
+            st.max_rad = Some(maxr);
+        }
+    }
+    st
+}
+
+/// Position statistics of the errors `errors` (tracker frame, m), one per row of `obs` (for the rows'
+/// table numbers); orientation fields stay empty.
+pub fn stats_of_errors(errors: &[Vector3<f64>], obs: &Observations) -> ResidualStats {
     let mut st = ResidualStats {
-        n: obs.len(),
+        n: errors.len(),
         ..Default::default()
     };
-    if obs.is_empty() {
+    if errors.is_empty() {
         return st;
     }
-    let (mut sum2, mut sum, mut sum2r, mut maxr) = (0.0, 0.0, 0.0, 0.0f64);
+    let (mut sum2, mut sum) = (0.0, 0.0);
     let mut mv = [0.0; 3];
-    for r in 0..obs.len() {
-        chain.forward(&mut s, obs.q_row(r));
-        let d = s.p_tracker - obs.position[r];
+    for (r, d) in errors.iter().enumerate() {
         let e = d.norm();
         sum2 += e * e;
         sum += e;
@@ -64,21 +93,37 @@ pub fn residual_stats(
             st.max_m = e;
             st.max_row = obs.source_row[r] + 1;
         }
-        if let Some(o) = &obs.orientation {
-            let a = log_rotation(&(s.r_tracker_target * o[r].transpose())).norm();
-            sum2r += a * a;
-            maxr = maxr.max(a);
-        }
     }
-    let n = obs.len() as f64;
+    let n = errors.len() as f64;
     st.rms_m = (sum2 / n).sqrt();
     st.mean_m = sum / n;
     st.mean_vector_m = mv.map(|v| v / n);
-    if obs.orientation.is_some() {
-        st.rms_rad = Some((sum2r / n).sqrt());
-        st.max_rad = Some(maxr);
-    }
     st
+}
+
+/// Position errors `predicted − measured` (tracker frame, m) of the model `params`, one per row of `obs`.
+pub fn position_errors(
+    model: &Model,
+    params: &KinematicParams,
+    obs: &Observations,
+) -> Vec<Vector3<f64>> {
+    let chain = Chain::new(model, params);
+    let mut s = ChainScratch::new(model.nq());
+    let mut q_buf = vec![0.0; model.nq()];
+    (0..obs.len())
+        .map(|r| {
+            let (p, _, _) = predict_row(
+                &chain,
+                &mut s,
+                params,
+                &obs.ext,
+                r,
+                obs.q_row(r),
+                &mut q_buf,
+            );
+            p - obs.position[r]
+        })
+        .collect()
 }
 
 /// Splits `table`'s rows into training and test rows by pose id: the distinct ids are shuffled with

@@ -38,7 +38,7 @@ pub const LAMBDAS: [f64; 7] = [1e-6, 1e-4, 1e-2, 1e-1, 1.0, 10.0, 100.0];
 pub const MAX_ROWS: usize = 1000;
 
 /// A fitted kernel ridge regression correction.
-#[derive(Clone, Debug, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct KernelModel {
     /// Length scale `ℓ` (standardised joint-angle units).
     pub length_scale: f64,

@@ -38,7 +38,7 @@ pub const KINDS: &[&str] = &["poly", "poly1", "poly2", "poly3", "kernel"];
 pub const MIN_ROWS: usize = 2 * K_FOLDS;
 
 /// The fitted correction behind a [`LearnedResidual`].
-#[derive(Clone, Debug, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 enum Correction {
     /// Cross-validation found no gain: the correction is zero.
     Zero,
@@ -50,7 +50,7 @@ enum Correction {
 
 /// A learned correction of the tracker-frame residual as a function of the joint angles, with its
 /// cross-validation statistics.
-#[derive(Clone, Debug, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct LearnedResidual {
     kind: String,
     n_joints: usize,

@@ -51,7 +51,7 @@ fn push_monomials(
 }
 
 /// A fitted polynomial correction: `r̂(q) = c + Σ_k w_k (m_k(z(q)) − μ_k) / s_k` (m, tracker frame).
-#[derive(Clone, Debug, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct PolynomialModel {
     /// Total degree of the monomials.
     pub degree: usize,

@@ -1,0 +1,114 @@
+//! Thermal drift, as the estimator models it: joint zeros drift and the arm grows with temperature.
+//!
+//! With `ΔT = T − T_ref` (K; `T_ref` the training mean, where the kinematic parameters hold):
+//!
+//! - joint-zero drift: `θᵢ = qᵢ + βᵢ ΔT` (`βᵢ` in rad/K, m/K for a prismatic joint);
+//! - link growth: every link grows by the same fraction `α ΔT` (`α` in 1/K), which scales the target's
+//!   position about the base origin, `p_base ← (1 + α ΔT) p_base`. Per-link coefficients are not
+//!   separable from one common one with the data a calibration campaign gives (they would need the
+//!   temperature to vary independently per link), so the model has one.
+//!
+//! Without a `temp` column, `ΔT` is replaced by the first-order warm-up `w(t) = 1 − exp(−t/τ)` (minus its
+//! training mean) from the `t` column, and the parameters are per unit of warm-up (rad, 1); the time
+//! constant τ (s) is found by the calibration's search over candidates ([`WARM_UP_TAUS_S`]).
+
+use super::{Cause, ExtensionParam, ExtensionSettings, Term, ThermalInput};
+use crate::error::{CalibError, Result};
+use sim::Model;
+use sim::measurement_table::MeasurementTable;
+
+/// Expected joint-zero drift (rad/K).
+pub const BETA_SCALE_RAD_PER_K: f64 = 1e-5;
+/// Expected linear expansion (1/K): aluminium is 23e-6.
+pub const ALPHA_SCALE_PER_K: f64 = 2e-5;
+/// Warm-up time constants tried without a temperature column (s): 5 min to 4 h.
+pub const WARM_UP_TAUS_S: [f64; 10] = [
+    300.0, 450.0, 600.0, 900.0, 1200.0, 1800.0, 2700.0, 3600.0, 7200.0, 14400.0,
+];
+
+/// The `ΔT` source for training rows `rows` of `table`: the temperature column (reference = its mean
+/// over `rows`), else a warm-up with time constant `tau_s` (default 1800 s) from the time column.
+pub fn input_for(
+    table: &MeasurementTable,
+    rows: &[usize],
+    tau_s: Option<f64>,
+    source: &str,
+) -> Result<ThermalInput> {
+    let mean = |v: &[f64], f: &dyn Fn(f64) -> f64| {
+        rows.iter().map(|&r| f(v[r])).sum::<f64>() / rows.len().max(1) as f64
+    };
+    if let Some(temp) = &table.temp {
+        return Ok(ThermalInput::Temperature {
+            t_ref_c: mean(temp, &|x| x),
+        });
+    }
+    if let Some(t) = &table.t {
+        let tau = tau_s.unwrap_or(1800.0);
+        return Ok(ThermalInput::WarmUp {
+            tau_s: tau,
+            w_ref: mean(t, &|x| warm_up(x, tau)),
+        });
+    }
+    Err(CalibError::BadValue {
+        context: source.to_string(),
+        field: "temp, t".into(),
+        value: "absent".into(),
+        problem: "thermal_drift needs a temperature (temp) or time (t) column".into(),
+    })
+}
+
+/// `1 − exp(−t/τ)` (dimensionless; `t`, `τ` in s).
+#[inline]
+pub fn warm_up(t_s: f64, tau_s: f64) -> f64 {
+    1.0 - (-t_s.max(0.0) / tau_s).exp()
+}
+
+/// Joint-zero drift per joint, then the common link growth.
+pub fn params(model: &Model, settings: &ExtensionSettings) -> Vec<ExtensionParam> {
+    let per_kelvin = matches!(settings.thermal, Some(ThermalInput::Temperature { .. }));
+    let (per, gain) = if per_kelvin {
+        ("/K", 1.0)
+    } else {
+        (" per warm-up", 10.0)
+    };
+    let mut out: Vec<ExtensionParam> = model
+        .joints
+        .iter()
+        .enumerate()
+        .map(|(i, j)| ExtensionParam {
+            cause: Cause::ThermalDrift,
+            term: Term::JointAngle { joint: i },
+            name: format!("joint {} zero drift", i + 1),
+            unit: format!("{}{per}", if j.kind.is_rotational() { "rad" } else { "m" }),
+            scale: BETA_SCALE_RAD_PER_K * gain,
+        })
+        .collect();
+    out.push(ExtensionParam {
+        cause: Cause::ThermalDrift,
+        term: Term::Growth,
+        name: "link growth".into(),
+        unit: if per_kelvin { "1/K" } else { "1 per warm-up" }.into(),
+        scale: ALPHA_SCALE_PER_K * gain,
+    });
+    out
+}
+
+/// Regressors of row `r`: `ΔT` (K, or warm-up units) for every parameter.
+pub fn regressors(
+    settings: &ExtensionSettings,
+    table: &MeasurementTable,
+    r: usize,
+    out: &mut [f64],
+) {
+    let dt = match settings.thermal {
+        Some(ThermalInput::Temperature { t_ref_c }) => {
+            table.temp.as_ref().map_or(0.0, |t| t[r] - t_ref_c)
+        }
+        Some(ThermalInput::WarmUp { tau_s, w_ref }) => table
+            .t
+            .as_ref()
+            .map_or(0.0, |t| warm_up(t[r], tau_s) - w_ref),
+        None => 0.0,
+    };
+    out.fill(dt);
+}
