@@ -87,6 +87,7 @@
 
 pub mod calibrate;
 pub mod chain;
+pub mod diagnose;
 pub mod error;
 pub mod extensions;
 pub mod identifiability;

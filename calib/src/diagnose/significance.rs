@@ -133,7 +133,9 @@ mod tests {
 
     #[test]
     fn paired_test_sees_a_shift_and_not_noise() {
-        let before: Vec<f64> = (0..100).map(|k| 1.0 + 0.1 * ((k * 37 % 11) as f64)).collect();
+        let before: Vec<f64> = (0..100)
+            .map(|k| 1.0 + 0.1 * ((k * 37 % 11) as f64))
+            .collect();
         let same = paired(&before, &before);
         assert_eq!(same.z, 0.0);
         let after: Vec<f64> = before.iter().map(|b| b - 0.5).collect();

@@ -1,0 +1,525 @@
+//! Diagnosis: what the kinematic model still gets wrong, which physical cause explains it, and how much
+//! the extended model gains on held-out poses.
+//!
+//! 1. The poses are split into training and test sets ([`split_by_pose`], seeded); every decision is
+//!    checked on the test poses, which no fit has seen.
+//! 2. The current model (first the kinematic one) is extended by each candidate cause in turn
+//!    ([`crate::extensions::Cause`]) and refitted on the training poses. A candidate is **significant**
+//!    when both (a) its training `χ²` drops by more than its added identifiable parameters explain
+//!    (`Δχ² / (χ²₁/dof₁)` against `χ²` with `Δrank` degrees of freedom, as a normal `z`,
+//!    [`significance::chi2_to_z`]), and (b) it predicts the test poses better (a paired test of the
+//!    per-pose squared errors, [`significance::paired`]), each at level `α` divided by the number of
+//!    candidates (Bonferroni), and (c) it lowers the test RMS by at least [`DiagnoseOptions::min_gain`].
+//! 3. The significant candidate with the largest test `z` is adopted; the loop repeats with the
+//!    remaining causes until none is significant.
+//! 4. The joints of a finding are those whose parameter of that cause is determined on its own and
+//!    differs from zero by more than [`DiagnoseOptions::joint_z`] standard deviations.
+//! 5. What is left is examined for structure no known cause explains ([`unexplained`]): harmonics of
+//!    each joint angle and the learned residual models, again judged on the test poses.
+//!
+//! The noise floor ([`noise_floor`]) comes from repeated poses when the data have enough of them, else
+//! from the `sigma` column or the tracker noise model.
+
+pub mod noise_floor;
+pub mod report;
+pub mod significance;
+pub mod unexplained;
+
+use crate::calibrate::{Calibration, CalibrationOptions, Dataset, calibrate_model, observations};
+use crate::error::{CalibError, Result};
+use crate::extensions::{Cause, ModelSpec, Term};
+use crate::stats::{position_errors, split_by_pose};
+use nalgebra::Vector3;
+use serde::{Deserialize, Serialize};
+use sim::Model;
+use sim::measurement_table::MeasurementTable;
+use std::collections::BTreeMap;
+
+/// Settings of [`diagnose`].
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct DiagnoseOptions {
+    /// Fraction of the poses held out (default 1/3).
+    pub test_fraction: f64,
+    /// Seed of the split and of the learned models' folds.
+    pub seed: u64,
+    /// Calibration settings.
+    pub calibration: CalibrationOptions,
+    /// Family-wise false-alarm level of each round's decision (default 1e-3).
+    pub alpha: f64,
+    /// Smallest relative test-RMS reduction a finding must bring (default 0.02).
+    pub min_gain: f64,
+    /// A joint is named when its parameter differs from zero by this many standard deviations (default 4).
+    pub joint_z: f64,
+    /// Causes to try (default: all).
+    pub candidates: Vec<Cause>,
+    /// Learned models tried on what is left (default `kernel`, `poly`).
+    pub learned_kinds: Vec<String>,
+}
+
+impl Default for DiagnoseOptions {
+    fn default() -> Self {
+        DiagnoseOptions {
+            test_fraction: 1.0 / 3.0,
+            seed: 0,
+            calibration: CalibrationOptions::default(),
+            alpha: 1e-3,
+            min_gain: 0.02,
+            joint_z: 4.0,
+            candidates: Cause::ALL.to_vec(),
+            learned_kinds: vec!["kernel".into(), "poly".into()],
+        }
+    }
+}
+
+/// One model of the sequence: its fit and held-out errors.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Step {
+    /// Model name (`kinematic`, `kinematic+joint_compliance`, …).
+    pub model: String,
+    /// RMS position error on the training poses (m).
+    pub train_rms_m: f64,
+    /// RMS position error on the test poses (m).
+    pub test_rms_m: f64,
+    /// Largest position error on the test poses (m).
+    pub test_max_m: f64,
+}
+
+/// An identified extension parameter, for the report.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct FoundParameter {
+    /// Its name (e.g. `joint 2 compliance`).
+    pub name: String,
+    /// Its unit.
+    pub unit: String,
+    /// The estimate.
+    pub value: f64,
+    /// Its standard deviation (NaN when not determined on its own).
+    pub sigma: f64,
+}
+
+/// A cause the data show.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Finding {
+    /// `joint_compliance`, `gear_backlash` or `thermal_drift`.
+    pub cause: String,
+    /// 1-based joints it acts on (empty where it is not tied to joints).
+    pub joints: Vec<usize>,
+    /// One sentence of evidence.
+    pub evidence: String,
+    /// Test RMS before adopting it (m).
+    pub test_rms_m_before: f64,
+    /// Test RMS after (m).
+    pub test_rms_m_after: f64,
+    /// `1 − after/before`.
+    pub gain: f64,
+    /// Correlation of the residual with what the cause predicts (test poses).
+    pub r: f64,
+    /// Paired test `z` on the test poses.
+    pub test_z: f64,
+    /// Training `χ²` drop as a normal `z`.
+    pub train_z: f64,
+    /// The cause's identified parameters.
+    pub parameters: Vec<FoundParameter>,
+}
+
+/// A candidate tried in one round.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Trial {
+    /// Round (1-based).
+    pub round: usize,
+    /// The cause.
+    pub cause: String,
+    /// Test RMS with it (m).
+    pub test_rms_m: f64,
+    /// Paired test `z`.
+    pub test_z: f64,
+    /// Training `z`.
+    pub train_z: f64,
+    /// Relative test RMS reduction.
+    pub gain: f64,
+    /// Whether it passed every test.
+    pub significant: bool,
+}
+
+/// The full result; its JSON form is the `diagnose --json` contract.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Diagnosis {
+    /// Robot name.
+    pub robot: String,
+    /// Training poses.
+    pub n_train: usize,
+    /// Test poses.
+    pub n_test: usize,
+    /// RMS position error (m) that noise alone would leave.
+    pub noise_floor_m: f64,
+    /// Where the noise floor comes from.
+    pub noise_floor_source: String,
+    /// The models fitted, kinematic first, each adopted extension after.
+    pub steps: Vec<Step>,
+    /// The causes found, in the order adopted.
+    pub findings: Vec<Finding>,
+    /// Structure no known cause explains.
+    pub unexplained: unexplained::Unexplained,
+    /// The chosen model (what `calibrate --model auto` fits).
+    pub model: String,
+    /// Every candidate tried.
+    pub trials: Vec<Trial>,
+    /// Significance level used.
+    pub alpha: f64,
+    /// Split seed.
+    pub seed: u64,
+}
+
+/// A fitted model with its held-out errors.
+pub(crate) struct Evaluated {
+    pub spec: ModelSpec,
+    pub cal: Calibration,
+    /// `predicted − measured` per training row (m).
+    pub train_err: Vec<Vector3<f64>>,
+    /// `predicted − measured` per test row (m).
+    pub test_err: Vec<Vector3<f64>>,
+    /// Sum of squared test errors per test pose (m²).
+    pub pose_sq: Vec<f64>,
+    pub step: Step,
+}
+
+fn rms(e: &[Vector3<f64>]) -> f64 {
+    if e.is_empty() {
+        return 0.0;
+    }
+    (e.iter().map(|v| v.norm_squared()).sum::<f64>() / e.len() as f64).sqrt()
+}
+
+/// Sums `values` per pose id (ids of the same rows), in ascending id order.
+pub(crate) fn per_pose(pose: &[i64], values: impl Iterator<Item = f64>) -> Vec<f64> {
+    let mut m: BTreeMap<i64, f64> = BTreeMap::new();
+    for (id, v) in pose.iter().zip(values) {
+        *m.entry(*id).or_default() += v;
+    }
+    m.into_values().collect()
+}
+
+/// The data of one diagnosis: the split and the prepared data sets.
+pub(crate) struct Split<'a> {
+    pub train: Dataset<'a>,
+    pub test: Dataset<'a>,
+    pub test_pose: Vec<i64>,
+}
+
+pub(crate) fn evaluate(
+    model: &Model,
+    split: &Split<'_>,
+    spec: &ModelSpec,
+    options: &DiagnoseOptions,
+) -> Result<Evaluated> {
+    let cal = calibrate_model(
+        model,
+        &split.train,
+        Some(&split.test),
+        spec,
+        &options.calibration,
+    )?;
+    let ext = cal.extensions.as_ref();
+    let train_obs = observations(model, &split.train, &options.calibration, ext)?;
+    let test_obs = observations(model, &split.test, &options.calibration, ext)?;
+    let train_err = position_errors(model, &cal.params, &train_obs);
+    let test_err = position_errors(model, &cal.params, &test_obs);
+    let pose_sq = per_pose(&split.test_pose, test_err.iter().map(|e| e.norm_squared()));
+    let step = Step {
+        model: spec.name(),
+        train_rms_m: rms(&train_err),
+        test_rms_m: rms(&test_err),
+        test_max_m: test_err.iter().map(|e| e.norm()).fold(0.0, f64::max),
+    };
+    Ok(Evaluated {
+        spec: spec.clone(),
+        cal,
+        train_err,
+        test_err,
+        pose_sq,
+        step,
+    })
+}
+
+/// Training `χ²` drop of `big` over `small` as a normal `z`, with the variance factor of `big`.
+fn train_z(small: &Calibration, big: &Calibration) -> f64 {
+    let c0 = small.report.after.solver.cost_final;
+    let c1 = big.report.after.solver.cost_final;
+    let k = big.subspace.rank.saturating_sub(small.subspace.rank) as f64;
+    let vf = if big.report.dof > 0 {
+        c1 / big.report.dof as f64
+    } else {
+        1.0
+    };
+    if k == 0.0 || vf <= 0.0 {
+        return 0.0;
+    }
+    significance::chi2_to_z((c0 - c1) / vf, k)
+}
+
+/// Correlation between the residual `−before` and the change `after − before` of the prediction.
+fn explained_correlation(before: &[Vector3<f64>], after: &[Vector3<f64>]) -> f64 {
+    let (mut num, mut a2, mut b2) = (0.0, 0.0, 0.0);
+    for (b, a) in before.iter().zip(after) {
+        let d = a - b;
+        num += (-b).dot(&d);
+        a2 += b.norm_squared();
+        b2 += d.norm_squared();
+    }
+    if a2 > 0.0 && b2 > 0.0 {
+        num / (a2 * b2).sqrt()
+    } else {
+        0.0
+    }
+}
+
+/// The extension parameters of `cause` in `cal`, with standard deviations where determined alone.
+fn cause_parameters(cal: &Calibration, cause: Cause) -> Vec<(FoundParameter, Term, bool)> {
+    let layout = &cal.layout;
+    layout
+        .extensions
+        .iter()
+        .enumerate()
+        .filter(|(_, p)| p.cause == cause)
+        .map(|(e, p)| {
+            let k = layout.extension(e);
+            let alone = cal.report.unidentifiable.identifiable_alone[k];
+            let sigma = if alone {
+                cal.covariance[(k, k)].max(0.0).sqrt()
+            } else {
+                f64::NAN
+            };
+            (
+                FoundParameter {
+                    name: p.name.clone(),
+                    unit: p.unit.clone(),
+                    value: cal.params.extension[e],
+                    sigma,
+                },
+                p.term,
+                alone,
+            )
+        })
+        .collect()
+}
+
+fn join_joints(j: &[usize]) -> String {
+    let s: Vec<String> = j.iter().map(|x| x.to_string()).collect();
+    match s.len() {
+        0 => String::new(),
+        1 => format!("joint {}", s[0]),
+        _ => format!(
+            "joints {} and {}",
+            s[..s.len() - 1].join(", "),
+            s[s.len() - 1]
+        ),
+    }
+}
+
+fn evidence(
+    cause: Cause,
+    joints: &[usize],
+    params: &[FoundParameter],
+    r: f64,
+    growth: bool,
+) -> String {
+    let named: Vec<&FoundParameter> = params
+        .iter()
+        .filter(|p| {
+            joints
+                .iter()
+                .any(|j| p.name.starts_with(&format!("joint {j} ")))
+                || (growth && p.name == "link growth")
+        })
+        .collect();
+    let values: Vec<String> = named
+        .iter()
+        .map(|p| {
+            let extra = if cause == Cause::JointCompliance && p.value > 0.0 {
+                format!(", stiffness {:.3} N m/rad", 1.0 / p.value)
+            } else {
+                String::new()
+            };
+            format!(
+                "{} {:.3e} ± {:.1e} {}{extra}",
+                p.name, p.value, p.sigma, p.unit
+            )
+        })
+        .collect();
+    let what = match cause {
+        Cause::JointCompliance => format!("the gravity torque of {}", join_joints(joints)),
+        Cause::GearBacklash => format!("the approach direction of {}", join_joints(joints)),
+        Cause::ThermalDrift => "the temperature change".to_string(),
+    };
+    format!(
+        "residual correlates with {what} (r = {r:.2}); identified {}",
+        values.join("; ")
+    )
+}
+
+/// Diagnoses `table` (all rows; `name` names it in messages) for `model`.
+///
+/// Errors: input the calibration refuses (too few poses, a bad `sigma`), or too few poses to hold out
+/// a test set.
+pub fn diagnose(
+    model: &Model,
+    table: &MeasurementTable,
+    name: &str,
+    options: &DiagnoseOptions,
+) -> Result<Diagnosis> {
+    diagnose_with_progress(model, table, name, options, &mut |_| {})
+}
+
+/// [`diagnose`], calling `progress` with a short line before each fit.
+pub fn diagnose_with_progress(
+    model: &Model,
+    table: &MeasurementTable,
+    name: &str,
+    options: &DiagnoseOptions,
+    progress: &mut dyn FnMut(&str),
+) -> Result<Diagnosis> {
+    let (train_rows, test_rows) = split_by_pose(table, options.test_fraction, options.seed);
+    if test_rows.is_empty() {
+        return Err(CalibError::BadValue {
+            context: name.to_string(),
+            field: "pose".into(),
+            value: format!("{} poses", table.rows_by_pose().len()),
+            problem: "diagnose needs poses to hold out: give more poses or a larger test fraction"
+                .into(),
+        });
+    }
+    let split = Split {
+        test_pose: test_rows.iter().map(|&r| table.pose[r]).collect(),
+        train: Dataset {
+            table,
+            rows: train_rows,
+            name: format!("{name} (training set)"),
+        },
+        test: Dataset {
+            table,
+            rows: test_rows,
+            name: format!("{name} (test set)"),
+        },
+    };
+    let usable: Vec<Cause> = options
+        .candidates
+        .iter()
+        .copied()
+        .filter(|c| match c {
+            Cause::ThermalDrift => table.temp.is_some() || table.t.is_some(),
+            Cause::JointCompliance => model.require_inertials().is_ok(),
+            Cause::GearBacklash => table.dir.is_some() || model.require_inertials().is_ok(),
+        })
+        .collect();
+    progress("kinematic");
+    let mut current = evaluate(model, &split, &ModelSpec::kinematic(), options)?;
+    let mut steps = vec![current.step.clone()];
+    let mut findings = Vec::new();
+    let mut trials = Vec::new();
+    let mut round = 0;
+    loop {
+        round += 1;
+        let remaining: Vec<Cause> = usable
+            .iter()
+            .copied()
+            .filter(|c| !current.spec.causes.contains(c))
+            .collect();
+        if remaining.is_empty() {
+            break;
+        }
+        let z_crit = significance::normal_upper_quantile(options.alpha / remaining.len() as f64);
+        let mut best: Option<(Evaluated, f64, f64)> = None;
+        for cause in remaining {
+            let spec = current.spec.with(cause);
+            progress(&spec.name());
+            let cand = match evaluate(model, &split, &spec, options) {
+                Ok(c) => c,
+                Err(CalibError::TooFewPoses { .. }) => continue,
+                Err(e) => return Err(e),
+            };
+            let tz = significance::paired(&current.pose_sq, &cand.pose_sq).z;
+            let trz = train_z(&current.cal, &cand.cal);
+            let gain = 1.0 - cand.step.test_rms_m / current.step.test_rms_m;
+            let significant = tz > z_crit && trz > z_crit && gain >= options.min_gain;
+            trials.push(Trial {
+                round,
+                cause: cause.name().into(),
+                test_rms_m: cand.step.test_rms_m,
+                test_z: tz,
+                train_z: trz,
+                gain,
+                significant,
+            });
+            if significant && best.as_ref().is_none_or(|(_, z, _)| tz > *z) {
+                best = Some((cand, tz, trz));
+            }
+        }
+        let Some((next, tz, trz)) = best else { break };
+        let cause = *next
+            .spec
+            .causes
+            .iter()
+            .find(|c| !current.spec.causes.contains(c))
+            .expect("one new cause");
+        let params = cause_parameters(&next.cal, cause);
+        let mut joints: Vec<usize> = params
+            .iter()
+            .filter_map(|(p, term, alone)| match term {
+                Term::JointAngle { joint }
+                    if *alone && p.sigma > 0.0 && (p.value / p.sigma).abs() > options.joint_z =>
+                {
+                    Some(joint + 1)
+                }
+                _ => None,
+            })
+            .collect();
+        joints.sort_unstable();
+        let growth = params.iter().any(|(p, term, alone)| {
+            *term == Term::Growth && *alone && (p.value / p.sigma).abs() > options.joint_z
+        });
+        let r = explained_correlation(&current.test_err, &next.test_err);
+        let found: Vec<FoundParameter> = params.into_iter().map(|(p, _, _)| p).collect();
+        findings.push(Finding {
+            cause: cause.name().into(),
+            evidence: evidence(cause, &joints, &found, r, growth),
+            joints,
+            test_rms_m_before: current.step.test_rms_m,
+            test_rms_m_after: next.step.test_rms_m,
+            gain: 1.0 - next.step.test_rms_m / current.step.test_rms_m,
+            r,
+            test_z: tz,
+            train_z: trz,
+            parameters: found,
+        });
+        steps.push(next.step.clone());
+        current = next;
+    }
+    let (noise_floor_m, noise_floor_source) =
+        noise_floor::estimate(table, &split.test.rows, &options.calibration.noise);
+    progress("unexplained structure");
+    let unexplained = unexplained::analyse(model, &split, &current, noise_floor_m, options)?;
+    Ok(Diagnosis {
+        robot: model.name.clone(),
+        n_train: split
+            .train
+            .rows
+            .iter()
+            .map(|&r| table.pose[r])
+            .collect::<std::collections::BTreeSet<_>>()
+            .len(),
+        n_test: split
+            .test_pose
+            .iter()
+            .collect::<std::collections::BTreeSet<_>>()
+            .len(),
+        noise_floor_m,
+        noise_floor_source,
+        steps,
+        findings,
+        unexplained,
+        model: current.spec.name(),
+        trials,
+        alpha: options.alpha,
+        seed: options.seed,
+    })
+}

@@ -1,0 +1,1 @@
+//! Report: plots and a one-page summary.
