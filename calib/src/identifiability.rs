@@ -300,7 +300,8 @@ pub fn describe_null_space(
     sub: &Subspace,
     obs: &Observations,
 ) -> NullSpaceReport {
-    let layout = ParamLayout::new(model, obs.orientation.is_some());
+    let layout =
+        ParamLayout::new(model, obs.orientation.is_some()).with_extensions(obs.ext.params.clone());
     let p = layout.len();
     assert_eq!(gram.ncols(), p, "the normal matrix of all parameters");
     let k = p - sub.rank;

@@ -2,7 +2,8 @@
 
 use super::{CliError, CliResult, print_json, robot_arg::RobotArgs};
 use calib::CalibError;
-use calib::calibrate::{CalibrationOptions, Dataset, RobustLoss, calibrate};
+use calib::calibrate::{CalibrationOptions, Dataset, RobustLoss, calibrate_model};
+use calib::extensions::ModelSpec;
 use calib::model_file::{CalibratedModel, calibrated_urdf, urdf_deviation};
 use calib::robot::Robot;
 use calib::stats::split_by_pose;
@@ -19,7 +20,9 @@ pub struct Args {
     /// Measurement table (.csv or .parquet, see the measurement contract).
     #[arg(long, value_name = "FILE")]
     data: PathBuf,
-    /// Error model: `kinematic` (joint error twists, zero offsets, base and target).
+    /// Error model: `kinematic` (joint error twists, zero offsets, base and target), a `+`-joined
+    /// extension such as `kinematic+joint_compliance+thermal_drift` (also `gear_backlash`,
+    /// `learned:poly|poly1|poly2|poly3|kernel`), or `auto` (what diagnose chooses).
     #[arg(long, value_name = "MODEL", default_value = "kinematic")]
     model: String,
     /// Where to write the calibrated model (JSON, with the robot embedded).
@@ -46,32 +49,6 @@ pub struct Args {
     json: bool,
 }
 
-/// Error models of the next version, refused with a clear message.
-const LATER_MODELS: &[&str] = &["joint_compliance", "gear_backlash", "thermal_drift", "auto"];
-
-/// Checks `--model`; only `kinematic` is available.
-pub(crate) fn check_model(name: &str) -> Result<(), CliError> {
-    if name == "kinematic" {
-        return Ok(());
-    }
-    let known =
-        |p: &str| p == "kinematic" || LATER_MODELS.contains(&p) || p.starts_with("learned:");
-    if name.split('+').all(known) {
-        return Err(CliError::Input(
-            CalibError::UnsupportedModel {
-                name: name.to_string(),
-            }
-            .to_string(),
-        ));
-    }
-    let bad: Vec<&str> = name.split('+').filter(|p| !known(p)).collect();
-    Err(CliError::Input(format!(
-        "--model {name}: unknown model part '{}' (known: kinematic, joint_compliance, gear_backlash, \
-         thermal_drift, auto, learned:...)",
-        bad.join("', '")
-    )))
-}
-
 /// Reads a measurement table and checks it against the robot; warnings go to stderr.
 pub(crate) fn read_table(path: &Path, robot: &sim::Model) -> Result<MeasurementTable, CliError> {
     let table = measurement_table::read(path)?;
@@ -81,7 +58,7 @@ pub(crate) fn read_table(path: &Path, robot: &sim::Model) -> Result<MeasurementT
     Ok(table)
 }
 
-fn input(e: CalibError) -> CliError {
+pub(crate) fn input(e: CalibError) -> CliError {
     match e {
         CalibError::Io { .. } => CliError::Runtime(e.to_string()),
         _ => CliError::Input(e.to_string()),
@@ -90,7 +67,11 @@ fn input(e: CalibError) -> CliError {
 
 /// Runs `robocal calibrate`.
 pub fn run(args: Args) -> CliResult {
-    check_model(&args.model)?;
+    let model_spec = if args.model == "auto" {
+        None
+    } else {
+        Some(ModelSpec::parse(&args.model).map_err(input)?)
+    };
     let robust = match args.robust.as_deref() {
         None => None,
         Some("huber") => Some(RobustLoss::HUBER),
@@ -150,20 +131,36 @@ pub fn run(args: Args) -> CliResult {
         robust,
         ..CalibrationOptions::default()
     };
-    let cal = calibrate(model, &train, test.as_ref(), &options).map_err(|e| {
-        let mut m = input(e);
-        if let CliError::Input(s) = &mut m
-            && args.test_data.is_none()
-            && args.test_fraction > 0.0
-            && s.contains("distinct poses give")
-        {
-            s.push_str(&format!(
-                " (--test-fraction {} held out part of the poses; --test-fraction 0 uses all)",
-                args.test_fraction
-            ));
+    let model_spec = match model_spec {
+        Some(s) => s,
+        None => {
+            let d = super::diagnose::run_diagnosis(
+                model,
+                &table,
+                &data_name,
+                &super::diagnose::options(1.0 / 3.0, args.seed, 1e-3)?,
+            )?;
+            if !args.json {
+                eprintln!("--model auto: diagnose chose {}", d.model);
+            }
+            ModelSpec::parse(&d.model).map_err(input)?
         }
-        m
-    })?;
+    };
+    let cal =
+        calibrate_model(model, &train, test.as_ref(), &model_spec, &options).map_err(|e| {
+            let mut m = input(e);
+            if let CliError::Input(s) = &mut m
+                && args.test_data.is_none()
+                && args.test_fraction > 0.0
+                && s.contains("distinct poses give")
+            {
+                s.push_str(&format!(
+                    " (--test-fraction {} held out part of the poses; --test-fraction 0 uses all)",
+                    args.test_fraction
+                ));
+            }
+            m
+        })?;
     let report = &cal.report;
     if !report.was_successful() {
         let msg = format!(
@@ -199,7 +196,7 @@ pub fn run(args: Args) -> CliResult {
     if args.json {
         print_json(&json!({
             "robot": model.name,
-            "model": "kinematic",
+            "model": model_spec.name(),
             "data": data_name,
             "out": args.out.display().to_string(),
             "urdf_out": args.urdf_out.as_ref().map(|p| p.display().to_string()),

@@ -1,6 +1,8 @@
 //! Subcommands, one module each, and the error type that decides the exit code.
 
 mod calibrate;
+mod demo;
+mod diagnose;
 mod fk;
 mod generate;
 mod info;
@@ -32,6 +34,10 @@ enum Command {
     Predict(predict::Args),
     /// Choose the poses that determine the parameters best.
     PlanPoses(plan_poses::Args),
+    /// Find what the kinematic model misses, name the cause, extend the model, measure the gain.
+    Diagnose(diagnose::Args),
+    /// The whole loop on the embedded iiwa 7: hide an effect, generate, calibrate, diagnose, compare.
+    Demo(demo::Args),
 }
 
 /// A failed command: bad input (exit 2) or a runtime failure (exit 1).
@@ -79,6 +85,8 @@ pub fn run(cli: Cli) -> CliResult {
         Command::Calibrate(a) => calibrate::run(a),
         Command::Predict(a) => predict::run(a),
         Command::PlanPoses(a) => plan_poses::run(a),
+        Command::Diagnose(a) => diagnose::run(a),
+        Command::Demo(a) => demo::run(a),
     }
 }
 

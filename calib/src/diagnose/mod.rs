@@ -25,9 +25,12 @@ pub mod report;
 pub mod significance;
 pub mod unexplained;
 
-use crate::calibrate::{Calibration, CalibrationOptions, Dataset, calibrate_model, observations};
+use crate::calibrate::{
+    Calibration, CalibrationOptions, Dataset, calibrate_model, observations,
+    prediction_and_jacobian,
+};
 use crate::error::{CalibError, Result};
-use crate::extensions::{Cause, ModelSpec, Term};
+use crate::extensions::{Cause, ModelSpec, Regressors, Term};
 use crate::stats::{position_errors, split_by_pose};
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
@@ -168,6 +171,9 @@ pub struct Diagnosis {
     pub alpha: f64,
     /// Split seed.
     pub seed: u64,
+    /// What `--report` draws (not part of the JSON).
+    #[serde(skip)]
+    pub plots: report::PlotData,
 }
 
 /// A fitted model with its held-out errors.
@@ -180,6 +186,8 @@ pub(crate) struct Evaluated {
     pub test_err: Vec<Vector3<f64>>,
     /// Sum of squared test errors per test pose (m²).
     pub pose_sq: Vec<f64>,
+    /// Extension regressors of the test rows.
+    pub test_regs: Regressors,
     pub step: Step,
 }
 
@@ -237,8 +245,116 @@ pub(crate) fn evaluate(
         train_err,
         test_err,
         pose_sq,
+        test_regs: test_obs.ext,
         step,
     })
+}
+
+/// `∂p/∂qⱼ` (tracker frame, m/rad) of `cal` at `q`.
+fn joint_direction(model: &Model, cal: &Calibration, q: &[f64], j: usize) -> Vector3<f64> {
+    let (_, _, jac) = prediction_and_jacobian(model, &cal.params, q);
+    let k = cal.layout.zero_offset(j);
+    Vector3::new(jac[(0, k)], jac[(1, k)], jac[(2, k)])
+}
+
+/// The residual `−err` of each test row as the angle of joint `j` (µrad) that would explain it.
+fn as_joint_angle_urad(
+    model: &Model,
+    split: &Split<'_>,
+    cal: &Calibration,
+    err: &[Vector3<f64>],
+    j: usize,
+) -> Vec<f64> {
+    split
+        .test
+        .rows
+        .iter()
+        .zip(err)
+        .map(|(&r, e)| {
+            let d = joint_direction(model, cal, split.test.table.q_row(r), j);
+            let n2 = d.norm_squared();
+            if n2 > 0.0 {
+                -e.dot(&d) / n2 * 1e6
+            } else {
+                f64::NAN
+            }
+        })
+        .collect()
+}
+
+/// Plots of a finding: per named joint (and the growth), the residual before and after against the
+/// parameter's regressor.
+fn finding_plots(
+    model: &Model,
+    split: &Split<'_>,
+    before: &Evaluated,
+    after: &Evaluated,
+    cause: Cause,
+    joints: &[usize],
+    growth: bool,
+) -> Vec<report::RegressorPlot> {
+    let layout = &after.cal.layout;
+    let mut out = Vec::new();
+    for (e, p) in layout.extensions.iter().enumerate() {
+        if p.cause != cause {
+            continue;
+        }
+        let value = after.cal.params.extension[e];
+        let g: Vec<f64> = (0..split.test.rows.len())
+            .map(|r| after.test_regs.row(r)[e])
+            .collect();
+        match p.term {
+            Term::JointAngle { joint } if joints.contains(&(joint + 1)) => {
+                let (sign, x_label) = match cause {
+                    Cause::JointCompliance => {
+                        (-1.0, format!("holding torque of joint {} (N m)", joint + 1))
+                    }
+                    Cause::GearBacklash => (
+                        -1.0,
+                        format!("approach direction of joint {} (−1, +1)", joint + 1),
+                    ),
+                    Cause::ThermalDrift => (1.0, "temperature change (K or warm-up)".to_string()),
+                };
+                out.push(report::RegressorPlot {
+                    file: format!("{}_joint{}", cause.name(), joint + 1),
+                    title: format!("{}: joint {}", cause.name(), joint + 1),
+                    x_label,
+                    y_label: format!("residual as joint {} angle (µrad)", joint + 1),
+                    x: g.iter().map(|v| sign * v).collect(),
+                    before: as_joint_angle_urad(model, split, &before.cal, &before.test_err, joint),
+                    after: as_joint_angle_urad(model, split, &after.cal, &after.test_err, joint),
+                    slope: sign * value * 1e6,
+                });
+            }
+            Term::Growth if growth => {
+                let t = after.cal.params.t_tracker_base.translation.vector;
+                let rel = |err: &[Vector3<f64>]| -> Vec<f64> {
+                    split
+                        .test
+                        .rows
+                        .iter()
+                        .zip(err)
+                        .map(|(&r, e)| {
+                            let lever = Vector3::from(split.test.table.position[r]) - t;
+                            -e.dot(&lever) / lever.norm_squared() * 1e6
+                        })
+                        .collect()
+                };
+                out.push(report::RegressorPlot {
+                    file: format!("{}_growth", cause.name()),
+                    title: "thermal_drift: link growth".into(),
+                    x_label: "temperature change (K or warm-up)".into(),
+                    y_label: "residual as growth (ppm)".into(),
+                    x: g,
+                    before: rel(&before.test_err),
+                    after: rel(&after.test_err),
+                    slope: value * 1e6,
+                });
+            }
+            _ => {}
+        }
+    }
+    out
 }
 
 /// Training `χ²` drop of `big` over `small` as a normal `z`, with the variance factor of `big`.
@@ -273,6 +389,10 @@ fn explained_correlation(before: &[Vector3<f64>], after: &[Vector3<f64>]) -> f64
     }
 }
 
+/// Largest share of an extension parameter (scaled units) in the null space for it to count as
+/// determined on its own.
+pub const MAX_NULL_SHARE: f64 = 0.1;
+
 /// The extension parameters of `cause` in `cal`, with standard deviations where determined alone.
 fn cause_parameters(cal: &Calibration, cause: Cause) -> Vec<(FoundParameter, Term, bool)> {
     let layout = &cal.layout;
@@ -283,7 +403,15 @@ fn cause_parameters(cal: &Calibration, cause: Cause) -> Vec<(FoundParameter, Ter
         .filter(|(_, p)| p.cause == cause)
         .map(|(e, p)| {
             let k = layout.extension(e);
-            let alone = cal.report.unidentifiable.identifiable_alone[k];
+            // Determined when at most a tenth of it (in scaled units) lies in the unidentifiable or
+            // weakly determined subspace; its standard deviation then holds to that accuracy.
+            let sub = &cal.subspace;
+            let null_share = sub
+                .v
+                .row(k)
+                .columns(sub.rank, sub.n_params() - sub.rank)
+                .norm();
+            let alone = null_share <= MAX_NULL_SHARE;
             let sigma = if alone {
                 cal.covariance[(k, k)].max(0.0).sqrt()
             } else {
@@ -416,6 +544,10 @@ pub fn diagnose_with_progress(
     let mut steps = vec![current.step.clone()];
     let mut findings = Vec::new();
     let mut trials = Vec::new();
+    let mut plots = report::PlotData {
+        test_errors_kinematic_m: current.test_err.iter().map(|e| e.norm()).collect(),
+        ..Default::default()
+    };
     let mut round = 0;
     loop {
         round += 1;
@@ -479,6 +611,9 @@ pub fn diagnose_with_progress(
         });
         let r = explained_correlation(&current.test_err, &next.test_err);
         let found: Vec<FoundParameter> = params.into_iter().map(|(p, _, _)| p).collect();
+        plots.regressors.extend(finding_plots(
+            model, &split, &current, &next, cause, &joints, growth,
+        ));
         findings.push(Finding {
             cause: cause.name().into(),
             evidence: evidence(cause, &joints, &found, r, growth),
@@ -498,6 +633,24 @@ pub fn diagnose_with_progress(
         noise_floor::estimate(table, &split.test.rows, &options.calibration.noise);
     progress("unexplained structure");
     let unexplained = unexplained::analyse(model, &split, &current, noise_floor_m, options)?;
+    plots.test_errors_final_m = current.test_err.iter().map(|e| e.norm()).collect();
+    if let Some(j) = unexplained.correlates_with.as_ref().and_then(|p| p.joint) {
+        plots.unexplained = Some(report::RegressorPlot {
+            file: format!("unexplained_joint{j}"),
+            title: format!("unexplained: residual against the angle of joint {j}"),
+            x_label: format!("q{j} (rad)"),
+            y_label: format!("residual as joint {j} angle (µrad)"),
+            x: split
+                .test
+                .rows
+                .iter()
+                .map(|&r| table.q_row(r)[j - 1])
+                .collect(),
+            before: as_joint_angle_urad(model, &split, &current.cal, &current.test_err, j - 1),
+            after: Vec::new(),
+            slope: 0.0,
+        });
+    }
     Ok(Diagnosis {
         robot: model.name.clone(),
         n_train: split
@@ -521,5 +674,6 @@ pub fn diagnose_with_progress(
         trials,
         alpha: options.alpha,
         seed: options.seed,
+        plots,
     })
 }

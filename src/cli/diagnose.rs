@@ -1,0 +1,179 @@
+//! `robocal diagnose`: what the kinematic model misses, its cause, and the gain on held-out poses.
+
+use super::calibrate::{input, read_table};
+use super::{CliError, CliResult, print_json, robot_arg::RobotArgs};
+use calib::diagnose::{DiagnoseOptions, Diagnosis, diagnose_with_progress, report};
+use calib::robot::Robot;
+use sim::ChainSpec;
+use std::io::IsTerminal;
+use std::path::PathBuf;
+
+/// Arguments of `robocal diagnose`.
+#[derive(clap::Args, Debug)]
+pub struct Args {
+    #[command(flatten)]
+    robot: RobotArgs,
+    /// Measurement table (.csv or .parquet, see the measurement contract).
+    #[arg(long, value_name = "FILE")]
+    data: PathBuf,
+    /// Print one JSON document on stdout (the diagnose contract) instead of text on stderr.
+    #[arg(long)]
+    json: bool,
+    /// Write plots (SVG) and a one-page summary (index.html, summary.md) into this folder.
+    #[arg(long, value_name = "DIR")]
+    report: Option<PathBuf>,
+    /// Fraction of the poses held out to judge every decision (repeats of a pose stay together).
+    #[arg(long, value_name = "F", default_value_t = 1.0 / 3.0)]
+    test_fraction: f64,
+    /// Seed of the train/test split and of the learned models' folds.
+    #[arg(long, value_name = "N", default_value_t = 0)]
+    seed: u64,
+    /// False-alarm level of each decision (family-wise over the candidates of a round).
+    #[arg(long, value_name = "P", default_value_t = 1e-3)]
+    alpha: f64,
+}
+
+/// Human-readable summary of a diagnosis.
+pub(crate) fn text(d: &Diagnosis, data: &str) -> String {
+    let um = |x: f64| format!("{:8.1} µm", x * 1e6);
+    let mut s = format!(
+        "diagnose {} on {data}: {} training / {} test poses\nnoise floor {} ({})\n\n  {:<52} {:>11} {:>11} {:>11}\n",
+        d.robot,
+        d.n_train,
+        d.n_test,
+        um(d.noise_floor_m).trim(),
+        d.noise_floor_source,
+        "model",
+        "train RMS",
+        "test RMS",
+        "test max"
+    );
+    for st in &d.steps {
+        s.push_str(&format!(
+            "  {:<52} {} {} {}\n",
+            st.model,
+            um(st.train_rms_m),
+            um(st.test_rms_m),
+            um(st.test_max_m)
+        ));
+    }
+    s.push('\n');
+    if d.findings.is_empty() {
+        s.push_str(
+            "findings: none (the kinematic model explains the data as well as any known cause)\n",
+        );
+    } else {
+        s.push_str("findings:\n");
+    }
+    for f in &d.findings {
+        let joints = if f.joints.is_empty() {
+            String::new()
+        } else {
+            format!(
+                " at joints {}",
+                f.joints
+                    .iter()
+                    .map(|j| j.to_string())
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            )
+        };
+        s.push_str(&format!(
+            "  {}{joints}: test RMS {:.1} -> {:.1} µm (gain {:.0} %)\n    {}\n",
+            f.cause,
+            f.test_rms_m_before * 1e6,
+            f.test_rms_m_after * 1e6,
+            100.0 * f.gain,
+            f.evidence
+        ));
+    }
+    s.push_str(&format!(
+        "unexplained: {}: {}\nmodel for `calibrate --model auto`: {}\n",
+        if d.unexplained.present {
+            "present"
+        } else {
+            "none"
+        },
+        d.unexplained.note,
+        d.model
+    ));
+    s
+}
+
+/// Checks the shared flags of diagnose-like commands.
+pub(crate) fn options(
+    test_fraction: f64,
+    seed: u64,
+    alpha: f64,
+) -> Result<DiagnoseOptions, CliError> {
+    if !(test_fraction > 0.0 && test_fraction < 1.0) {
+        return Err(CliError::Input(format!(
+            "--test-fraction {test_fraction}: must be in (0, 1): diagnose judges on held-out poses"
+        )));
+    }
+    if !(alpha > 0.0 && alpha < 0.5) {
+        return Err(CliError::Input(format!(
+            "--alpha {alpha}: must be in (0, 0.5)"
+        )));
+    }
+    Ok(DiagnoseOptions {
+        test_fraction,
+        seed,
+        alpha,
+        ..DiagnoseOptions::default()
+    })
+}
+
+/// Runs a diagnosis with a spinner on a terminal.
+pub(crate) fn run_diagnosis(
+    model: &sim::Model,
+    table: &sim::measurement_table::MeasurementTable,
+    name: &str,
+    options: &DiagnoseOptions,
+) -> Result<Diagnosis, CliError> {
+    let bar = std::io::stderr().is_terminal().then(|| {
+        let b = indicatif::ProgressBar::new_spinner();
+        b.enable_steady_tick(std::time::Duration::from_millis(120));
+        b
+    });
+    let mut progress = |m: &str| {
+        if let Some(b) = &bar {
+            b.set_message(format!("fitting {m}"));
+        }
+    };
+    let d = diagnose_with_progress(model, table, name, options, &mut progress).map_err(input);
+    if let Some(b) = &bar {
+        b.finish_and_clear();
+    }
+    d
+}
+
+/// Runs `robocal diagnose`.
+pub fn run(args: Args) -> CliResult {
+    let options = options(args.test_fraction, args.seed, args.alpha)?;
+    let spec = ChainSpec {
+        base_link: args.robot.base_link.clone(),
+        tip_link: args.robot.tip_link.clone(),
+    };
+    let robot = Robot::load(&args.robot.robot, &spec).map_err(input)?;
+    let table = read_table(&args.data, &robot.model)?;
+    let name = args.data.display().to_string();
+    let d = run_diagnosis(&robot.model, &table, &name, &options)?;
+    if let Some(dir) = &args.report {
+        let files = report::write(dir, &d, &d.plots, &name).map_err(input)?;
+        if !args.json {
+            eprintln!(
+                "wrote {} ({} files, open index.html)",
+                dir.display(),
+                files.len()
+            );
+        }
+    }
+    if args.json {
+        let v = serde_json::to_value(&d)
+            .map_err(|e| CliError::Runtime(format!("cannot write JSON: {e}")))?;
+        return print_json(&v);
+    }
+    eprint!("{}", text(&d, &name));
+    Ok(())
+}
