@@ -257,7 +257,12 @@ fn joint_direction(model: &Model, cal: &Calibration, q: &[f64], j: usize) -> Vec
     Vector3::new(jac[(0, k)], jac[(1, k)], jac[(2, k)])
 }
 
-/// The residual `−err` of each test row as the angle of joint `j` (µrad) that would explain it.
+/// Smallest lever `|∂p/∂qⱼ|` (m/rad) of a row to be drawn in a joint-angle residual plot: below it the
+/// projection amplifies the noise more than it shows.
+const MIN_PLOT_LEVER_M: f64 = 0.15;
+
+/// The residual `−err` of each test row as the angle of joint `j` (µrad) that would explain it (NaN,
+/// not drawn, where the joint's lever is below [`MIN_PLOT_LEVER_M`]).
 fn as_joint_angle_urad(
     model: &Model,
     split: &Split<'_>,
@@ -273,7 +278,7 @@ fn as_joint_angle_urad(
         .map(|(&r, e)| {
             let d = joint_direction(model, cal, split.test.table.q_row(r), j);
             let n2 = d.norm_squared();
-            if n2 > 0.0 {
+            if n2 >= MIN_PLOT_LEVER_M * MIN_PLOT_LEVER_M {
                 -e.dot(&d) / n2 * 1e6
             } else {
                 f64::NAN
@@ -282,12 +287,12 @@ fn as_joint_angle_urad(
         .collect()
 }
 
-/// Plots of a finding: per named joint (and the growth), the residual before and after against the
-/// parameter's regressor.
+/// Plots of a finding: per named joint (and the growth), against the parameter's regressor, the
+/// partial residual (the adopted model's residual plus this parameter's own contribution: what the
+/// data show of the term) and the adopted model's residual.
 fn finding_plots(
     model: &Model,
     split: &Split<'_>,
-    before: &Evaluated,
     after: &Evaluated,
     cause: Cause,
     joints: &[usize],
@@ -315,14 +320,15 @@ fn finding_plots(
                     ),
                     Cause::ThermalDrift => (1.0, "temperature change (K or warm-up)".to_string()),
                 };
+                let resid = as_joint_angle_urad(model, split, &after.cal, &after.test_err, joint);
                 out.push(report::RegressorPlot {
                     file: format!("{}_joint{}", cause.name(), joint + 1),
                     title: format!("{}: joint {}", cause.name(), joint + 1),
                     x_label,
                     y_label: format!("residual as joint {} angle (µrad)", joint + 1),
                     x: g.iter().map(|v| sign * v).collect(),
-                    before: as_joint_angle_urad(model, split, &before.cal, &before.test_err, joint),
-                    after: as_joint_angle_urad(model, split, &after.cal, &after.test_err, joint),
+                    before: resid.iter().zip(&g).map(|(r, g)| r + value * g * 1e6).collect(),
+                    after: resid,
                     slope: sign * value * 1e6,
                 });
             }
@@ -345,9 +351,13 @@ fn finding_plots(
                     title: "thermal_drift: link growth".into(),
                     x_label: "temperature change (K or warm-up)".into(),
                     y_label: "residual as growth (ppm)".into(),
-                    x: g,
-                    before: rel(&before.test_err),
+                    before: rel(&after.test_err)
+                        .iter()
+                        .zip(&g)
+                        .map(|(r, g)| r + value * g * 1e6)
+                        .collect(),
                     after: rel(&after.test_err),
+                    x: g,
                     slope: value * 1e6,
                 });
             }
@@ -612,7 +622,7 @@ pub fn diagnose_with_progress(
         let r = explained_correlation(&current.test_err, &next.test_err);
         let found: Vec<FoundParameter> = params.into_iter().map(|(p, _, _)| p).collect();
         plots.regressors.extend(finding_plots(
-            model, &split, &current, &next, cause, &joints, growth,
+            model, &split, &next, cause, &joints, growth,
         ));
         findings.push(Finding {
             cause: cause.name().into(),

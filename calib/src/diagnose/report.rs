@@ -21,9 +21,9 @@ pub struct RegressorPlot {
     pub y_label: String,
     /// Regressor per test row.
     pub x: Vec<f64>,
-    /// Residual before (vertical units) per test row.
+    /// Partial residual (vertical units) per test row: the residual with the term left out.
     pub before: Vec<f64>,
-    /// Residual after.
+    /// Residual with the term.
     pub after: Vec<f64>,
     /// Identified slope (vertical units per regressor unit): the fitted line.
     pub slope: f64,
@@ -56,12 +56,12 @@ fn regressor_svg(p: &RegressorPlot) -> String {
             });
     let mut series = vec![
         Series {
-            label: "before (model without the cause)".into(),
+            label: "partial residual (without this term)".into(),
             points: pts(&p.before),
             style: Style::Markers,
         },
         Series {
-            label: "after (cause adopted)".into(),
+            label: "residual (cause adopted)".into(),
             points: pts(&p.after),
             style: Style::Markers,
         },
