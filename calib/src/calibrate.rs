@@ -15,7 +15,9 @@
 use crate::chain::{Chain, ChainScratch};
 use crate::error::{CalibError, Result};
 use crate::extensions::thermal_drift::WARM_UP_TAUS_S;
-use crate::extensions::{ExtensionSettings, ModelSpec, Regressors, ThermalInput, predict_row};
+use crate::extensions::{
+    Cause, ExtensionSettings, ModelSpec, Regressors, ThermalInput, predict_row,
+};
 use crate::identifiability::{NullSpaceReport, Observability, describe_null_space};
 use crate::learned::LearnedResidual;
 use crate::lie3::{left_jacobian_inverse, log_rotation};
@@ -543,7 +545,43 @@ pub fn calibrate(
     test: Option<&Dataset<'_>>,
     options: &CalibrationOptions,
 ) -> Result<Calibration> {
-    calibrate_with(model, train, test, options, None)
+    calibrate_with(model, train, test, options, None, &[])
+}
+
+/// Outer iterations that move the torque evaluation to the estimated equilibrium (see
+/// [`Regressors::build`]); each shrinks the compliance error by about 10⁻².
+pub const EQUILIBRIUM_REFITS: usize = 3;
+
+/// [`calibrate_with`] for an extended model; with joint compliance, refitted with the torques at the
+/// estimated equilibrium until the compliances settle (relative change below 10⁻⁶ of their scale).
+fn calibrate_extended(
+    model: &Model,
+    train: &Dataset<'_>,
+    test: Option<&Dataset<'_>>,
+    options: &CalibrationOptions,
+    settings: &ExtensionSettings,
+) -> Result<Calibration> {
+    let mut cal = calibrate_with(model, train, test, options, Some(settings), &[])?;
+    if !settings.causes.contains(&Cause::JointCompliance) {
+        return Ok(cal);
+    }
+    for _ in 0..EQUILIBRIUM_REFITS {
+        let at = cal.params.extension.clone();
+        let next = calibrate_with(model, train, test, options, Some(settings), &at)?;
+        let change = next
+            .params
+            .extension
+            .iter()
+            .zip(&at)
+            .zip(&next.layout.extensions)
+            .map(|((a, b), p)| (a - b).abs() / p.scale)
+            .fold(0.0, f64::max);
+        cal = next;
+        if change < 1e-6 {
+            break;
+        }
+    }
+    Ok(cal)
 }
 
 /// Calibrates the model `spec` (kinematic, extensions identified jointly with it, then an optional
@@ -562,7 +600,7 @@ pub fn calibrate_model(
     options: &CalibrationOptions,
 ) -> Result<Calibration> {
     let mut cal = if spec.causes.is_empty() {
-        calibrate_with(model, train, test, options, None)?
+        calibrate_with(model, train, test, options, None, &[])?
     } else {
         let settings = |tau| {
             ExtensionSettings::for_data(
@@ -578,7 +616,7 @@ pub fn calibrate_model(
         if matches!(first.thermal, Some(ThermalInput::WarmUp { .. })) {
             let mut best: Option<Calibration> = None;
             for tau in WARM_UP_TAUS_S {
-                let cal = calibrate_with(model, train, test, options, Some(&settings(Some(tau))?))?;
+                let cal = calibrate_extended(model, train, test, options, &settings(Some(tau))?)?;
                 if best.as_ref().is_none_or(|b| {
                     cal.report.after.solver.cost_final < b.report.after.solver.cost_final
                 }) {
@@ -587,7 +625,7 @@ pub fn calibrate_model(
             }
             best.expect("at least one time constant")
         } else {
-            calibrate_with(model, train, test, options, Some(&first))?
+            calibrate_extended(model, train, test, options, &first)?
         }
     };
     cal.report.model = spec.name();
@@ -606,7 +644,8 @@ fn add_learned(
     test: Option<&Dataset<'_>>,
     options: &CalibrationOptions,
 ) -> Result<()> {
-    let obs = observations(model, train, options, cal.extensions.as_ref())?;
+    let at = cal.params.extension.clone();
+    let obs = observations(model, train, options, cal.extensions.as_ref(), &at)?;
     let residual: Vec<Vector3<f64>> = position_errors(model, &cal.params, &obs)
         .iter()
         .map(|e| -e)
@@ -626,6 +665,7 @@ fn add_learned(
             t,
             options,
             cal.extensions.as_ref(),
+            &at,
         )?)),
         _ => None,
     };
@@ -639,16 +679,18 @@ fn add_learned(
     Ok(())
 }
 
-/// The rows of `data` prepared for the solver, with the extensions' regressors under `extensions`.
+/// The rows of `data` prepared for the solver, with the extensions' regressors under `extensions`,
+/// torques evaluated at the extension values `at` ([`Regressors::build`]).
 pub fn observations(
     model: &Model,
     data: &Dataset<'_>,
     options: &CalibrationOptions,
     extensions: Option<&ExtensionSettings>,
+    at: &[f64],
 ) -> Result<Observations> {
     let mut obs = Observations::from_table(data.table, &data.rows, &options.noise, &data.name)?;
     if let Some(s) = extensions {
-        obs.ext = Regressors::build(model, s, data.table, &data.rows, &data.name)?;
+        obs.ext = Regressors::build(model, s, data.table, &data.rows, &data.name, at)?;
     }
     Ok(obs)
 }
@@ -659,6 +701,7 @@ fn calibrate_with(
     test: Option<&Dataset<'_>>,
     options: &CalibrationOptions,
     extensions: Option<&ExtensionSettings>,
+    at: &[f64],
 ) -> Result<Calibration> {
     for d in std::iter::once(train).chain(test) {
         if d.table.n_joints != model.nq() {
@@ -678,9 +721,9 @@ fn calibrate_with(
             problem: "no rows to calibrate on".into(),
         });
     }
-    let mut obs = observations(model, train, options, extensions)?;
+    let mut obs = observations(model, train, options, extensions, at)?;
     let test_obs = match test {
-        Some(t) if !t.rows.is_empty() => Some(observations(model, t, options, extensions)?),
+        Some(t) if !t.rows.is_empty() => Some(observations(model, t, options, extensions, at)?),
         _ => None,
     };
     let orientation = obs.orientation.is_some();

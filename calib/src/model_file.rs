@@ -502,7 +502,7 @@ impl Predictor {
         let regs = match &self.extensions {
             Some(s) => {
                 s.check_table(table, file)?;
-                Regressors::build(&self.model, s, table, &rows, file)?
+                Regressors::build(&self.model, s, table, &rows, file, &self.params.extension)?
             }
             None => Regressors::none(),
         };

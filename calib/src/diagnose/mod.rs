@@ -228,8 +228,9 @@ pub(crate) fn evaluate(
         &options.calibration,
     )?;
     let ext = cal.extensions.as_ref();
-    let train_obs = observations(model, &split.train, &options.calibration, ext)?;
-    let test_obs = observations(model, &split.test, &options.calibration, ext)?;
+    let at = &cal.params.extension;
+    let train_obs = observations(model, &split.train, &options.calibration, ext, at)?;
+    let test_obs = observations(model, &split.test, &options.calibration, ext, at)?;
     let train_err = position_errors(model, &cal.params, &train_obs);
     let test_err = position_errors(model, &cal.params, &test_obs);
     let pose_sq = per_pose(&split.test_pose, test_err.iter().map(|e| e.norm_squared()));
@@ -327,7 +328,11 @@ fn finding_plots(
                     x_label,
                     y_label: format!("residual as joint {} angle (µrad)", joint + 1),
                     x: g.iter().map(|v| sign * v).collect(),
-                    before: resid.iter().zip(&g).map(|(r, g)| r + value * g * 1e6).collect(),
+                    before: resid
+                        .iter()
+                        .zip(&g)
+                        .map(|(r, g)| r + value * g * 1e6)
+                        .collect(),
                     after: resid,
                     slope: sign * value * 1e6,
                 });
@@ -621,9 +626,9 @@ pub fn diagnose_with_progress(
         });
         let r = explained_correlation(&current.test_err, &next.test_err);
         let found: Vec<FoundParameter> = params.into_iter().map(|(p, _, _)| p).collect();
-        plots.regressors.extend(finding_plots(
-            model, &split, &next, cause, &joints, growth,
-        ));
+        plots
+            .regressors
+            .extend(finding_plots(model, &split, &next, cause, &joints, growth));
         findings.push(Finding {
             cause: cause.name().into(),
             evidence: evidence(cause, &joints, &found, r, growth),
