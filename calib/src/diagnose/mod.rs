@@ -252,7 +252,12 @@ pub(crate) fn evaluate(
 }
 
 /// `∂p/∂qⱼ` (tracker frame, m/rad) of `cal` at `q`.
-fn joint_direction(model: &Model, cal: &Calibration, q: &[f64], j: usize) -> Vector3<f64> {
+pub(crate) fn joint_direction(
+    model: &Model,
+    cal: &Calibration,
+    q: &[f64],
+    j: usize,
+) -> Vector3<f64> {
     let (_, _, jac) = prediction_and_jacobian(model, &cal.params, q);
     let k = cal.layout.zero_offset(j);
     Vector3::new(jac[(0, k)], jac[(1, k)], jac[(2, k)])
@@ -608,41 +613,51 @@ pub fn diagnose_with_progress(
             .iter()
             .find(|c| !current.spec.causes.contains(c))
             .expect("one new cause");
-        let params = cause_parameters(&next.cal, cause);
-        let mut joints: Vec<usize> = params
-            .iter()
-            .filter_map(|(p, term, alone)| match term {
-                Term::JointAngle { joint }
-                    if *alone && p.sigma > 0.0 && (p.value / p.sigma).abs() > options.joint_z =>
-                {
-                    Some(joint + 1)
-                }
-                _ => None,
-            })
-            .collect();
-        joints.sort_unstable();
-        let growth = params.iter().any(|(p, term, alone)| {
-            *term == Term::Growth && *alone && (p.value / p.sigma).abs() > options.joint_z
-        });
         let r = explained_correlation(&current.test_err, &next.test_err);
-        let found: Vec<FoundParameter> = params.into_iter().map(|(p, _, _)| p).collect();
-        plots
-            .regressors
-            .extend(finding_plots(model, &split, &next, cause, &joints, growth));
         findings.push(Finding {
             cause: cause.name().into(),
-            evidence: evidence(cause, &joints, &found, r, growth),
-            joints,
+            evidence: String::new(),
+            joints: Vec::new(),
             test_rms_m_before: current.step.test_rms_m,
             test_rms_m_after: next.step.test_rms_m,
             gain: 1.0 - next.step.test_rms_m / current.step.test_rms_m,
             r,
             test_z: tz,
             train_z: trz,
-            parameters: found,
+            parameters: Vec::new(),
         });
         steps.push(next.step.clone());
         current = next;
+    }
+    // Joints, values and evidence from the final model, where every adopted cause is fitted jointly
+    // (a cause adopted early may have taken up part of a later one before that was in the model).
+    for f in &mut findings {
+        let cause = Cause::from_name(&f.cause).expect("a known cause");
+        let params = cause_parameters(&current.cal, cause);
+        let z_of = |p: &FoundParameter| {
+            if p.sigma > 0.0 {
+                (p.value / p.sigma).abs()
+            } else {
+                0.0
+            }
+        };
+        f.joints = params
+            .iter()
+            .filter_map(|(p, term, alone)| match term {
+                Term::JointAngle { joint } if *alone && z_of(p) > options.joint_z => {
+                    Some(joint + 1)
+                }
+                _ => None,
+            })
+            .collect();
+        let growth = params
+            .iter()
+            .any(|(p, term, alone)| *term == Term::Growth && *alone && z_of(p) > options.joint_z);
+        f.parameters = params.into_iter().map(|(p, _, _)| p).collect();
+        f.evidence = evidence(cause, &f.joints, &f.parameters, f.r, growth);
+        plots.regressors.extend(finding_plots(
+            model, &split, &current, cause, &f.joints, growth,
+        ));
     }
     let (noise_floor_m, noise_floor_source) =
         noise_floor::estimate(table, &split.test.rows, &options.calibration.noise);

@@ -3,9 +3,9 @@
 //! Two probes look at the residual `r = measured − predicted` (tracker frame, m) of the final physical
 //! model, each fitted on the training poses and judged on the test poses:
 //!
-//! - **harmonics of one joint angle**: per joint `j`, least squares of `r` on
-//!   `[sin(k qⱼ), cos(k qⱼ)]`, `k = 1…3`, per tracker axis (18 coefficients): gear eccentricity,
-//!   encoder errors and other errors periodic in a joint's angle live here;
+//! - **harmonics of one joint angle**: per joint `j`, an angle error periodic in that joint's angle,
+//!   `r ≈ ∂p/∂qⱼ Σₖ (aₖ sin k qⱼ + bₖ cos k qⱼ)`, `k = 1…3` (6 coefficients, linear least squares):
+//!   gear eccentricity and encoder errors live here;
 //! - **the learned residual models** ([`crate::learned`]: polynomial and kernel ridge regression over
 //!   all joint angles, cross-validated).
 //!
@@ -15,7 +15,7 @@
 //! a known cause.
 
 use super::significance::{normal_upper_quantile, paired};
-use super::{DiagnoseOptions, Evaluated, Split, per_pose, rms};
+use super::{DiagnoseOptions, Evaluated, Split, joint_direction, per_pose, rms};
 use crate::error::Result;
 use nalgebra::{DMatrix, DVector, Vector3};
 use serde::{Deserialize, Serialize};
@@ -65,23 +65,41 @@ fn harmonic_features(q: f64, out: &mut [f64]) {
     }
 }
 
-/// Fits `residual` (rows) on the harmonics of joint `j` of `q_train` (row-major, `n` joints) and
-/// returns the predicted residual at `q_test`.
+/// Rows of the joint-angle harmonic regression for one measurement: `∂p/∂qⱼ · [sin(k qⱼ), cos(k qⱼ)]`
+/// (3 × 2·[`HARMONICS`], m/rad), into `out` row-major.
+fn harmonic_rows(direction: &Vector3<f64>, qj: f64, feat: &mut [f64], out: &mut [f64]) {
+    harmonic_features(qj, feat);
+    let f = feat.len();
+    for axis in 0..3 {
+        for (c, v) in feat.iter().enumerate() {
+            out[axis * f + c] = direction[axis] * v;
+        }
+    }
+}
+
+/// Fits `residual` (m, one per training row) as an angle error of joint `j` periodic in its angle,
+/// `r ≈ ∂p/∂qⱼ Σₖ (aₖ sin k qⱼ + bₖ cos k qⱼ)`, and returns the predicted residual of the test rows.
+/// `dir_*` are the rows' `∂p/∂qⱼ` (tracker frame, m/rad), `qj_*` their angles of joint `j` (rad).
 fn harmonic_probe(
-    q_train: &[f64],
+    dir_train: &[Vector3<f64>],
+    qj_train: &[f64],
     residual: &[Vector3<f64>],
-    q_test: &[f64],
-    n: usize,
-    j: usize,
+    dir_test: &[Vector3<f64>],
+    qj_test: &[f64],
 ) -> Vec<Vector3<f64>> {
-    let m = residual.len();
     let f = 2 * HARMONICS;
-    let mut a = DMatrix::zeros(m, f);
-    let mut row = vec![0.0; f];
+    let m = residual.len();
+    let mut a = DMatrix::zeros(3 * m, f);
+    let mut b = DVector::zeros(3 * m);
+    let mut feat = vec![0.0; f];
+    let mut rows = vec![0.0; 3 * f];
     for r in 0..m {
-        harmonic_features(q_train[r * n + j], &mut row);
-        for (c, v) in row.iter().enumerate() {
-            a[(r, c)] = *v;
+        harmonic_rows(&dir_train[r], qj_train[r], &mut feat, &mut rows);
+        for axis in 0..3 {
+            for c in 0..f {
+                a[(3 * r + axis, c)] = rows[axis * f + c];
+            }
+            b[3 * r + axis] = residual[r][axis];
         }
     }
     // Tiny ridge against a joint that hardly moves (its features are then nearly collinear).
@@ -91,18 +109,15 @@ fn harmonic_probe(
         gram[(c, c)] += lambda;
     }
     let Some(chol) = gram.cholesky() else {
-        return vec![Vector3::zeros(); q_test.len() / n];
+        return vec![Vector3::zeros(); qj_test.len()];
     };
-    let coef: Vec<DVector<f64>> = (0..3)
-        .map(|axis| {
-            let b = DVector::from_fn(m, |r, _| residual[r][axis]);
-            chol.solve(&a.tr_mul(&b))
-        })
-        .collect();
-    (0..q_test.len() / n)
-        .map(|r| {
-            harmonic_features(q_test[r * n + j], &mut row);
-            Vector3::from_fn(|axis, _| row.iter().zip(coef[axis].iter()).map(|(x, c)| x * c).sum())
+    let coef = chol.solve(&a.tr_mul(&b));
+    dir_test
+        .iter()
+        .zip(qj_test)
+        .map(|(d, &q)| {
+            harmonic_rows(d, q, &mut feat, &mut rows);
+            Vector3::from_fn(|axis, _| (0..f).map(|c| rows[axis * f + c] * coef[c]).sum())
         })
         .collect()
 }
@@ -147,8 +162,20 @@ pub(crate) fn analyse(
             z: paired(&current.pose_sq, &sq).z,
         });
     };
+    let directions = |rows: &[usize], j: usize| -> Vec<Vector3<f64>> {
+        rows.iter()
+            .map(|&r| joint_direction(model, &current.cal, split.train.table.q_row(r), j))
+            .collect()
+    };
     for j in 0..n {
-        let c = harmonic_probe(&q_train, &residual, &q_test, n, j);
+        let qj = |q: &[f64]| q.iter().skip(j).step_by(n).copied().collect::<Vec<f64>>();
+        let c = harmonic_probe(
+            &directions(&split.train.rows, j),
+            &qj(&q_train),
+            &residual,
+            &directions(&split.test.rows, j),
+            &qj(&q_test),
+        );
         judge(format!("harmonics of joint {}", j + 1), Some(j + 1), &c);
     }
     for kind in &options.learned_kinds {
