@@ -160,10 +160,34 @@ impl Observations {
     }
 }
 
+/// Turns the kinematic position Jacobian of `p_kin` into that of the grown prediction
+/// `p = t + (1 + γ)(p_kin − t)` (`t` the base origin, tracker frame): every column that moves `p_kin`
+/// only is multiplied by `1 + γ`; the base twist moves `p` rigidly, `[−[p], I]` at the final `p` (m).
+fn grow_columns(layout: &ParamLayout, growth: f64, p: &Vector3<f64>, block: &mut [f64]) {
+    let np = layout.len();
+    let kb = layout.base();
+    let ec_cross_p = [
+        Vector3::new(0.0, -p.z, p.y),
+        Vector3::new(p.z, 0.0, -p.x),
+        Vector3::new(-p.y, p.x, 0.0),
+    ];
+    for row in 0..3 {
+        let cols = &mut block[row * np..row * np + layout.kinematic_len()];
+        for (k, v) in cols.iter_mut().enumerate() {
+            if !(kb..kb + 6).contains(&k) {
+                *v *= 1.0 + growth;
+            }
+        }
+        for c in 0..3 {
+            cols[kb + c] = ec_cross_p[c][row];
+            cols[kb + 3 + c] = if row == c { 1.0 } else { 0.0 };
+        }
+    }
+}
+
 /// Fills the extension columns of a 3-row Jacobian block (row-major, `layout.len()` columns) whose
 /// kinematic columns are set: a joint-angle term is the joint's zero-offset column times its regressor,
-/// the growth term `lever` times its regressor. (With growth `γ ≠ 0` the kinematic columns would carry
-/// a factor `1 + γ`, about `1 + 2·10⁻⁴`; leaving it out slows no convergence and moves no solution.)
+/// the growth term `lever` times its regressor.
 fn extension_columns(
     layout: &ParamLayout,
     coef: &[f64],
@@ -278,7 +302,7 @@ impl<'a> KinematicProblem<'a> {
     /// residuals (first `dim` entries used) at the trial point.
     fn row_block(&mut self, r: usize, with_jacobian: bool) -> [f64; 6] {
         let obs = self.obs;
-        let (p, lever, _) = predict_row(
+        let (p, lever, growth) = predict_row(
             &self.chain,
             &mut self.scratch,
             &self.trial,
@@ -295,6 +319,9 @@ impl<'a> KinematicProblem<'a> {
         if with_jacobian {
             self.chain
                 .position_jacobian(&self.scratch, &self.layout, &mut self.block[..3 * np]);
+            if growth != 0.0 {
+                grow_columns(&self.layout, growth, &p, &mut self.block[..3 * np]);
+            }
             extension_columns(
                 &self.layout,
                 obs.ext.row(r),

@@ -1,0 +1,269 @@
+//! The model extensions: their Jacobian columns against central differences, their recovery from data
+//! the simulator made with its own effect code (within the predicted standard deviations), and the
+//! model file carrying them to `predict`.
+
+use calib::calibrate::{CalibrationOptions, Dataset, calibrate_model, observations};
+use calib::extensions::{ExtensionSettings, ModelSpec};
+use calib::lm::LeastSquaresProblem;
+use calib::model_file::{CalibratedModel, Predictor};
+use calib::params::KinematicParams;
+use calib::problem::KinematicProblem;
+use calib::robot::Robot;
+use calib::stats::position_errors;
+use nalgebra::{DMatrix, Vector3};
+use rand::rngs::StdRng;
+use rand::{RngExt, SeedableRng};
+use sim::measurement_table::{self, MeasurementTable, OptionalColumns, Row};
+use sim::robots;
+use sim::scenario::{Overrides, Scenario};
+
+/// A table of random configurations with every optional column the extensions read; positions are
+/// arbitrary (the Jacobian does not depend on them).
+fn table_with_columns(model: &sim::Model, n: usize, seed: u64) -> MeasurementTable {
+    let mut g = StdRng::seed_from_u64(seed);
+    let cols = OptionalColumns {
+        t: true,
+        temp: true,
+        dir: true,
+        payload: true,
+        ..OptionalColumns::NONE
+    };
+    let mut t = MeasurementTable::new(model.nq(), cols);
+    for k in 0..n {
+        let q: Vec<f64> = model
+            .joints
+            .iter()
+            .map(|j| {
+                let l = j.limits.unwrap();
+                g.random_range(l.lower * 0.9..l.upper * 0.9)
+            })
+            .collect();
+        let dir: Vec<i8> = (0..model.nq())
+            .map(|_| if g.random::<bool>() { 1 } else { -1 })
+            .collect();
+        t.push_row(&Row {
+            pose: k as i64,
+            q: &q,
+            position: [
+                2.0 + g.random::<f64>(),
+                g.random::<f64>(),
+                g.random::<f64>(),
+            ],
+            t: Some(15.0 * k as f64),
+            temp: Some(20.0 + g.random_range(0.0..10.0)),
+            dir: Some(&dir),
+            payload: Some([0.0, 2.0, 5.0][k % 3]),
+            ..Row::default()
+        })
+        .unwrap();
+    }
+    t
+}
+
+#[test]
+fn extension_columns_match_central_differences() {
+    let model = robots::load_builtin("iiwa7").unwrap();
+    let t = table_with_columns(&model, 15, 3);
+    let rows: Vec<usize> = (0..t.len()).collect();
+    let spec = ModelSpec::parse("kinematic+joint_compliance+gear_backlash+thermal_drift").unwrap();
+    let settings = ExtensionSettings::for_data(&model, &spec.causes, &t, &rows, None, "t").unwrap();
+    let data = Dataset::all(&t, "t");
+    let n_ext = settings.params(&model).len();
+    // Torques at a non-trivial equilibrium, and a linearisation point with every extension non-zero.
+    let at: Vec<f64> = (0..n_ext).map(|e| 1e-4 * (1.0 + 0.1 * e as f64)).collect();
+    let obs = observations(
+        &model,
+        &data,
+        &CalibrationOptions::default(),
+        Some(&settings),
+        &at,
+    )
+    .unwrap();
+    let mut params = KinematicParams::nominal(model.nq(), false).with_extension(at.clone());
+    params.p_flange_target = Vector3::new(0.01, 0.02, 0.08);
+    params.t_tracker_base =
+        sim::lie::exp_twist(&nalgebra::Vector6::new(0.1, 0.2, -0.3, 1.5, 0.5, 0.1));
+    let np = calib::params::ParamLayout::new(&model, false)
+        .with_extensions(obs.ext.params.clone())
+        .len();
+    let all: Vec<usize> = (0..np).collect();
+    let mut prob = KinematicProblem::new(&model, &obs, params, all);
+    let m = prob.n_residuals();
+    let mut j = DMatrix::zeros(m, np);
+    prob.set_params(&vec![0.0; np]);
+    prob.jacobian(&mut j);
+    let (mut rp, mut rm) = (vec![0.0; m], vec![0.0; m]);
+    let kin = np - n_ext;
+    // Rounding of residuals of size ‖p‖/σ limits the central differences to about ε‖p‖/(σ h).
+    prob.set_params(&vec![0.0; np]);
+    prob.residuals(&mut rp);
+    let scale = rp.iter().fold(0.0f64, |a, v| a.max(v.abs())) + 2.0e5;
+    for k in kin..np {
+        let h = 1e-6;
+        let mut step = vec![0.0; np];
+        step[k] = h;
+        prob.set_params(&step);
+        prob.residuals(&mut rp);
+        step[k] = -h;
+        prob.set_params(&step);
+        prob.residuals(&mut rm);
+        for r in 0..m {
+            let fd = (rp[r] - rm[r]) / (2.0 * h);
+            assert!(
+                (fd - j[(r, k)]).abs() <= 1e-6 * (1.0 + fd.abs()) + 8.0 * f64::EPSILON * scale / h,
+                "{}: row {r}: analytic {} vs central difference {fd}",
+                obs.ext.params[k - kin].name,
+                j[(r, k)]
+            );
+        }
+    }
+}
+
+/// A campaign simulated with `effects` (TOML) on top of drawn geometric errors, 300 poses.
+fn simulate(effects: &str, seed: u64, dir: &std::path::Path) -> MeasurementTable {
+    let base = include_str!("../../scenarios/iiwa7_kinematic.toml");
+    let text = format!("{base}\n{effects}");
+    let sc = Scenario::parse(&text, "extension test", std::path::Path::new(".")).unwrap();
+    let res = sc
+        .resolve(&Overrides {
+            seed: Some(seed),
+            poses: Some(300),
+            noise: None,
+        })
+        .unwrap();
+    sim::generate::generate(&res, dir, None).unwrap();
+    measurement_table::read(&dir.join("measurements.parquet")).unwrap()
+}
+
+#[test]
+fn extensions_are_recovered_within_their_predicted_standard_deviations() {
+    let model = robots::load_builtin("iiwa7").unwrap();
+    let mut z2 = Vec::new();
+    for seed in [1u64, 2, 3] {
+        let mut g = StdRng::seed_from_u64(seed ^ 0xe47);
+        let k: Vec<f64> = (0..3).map(|_| g.random_range(5e3..2e4)).collect();
+        let b: Vec<f64> = (0..2).map(|_| g.random_range(2e-4..6e-4)).collect();
+        let delta = g.random_range(5.0..15.0);
+        let effects = format!(
+            "[effects.compliance]\nstiffness_nm_per_rad = [inf, {:e}, {:e}, {:e}, inf, inf, inf]\n\
+             [effects.backlash]\ndead_band_rad = [{:e}, 0.0, 0.0, 0.0, {:e}, 0.0, 0.0]\nmode = \"direction\"\n\
+             [effects.thermal]\nt_ref_c = 20.0\nalpha_per_k = 23e-6\nbeta_rad_per_k = 0.0\n\
+             [campaign.temperature]\nwarm_up = {{ t0_c = 20.0, delta_c = {delta}, tau_s = 1800.0 }}\n",
+            k[0], k[1], k[2], b[0], b[1]
+        );
+        let dir = std::env::temp_dir().join(format!("robocal_ext_{}_{seed}", std::process::id()));
+        let t = simulate(&effects, seed, &dir);
+        let spec =
+            ModelSpec::parse("kinematic+joint_compliance+gear_backlash+thermal_drift").unwrap();
+        let cal = calibrate_model(
+            &model,
+            &Dataset::all(&t, "sim"),
+            None,
+            &spec,
+            &CalibrationOptions::default(),
+        )
+        .unwrap();
+        // The truth in the estimator's parameters: compliance 1/k, half the dead band, α, no drift.
+        let truth = |name: &str| -> f64 {
+            match name {
+                "joint 2 compliance" => 1.0 / k[0],
+                "joint 3 compliance" => 1.0 / k[1],
+                "joint 4 compliance" => 1.0 / k[2],
+                "joint 1 half lost motion" => b[0] / 2.0,
+                "joint 5 half lost motion" => b[1] / 2.0,
+                "link growth" => 23e-6,
+                _ => 0.0,
+            }
+        };
+        let sub = &cal.subspace;
+        for (e, p) in cal.layout.extensions.iter().enumerate() {
+            let kk = cal.layout.extension(e);
+            let null_share = sub
+                .v
+                .row(kk)
+                .columns(sub.rank, sub.n_params() - sub.rank)
+                .norm();
+            if null_share > 0.1 {
+                continue; // joint 1 compliance (no torque), joint 7 backlash (no lever)…
+            }
+            let sigma = cal.covariance[(kk, kk)].sqrt();
+            let z = (cal.params.extension[e] - truth(&p.name)) / sigma;
+            assert!(
+                z.abs() < 4.0,
+                "seed {seed}: {} = {:.4e} ± {sigma:.1e}, truth {:.4e} (z = {z:.2})",
+                p.name,
+                cal.params.extension[e],
+                truth(&p.name)
+            );
+            z2.push(z * z);
+        }
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+    let mean = z2.iter().sum::<f64>() / z2.len() as f64;
+    // For n standard normal z the mean of z² has standard deviation √(2/n) ≈ 0.19 here.
+    assert!(
+        (0.4..1.8).contains(&mean),
+        "mean z² = {mean:.2} over {} parameters: the standard deviations do not describe the errors",
+        z2.len()
+    );
+}
+
+#[test]
+fn the_model_file_carries_extensions_and_learned_correction_to_predict() {
+    let model = robots::load_builtin("iiwa7").unwrap();
+    let dir = std::env::temp_dir().join(format!("robocal_ext_file_{}", std::process::id()));
+    let t = simulate(
+        "[effects.compliance]\nstiffness_nm_per_rad = [inf, 1.2e4, inf, 9e3, inf, inf, inf]\n\
+         [effects.backlash]\ndead_band_rad = [0.0, 0.0, 4e-4, 0.0, 0.0, 0.0, 0.0]\nmode = \"direction\"\n",
+        5,
+        &dir,
+    );
+    let spec = ModelSpec::parse("kinematic+joint_compliance+gear_backlash+learned:poly1").unwrap();
+    let data = Dataset::all(&t, "sim");
+    let options = CalibrationOptions::default();
+    let cal = calibrate_model(&model, &data, None, &spec, &options).unwrap();
+    assert_eq!(cal.report.model, spec.name());
+    let robot = Robot::load("iiwa7", &sim::ChainSpec::default()).unwrap();
+    let text = CalibratedModel::new(&robot, &cal).to_json();
+    let file = CalibratedModel::from_json(&text, "model.json").unwrap();
+    assert_eq!(
+        file.model,
+        "kinematic+joint_compliance+gear_backlash+learned:poly1"
+    );
+    let mut pred = Predictor::from_file(&file).unwrap();
+    let out = pred.predict_table(&t, "sim").unwrap();
+    // The predictor must reproduce the fit: measured + error of the physical model + the correction.
+    let obs = observations(
+        &model,
+        &data,
+        &options,
+        cal.extensions.as_ref(),
+        &cal.params.extension,
+    )
+    .unwrap();
+    let err = position_errors(&model, &cal.params, &obs);
+    let learned = cal.learned.as_ref().unwrap();
+    for r in 0..t.len() {
+        let expect = obs.position[r] + err[r] + learned.predict(t.q_row(r));
+        let got = Vector3::from(out.position[r]);
+        assert!((got - expect).norm() < 1e-12, "row {r}: {got} vs {expect}");
+    }
+    // Without the columns the model reads, predict refuses with the column's name.
+    let mut no_dir = t.clone();
+    no_dir.dir = None;
+    let e = pred
+        .predict_table(&no_dir, "poses.csv")
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("poses.csv") && e.contains("dir"), "{e}");
+    // A model file whose name and extensions disagree is refused.
+    let bad = text.replace(
+        "\"model\": \"kinematic+joint_compliance+gear_backlash+learned:poly1\"",
+        "\"model\": \"kinematic+learned:poly1\"",
+    );
+    let e = CalibratedModel::from_json(&bad, "m.json")
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("m.json") && e.contains("extensions"), "{e}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
