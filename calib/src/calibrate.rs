@@ -548,12 +548,65 @@ pub fn calibrate(
     calibrate_with(model, train, test, options, None, &[])
 }
 
-/// Outer iterations that move the torque evaluation to the estimated equilibrium (see
-/// [`Regressors::build`]); each shrinks the compliance error by about 10⁻².
-pub const EQUILIBRIUM_REFITS: usize = 3;
+/// Most outer iterations that move the torque evaluation to the estimated equilibrium (see
+/// [`Regressors::build`]) and, with payload, re-estimate its centre of mass.
+pub const EQUILIBRIUM_REFITS: usize = 12;
 
-/// [`calibrate_with`] for an extended model; with joint compliance, refitted with the torques at the
-/// estimated equilibrium until the compliances settle (relative change below 10⁻⁶ of their scale).
+/// One Gauss–Newton step (m) for the payload's centre of mass in the flange frame, the other parameters
+/// held at `cal`: the weighted least-squares fit of the training errors by their central-difference
+/// change with each coordinate of the centre of mass.
+fn payload_com_step(
+    model: &Model,
+    train: &Dataset<'_>,
+    options: &CalibrationOptions,
+    settings: &ExtensionSettings,
+    cal: &Calibration,
+) -> Result<Vector3<f64>> {
+    const H: f64 = 1e-3;
+    let at = &cal.params.extension;
+    let errors = |s: &ExtensionSettings| -> Result<(Vec<Vector3<f64>>, Vec<f64>)> {
+        let obs = observations(model, train, options, Some(s), at)?;
+        Ok((position_errors(model, &cal.params, &obs), obs.sigma.clone()))
+    };
+    let (e0, sigma) = errors(settings)?;
+    let mut cols = Vec::with_capacity(3);
+    for axis in 0..3 {
+        let mut plus = settings.clone();
+        plus.payload_com_m[axis] += H;
+        let mut minus = settings.clone();
+        minus.payload_com_m[axis] -= H;
+        let (ep, _) = errors(&plus)?;
+        let (em, _) = errors(&minus)?;
+        cols.push(
+            ep.iter()
+                .zip(&em)
+                .map(|(a, b)| (a - b) / (2.0 * H))
+                .collect::<Vec<_>>(),
+        );
+    }
+    let mut n = Matrix3::<f64>::zeros();
+    let mut g = Vector3::zeros();
+    for r in 0..e0.len() {
+        let w = 1.0 / (sigma[r] * sigma[r]);
+        for a in 0..3 {
+            g[a] -= w * cols[a][r].dot(&e0[r]);
+            for b in 0..3 {
+                n[(a, b)] += w * cols[a][r].dot(&cols[b][r]);
+            }
+        }
+    }
+    // Ridge of 1e-9 of the trace: a payload that never moves leaves its centre of mass at the start.
+    let ridge = 1e-9 * n.trace().max(f64::MIN_POSITIVE);
+    Ok((n + Matrix3::identity() * ridge)
+        .try_inverse()
+        .map_or(Vector3::zeros(), |inv| inv * g))
+}
+
+/// [`calibrate_with`] for an extended model. With joint compliance it is refitted with the torques at
+/// the estimated equilibrium until the compliances settle (relative change below 10⁻⁶ of their scale);
+/// when the table carries a payload, each refit also moves the payload's centre of mass (unknown to the
+/// table, [`ExtensionSettings::payload_com_m`]) by a Gauss–Newton step, until it moves less than 1 µm.
+/// The covariance treats the centre of mass as known.
 fn calibrate_extended(
     model: &Model,
     train: &Dataset<'_>,
@@ -561,13 +614,28 @@ fn calibrate_extended(
     options: &CalibrationOptions,
     settings: &ExtensionSettings,
 ) -> Result<Calibration> {
-    let mut cal = calibrate_with(model, train, test, options, Some(settings), &[])?;
+    let mut settings = settings.clone();
+    let mut cal = calibrate_with(model, train, test, options, Some(&settings), &[])?;
     if !settings.causes.contains(&Cause::JointCompliance) {
         return Ok(cal);
     }
+    let payload = train
+        .table
+        .payload
+        .as_ref()
+        .is_some_and(|m| train.rows.iter().any(|&r| m[r] > 0.0));
     for _ in 0..EQUILIBRIUM_REFITS {
         let at = cal.params.extension.clone();
-        let next = calibrate_with(model, train, test, options, Some(settings), &at)?;
+        let com_step = if payload {
+            let d = payload_com_step(model, train, options, &settings, &cal)?;
+            for (c, d) in settings.payload_com_m.iter_mut().zip(d.iter()) {
+                *c += d;
+            }
+            d.norm()
+        } else {
+            0.0
+        };
+        let next = calibrate_with(model, train, test, options, Some(&settings), &at)?;
         let change = next
             .params
             .extension
@@ -577,7 +645,7 @@ fn calibrate_extended(
             .map(|((a, b), p)| (a - b).abs() / p.scale)
             .fold(0.0, f64::max);
         cal = next;
-        if change < 1e-6 {
+        if change < 1e-6 && com_step < 1e-6 {
             break;
         }
     }

@@ -67,7 +67,7 @@ impl Default for DiagnoseOptions {
             calibration: CalibrationOptions::default(),
             alpha: 1e-3,
             min_gain: 0.02,
-            joint_z: 4.0,
+            joint_z: 5.0,
             candidates: Cause::ALL.to_vec(),
             learned_kinds: vec!["kernel".into(), "poly".into()],
         }
