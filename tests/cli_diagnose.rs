@@ -1,0 +1,264 @@
+//! `robocal diagnose`, `calibrate --model` with extensions, `predict` and `demo` through the built
+//! binary: the JSON contract of shared/spec/cli.md, the report files, and the exit codes of bad input.
+
+use serde_json::Value;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+fn repo() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+}
+
+fn dir(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("robocal_cli_diag_{}_{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+fn robocal(args: &[&str]) -> std::process::Output {
+    Command::new(env!("CARGO_BIN_EXE_robocal"))
+        .args(args)
+        .output()
+        .expect("run robocal")
+}
+
+fn stderr(o: &std::process::Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+fn generate(scenario: &str, out: &Path) -> PathBuf {
+    let o = robocal(&[
+        "generate",
+        "--scenario",
+        repo().join("scenarios").join(scenario).to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    out.join("measurements.parquet")
+}
+
+#[test]
+fn diagnose_json_follows_the_contract_and_the_report_is_written() {
+    let d = dir("contract");
+    let data = generate("iiwa7_backlash.toml", &d.join("data"));
+    let report = d.join("report");
+    let o = robocal(&[
+        "diagnose",
+        "--data",
+        data.to_str().unwrap(),
+        "--json",
+        "--report",
+        report.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let v: Value = serde_json::from_slice(&o.stdout).expect("exactly one JSON document on stdout");
+    for key in [
+        "robot",
+        "n_train",
+        "n_test",
+        "noise_floor_m",
+        "steps",
+        "findings",
+        "unexplained",
+    ] {
+        assert!(v.get(key).is_some(), "missing key {key}: {v}");
+    }
+    assert_eq!(v["robot"], "iiwa7");
+    assert_eq!(
+        v["n_train"].as_u64().unwrap() + v["n_test"].as_u64().unwrap(),
+        200
+    );
+    let steps = v["steps"].as_array().unwrap();
+    assert_eq!(steps[0]["model"], "kinematic");
+    for s in steps {
+        for key in ["model", "train_rms_m", "test_rms_m", "test_max_m"] {
+            assert!(s.get(key).is_some(), "step without {key}: {s}");
+        }
+    }
+    let f = &v["findings"][0];
+    assert_eq!(f["cause"], "gear_backlash");
+    // iiwa7_backlash.toml: 2.9e-4 rad on every joint; joint 7 moves the reflector by 7 µm, unseen.
+    assert_eq!(f["joints"], serde_json::json!([1, 2, 3, 4, 5, 6]));
+    let (before, after) = (
+        f["test_rms_m_before"].as_f64().unwrap(),
+        f["test_rms_m_after"].as_f64().unwrap(),
+    );
+    assert!((f["gain"].as_f64().unwrap() - (1.0 - after / before)).abs() < 1e-12);
+    assert!(
+        f["evidence"]
+            .as_str()
+            .unwrap()
+            .contains("approach direction")
+    );
+    assert_eq!(v["unexplained"]["present"], Value::Bool(false));
+    assert!(v["unexplained"]["note"].is_string());
+    for file in [
+        "index.html",
+        "summary.md",
+        "errors.svg",
+        "diagnosis.json",
+        "gear_backlash_joint1.svg",
+    ] {
+        let p = report.join(file);
+        assert!(p.is_file(), "report lacks {file}");
+    }
+    let svg = std::fs::read_to_string(report.join("gear_backlash_joint2.svg")).unwrap();
+    assert!(
+        svg.starts_with("<svg") || svg.starts_with("<?xml"),
+        "not an SVG"
+    );
+    let html = std::fs::read_to_string(report.join("index.html")).unwrap();
+    assert!(html.contains("gear_backlash") && html.contains("<img src=\"errors.svg\""));
+    let _ = std::fs::remove_dir_all(&d);
+}
+
+#[test]
+fn calibrate_auto_and_predict_carry_the_extended_model() {
+    let d = dir("auto");
+    let data = generate("iiwa7_thermal.toml", &d.join("data"));
+    let model = d.join("model.json");
+    let o = robocal(&[
+        "calibrate",
+        "--data",
+        data.to_str().unwrap(),
+        "--model",
+        "auto",
+        "--out",
+        model.to_str().unwrap(),
+        "--json",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let v: Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(v["model"], "kinematic+thermal_drift");
+    let file: Value = serde_json::from_str(&std::fs::read_to_string(&model).unwrap()).unwrap();
+    assert_eq!(file["model"], "kinematic+thermal_drift");
+    assert!(file["extensions"]["values"].is_array());
+    let pred = d.join("pred.csv");
+    let o = robocal(&[
+        "predict",
+        "--model",
+        model.to_str().unwrap(),
+        "--data",
+        data.to_str().unwrap(),
+        "--out",
+        pred.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let text = std::fs::read_to_string(&pred).unwrap();
+    assert!(text.starts_with("pose,x,y,z"));
+    assert_eq!(text.lines().count(), 201);
+    // Poses without the temperature column cannot be predicted by a thermal model: say which column.
+    let poses = d.join("poses.csv");
+    std::fs::write(&poses, "pose,q1,q2,q3,q4,q5,q6,q7\n0,0,0.5,0,-1,0,0.5,0\n").unwrap();
+    let o = robocal(&[
+        "predict",
+        "--model",
+        model.to_str().unwrap(),
+        "--data",
+        poses.to_str().unwrap(),
+        "--out",
+        d.join("p2.csv").to_str().unwrap(),
+    ]);
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(stderr(&o).contains("temp"), "{}", stderr(&o));
+    let _ = std::fs::remove_dir_all(&d);
+}
+
+#[test]
+fn bad_input_exits_2_with_a_one_line_message() {
+    let d = dir("bad");
+    let data = generate("iiwa7_clean.toml", &d.join("data"));
+    let data = data.to_str().unwrap();
+    let cases: Vec<(Vec<&str>, &str)> = vec![
+        (
+            vec!["diagnose", "--data", "/nonexistent/m.csv"],
+            "/nonexistent/m.csv",
+        ),
+        (
+            vec!["diagnose", "--data", data, "--test-fraction", "0"],
+            "--test-fraction",
+        ),
+        (vec!["diagnose", "--data", data, "--alpha", "2"], "--alpha"),
+        (
+            vec![
+                "calibrate",
+                "--data",
+                data,
+                "--model",
+                "kinematic+gravity",
+                "--out",
+                "/tmp/x.json",
+            ],
+            "gravity",
+        ),
+        (
+            vec![
+                "calibrate",
+                "--data",
+                data,
+                "--model",
+                "kinematic+learned:magic",
+                "--out",
+                "/tmp/x.json",
+            ],
+            "magic",
+        ),
+        (vec!["demo", "--poses", "10"], "--poses"),
+    ];
+    for (args, needle) in cases {
+        let o = robocal(&args);
+        assert_eq!(o.status.code(), Some(2), "{args:?}: {}", stderr(&o));
+        let e = stderr(&o);
+        assert!(e.contains(needle), "{args:?}: {e}");
+        assert!(!e.contains("panicked"), "{args:?}: {e}");
+    }
+    // A thermal model on a table without temperature or time.
+    let csv = d.join("no_temp.csv");
+    let table = sim::measurement_table::read(Path::new(data)).unwrap();
+    let mut plain = table.clone();
+    plain.t = None;
+    plain.temp = None;
+    sim::measurement_table::write(&csv, &plain).unwrap();
+    let o = robocal(&[
+        "calibrate",
+        "--data",
+        csv.to_str().unwrap(),
+        "--model",
+        "kinematic+thermal_drift",
+        "--out",
+        d.join("m.json").to_str().unwrap(),
+    ]);
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(stderr(&o).contains("temp"), "{}", stderr(&o));
+    let _ = std::fs::remove_dir_all(&d);
+}
+
+#[test]
+fn demo_runs_the_whole_loop_and_is_reproducible() {
+    let d = dir("demo");
+    let run = |out: &Path| {
+        let o = robocal(&[
+            "demo",
+            "--seed",
+            "3",
+            "--out",
+            out.to_str().unwrap(),
+            "--json",
+        ]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        serde_json::from_slice::<Value>(&o.stdout).unwrap()
+    };
+    let a = run(&d.join("a"));
+    let b = run(&d.join("b"));
+    assert_eq!(a["hidden"], b["hidden"]);
+    assert_eq!(a["diagnosis"], b["diagnosis"]);
+    assert!(d.join("a/report/index.html").is_file());
+    assert_eq!(
+        std::fs::read(d.join("a/measurements.parquet")).unwrap(),
+        std::fs::read(d.join("b/measurements.parquet")).unwrap()
+    );
+    assert_eq!(a["match"], Value::Bool(true), "{}", a["hidden"]);
+    let _ = std::fs::remove_dir_all(&d);
+}
