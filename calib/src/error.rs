@@ -46,15 +46,6 @@ pub enum CalibError {
         /// Distinct poses needed at least (one more equation than parameters, for the noise estimate).
         needed: usize,
     },
-    /// A calibration model name that is not (yet) implemented.
-    #[error(
-        "--model {name}: not available yet; this version identifies the `kinematic` model only \
-         (joint_compliance, gear_backlash, thermal_drift, auto and learned models come with a later version)"
-    )]
-    UnsupportedModel {
-        /// The name as given.
-        name: String,
-    },
     /// A calibrated-model file (MODEL.json) is unreadable or inconsistent.
     #[error("{file}: {message}")]
     ModelFile {
