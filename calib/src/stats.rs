@@ -48,7 +48,7 @@ pub fn residual_stats(
         let mut s = ChainScratch::new(model.nq());
         let mut q_buf = vec![0.0; model.nq()];
         let (mut sum2r, mut maxr) = (0.0, 0.0f64);
-        for r in 0..obs.len() {
+        for (r, meas) in o.iter().enumerate() {
             predict_row(
                 &chain,
                 &mut s,
@@ -58,7 +58,7 @@ pub fn residual_stats(
                 obs.q_row(r),
                 &mut q_buf,
             );
-            let a = log_rotation(&(s.r_tracker_target * o[r].transpose())).norm();
+            let a = log_rotation(&(s.r_tracker_target * meas.transpose())).norm();
             sum2r += a * a;
             maxr = maxr.max(a);
         }

@@ -243,8 +243,8 @@ fn the_model_file_carries_extensions_and_learned_correction_to_predict() {
     .unwrap();
     let err = position_errors(&model, &cal.params, &obs);
     let learned = cal.learned.as_ref().unwrap();
-    for r in 0..t.len() {
-        let expect = obs.position[r] + err[r] + learned.predict(t.q_row(r));
+    for (r, e) in err.iter().enumerate() {
+        let expect = obs.position[r] + e + learned.predict(t.q_row(r));
         let got = Vector3::from(out.position[r]);
         assert!((got - expect).norm() < 1e-12, "row {r}: {got} vs {expect}");
     }

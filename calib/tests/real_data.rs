@@ -78,3 +78,36 @@ fn wam_real_data_held_out_error_drops() {
     // Cable-driven, 2 mm repeatability: a kinematic model removes the geometric part only.
     assert!(after < 0.7 * before, "{after:e} vs {before:e}");
 }
+
+/// Diagnosis on the real data: what it adopts must pay on the held-out poses, and nothing it names may
+/// make them worse. (The findings themselves are recorded in the README, not asserted: nobody knows the
+/// truth of a real robot.)
+#[test]
+fn diagnose_on_real_data_gains_on_held_out_poses() {
+    use calib::diagnose::{DiagnoseOptions, diagnose};
+    for (robot, file) in [
+        ("ur5", "ur5_jacobi2025_grid.csv"),
+        ("wam", "wam_jacobi2025_grid.csv"),
+    ] {
+        let model = robots::load_builtin(robot).unwrap();
+        let table = sim::measurement_table::read(&data(file)).unwrap();
+        let d = diagnose(&model, &table, file, &DiagnoseOptions::default()).unwrap();
+        let first = &d.steps[0];
+        let last = d.steps.last().unwrap();
+        eprintln!(
+            "{robot}: {} -> test RMS {:.1} -> {:.1} µm; findings {:?}; unexplained: {}",
+            d.model,
+            first.test_rms_m * 1e6,
+            last.test_rms_m * 1e6,
+            d.findings
+                .iter()
+                .map(|f| (f.cause.as_str(), f.joints.clone(), f.gain))
+                .collect::<Vec<_>>(),
+            d.unexplained.note
+        );
+        for f in &d.findings {
+            assert!(f.gain > 0.0 && f.test_z > 3.0, "{robot}: {f:?}");
+        }
+        assert!(last.test_rms_m <= first.test_rms_m, "{robot}");
+    }
+}

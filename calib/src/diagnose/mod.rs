@@ -483,10 +483,14 @@ fn evidence(
     let values: Vec<String> = named
         .iter()
         .map(|p| {
-            let extra = if cause == Cause::JointCompliance && p.value > 0.0 {
-                format!(", stiffness {:.3} N m/rad", 1.0 / p.value)
-            } else {
-                String::new()
+            let extra = match cause {
+                Cause::JointCompliance if p.value > 0.0 => {
+                    format!(" (stiffness {:.0} N m/rad)", 1.0 / p.value)
+                }
+                Cause::JointCompliance => {
+                    " (negative: no spring; it stands in for another error)".to_string()
+                }
+                _ => String::new(),
             };
             format!(
                 "{} {:.3e} ± {:.1e} {}{extra}",
