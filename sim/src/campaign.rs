@@ -139,6 +139,12 @@ pub enum Sampling {
         /// Margin kept from each limit (rad or m).
         joint_margin_rad: f64,
     },
+    /// Joint positions given directly (rad or m, one list per pose), e.g. chosen by a pose planner;
+    /// cycled or cut to `poses` like a file.
+    List {
+        /// Joint positions per pose.
+        q: Vec<Vec<f64>>,
+    },
     /// Joint positions from a measurement table.
     File {
         /// CSV or Parquet measurement table, as opened.
@@ -613,6 +619,21 @@ fn pose_list(model: &Model, spec: &CampaignSpec, seed: u64, file: &str) -> Resul
                 ));
             }
             cycle(list, true)
+        }
+        Sampling::List { q } => {
+            for (k, qk) in q.iter().enumerate() {
+                if qk.len() != n {
+                    return Err(err(
+                        file,
+                        "campaign",
+                        format!(
+                            "pose {k} of the given list has {} joint values, but the robot has {n} joints",
+                            qk.len()
+                        ),
+                    ));
+                }
+            }
+            cycle(q.clone(), true)
         }
         Sampling::File { path, .. } => {
             let table = crate::measurement_table::read(path)?;

@@ -7,6 +7,7 @@ mod info;
 mod plan_poses;
 mod predict;
 mod robot_arg;
+mod sweep;
 
 use clap::{Parser, Subcommand};
 
@@ -32,6 +33,10 @@ enum Command {
     Predict(predict::Args),
     /// Choose the poses that determine the parameters best.
     PlanPoses(plan_poses::Args),
+    /// Sensitivity study: generate, calibrate and score runs over noise levels and pose counts.
+    Sweep(sweep::Args),
+    /// Join the shards of one sweep into the file a single run would have written.
+    SweepMerge(sweep::MergeArgs),
 }
 
 /// A failed command: bad input (exit 2) or a runtime failure (exit 1).
@@ -79,6 +84,8 @@ pub fn run(cli: Cli) -> CliResult {
         Command::Calibrate(a) => calibrate::run(a),
         Command::Predict(a) => predict::run(a),
         Command::PlanPoses(a) => plan_poses::run(a),
+        Command::Sweep(a) => sweep::run(a),
+        Command::SweepMerge(a) => sweep::run_merge(a),
     }
 }
 
