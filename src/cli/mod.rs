@@ -1,6 +1,7 @@
 //! Subcommands, one module each, and the error type that decides the exit code.
 
 mod calibrate;
+mod dataset;
 mod fk;
 mod generate;
 mod info;
@@ -37,6 +38,8 @@ enum Command {
     Sweep(sweep::Args),
     /// Join the shards of one sweep into the file a single run would have written.
     SweepMerge(sweep::MergeArgs),
+    /// Write a versioned benchmark suite (train/test data, truth, SHA-256 manifest).
+    Dataset(dataset::Args),
 }
 
 /// A failed command: bad input (exit 2) or a runtime failure (exit 1).
@@ -86,6 +89,7 @@ pub fn run(cli: Cli) -> CliResult {
         Command::PlanPoses(a) => plan_poses::run(a),
         Command::Sweep(a) => sweep::run(a),
         Command::SweepMerge(a) => sweep::run_merge(a),
+        Command::Dataset(a) => dataset::run(a),
     }
 }
 

@@ -281,11 +281,7 @@ pub fn run(args: Args) -> CliResult {
     let dim = if orientation { 6 } else { 3 };
     let needed = (rank + 1).div_ceil(dim);
     for &n in &poses {
-        // The split holds out round(f · n) poses (at least 1, never all): see calib::stats.
-        let n_test = ((args.test_fraction * n as f64).round() as usize)
-            .max(1)
-            .min(n.saturating_sub(1));
-        let n_train = n - n_test;
+        let (n_train, n_test) = sw::split_counts(n, args.test_fraction);
         if n_train < needed {
             return Err(input(
                 "--poses",

@@ -14,7 +14,8 @@
 //! 1. resolves the scenario with the run's seed, pose count and noise multiplier and simulates the
 //!    campaign in memory (`sim::generate`, the same code as `robocal generate`);
 //! 2. splits the poses into training and held-out ones (`calib::stats::split_by_pose`, as `robocal
-//!    calibrate --test-fraction F --seed S`) and calibrates the kinematic model on the training rows
+//!    calibrate --test-fraction F --seed S`; with planned selection the training poses are the planned
+//!    ones and the held-out ones random, see [`split_counts`]) and calibrates the kinematic model on the training rows
 //!    (`calib::calibrate`, default options);
 //! 3. scores the result against the truth: the held-out prediction error against the noise-free true
 //!    target positions and what the covariance predicts for it, the error of each identifiable
@@ -206,32 +207,51 @@ pub fn quantile(sorted: &[f64], q: f64) -> f64 {
     sorted[lo] + (h - lo as f64) * (sorted[hi] - sorted[lo])
 }
 
-/// The poses of a planned run: D-optimal choice of `poses` configurations among `candidates` drawn by
-/// the scenario's own campaign (so they obey its reachability rules), then the campaign re-planned on
-/// exactly those configurations.
+/// Held-out and training pose counts of `n` poses for the test fraction `f`, by the rule of
+/// `calib::stats::split_by_pose`: `round(f · n)` held out, at least one when `f > 0` and `n ≥ 2`, never
+/// all. Returns `(train, test)`.
+pub fn split_counts(n: usize, f: f64) -> (usize, usize) {
+    let mut t = (f.clamp(0.0, 1.0) * n as f64).round() as usize;
+    if f > 0.0 && t == 0 && n >= 2 {
+        t = 1;
+    }
+    t = t.min(n.saturating_sub(1));
+    (n - t, t)
+}
+
+/// The poses of a planned run: `train` configurations chosen D-optimally among `candidates` drawn by
+/// the scenario's own campaign (so they obey its reachability rules), followed by `test` held-out
+/// configurations, the first candidates not chosen (random poses: the score is over the workspace,
+/// not over the planner's favourite poses). The campaign is re-planned on exactly that list, so poses
+/// `0 … train − 1` are the training poses.
 fn planned_plan(
     res: &sim::scenario::Resolved,
-    poses: usize,
+    (train, test): (usize, usize),
     candidates: usize,
     options: &CalibrationOptions,
 ) -> Result<sim::campaign::Plan, RunError> {
     let mut cand_res = res.clone();
-    cand_res.campaign.poses = Some(candidates.max(poses));
+    cand_res.campaign.poses = Some(candidates.max(2 * (train + test)));
     let cand = sim::generate::plan_of(&cand_res).map_err(|e| RunError::Input(e.to_string()))?;
     let configs: Vec<Vec<f64>> = (0..cand.n_poses)
         .map(|k| cand.q_row(k * cand.repeats).to_vec())
         .collect();
-    let mut po = calib::plan::PlanOptions::new(configs.len(), poses, res.seed);
+    let mut po = calib::plan::PlanOptions::new(configs.len(), train, res.seed);
     po.target_offset = res.tracker.p_flange;
     po.calibration = *options;
     po.random_sets = 0;
     let chosen = calib::plan::select_from(&res.model, &configs, &po)
         .map_err(|e| RunError::Input(e.to_string()))?;
+    let mut list: Vec<Vec<f64>> = chosen.iter().map(|&c| configs[c].clone()).collect();
+    list.extend(
+        (0..configs.len())
+            .filter(|c| !chosen.contains(c))
+            .take(test)
+            .map(|c| configs[c].clone()),
+    );
     let mut spec = res.campaign.clone();
-    spec.poses = Some(poses);
-    spec.sampling = sim::campaign::Sampling::List {
-        q: chosen.iter().map(|&c| configs[c].clone()).collect(),
-    };
+    spec.poses = Some(train + test);
+    spec.sampling = sim::campaign::Sampling::List { q: list };
     sim::campaign::plan(&res.model, &spec, res.seed, &res.scenario.label)
         .map_err(|e| RunError::Input(e.to_string()))
 }
@@ -257,7 +277,7 @@ fn run_inner(ctx: &Context<'_>, id: &RunId) -> Result<SweepRow, RunError> {
         }
         Selection::Planned => planned_plan(
             &res,
-            id.poses,
+            split_counts(id.poses, spec.test_fraction),
             spec.candidates.unwrap_or(10 * id.poses),
             &ctx.options,
         )?,
@@ -273,7 +293,13 @@ fn run_inner(ctx: &Context<'_>, id: &RunId) -> Result<SweepRow, RunError> {
         .iter()
         .map(|r| Vector3::from(r.reading.p_true))
         .collect();
-    let (train_rows, test_rows) = calib::stats::split_by_pose(&table, spec.test_fraction, id.seed);
+    let (train_rows, test_rows) = match spec.selection {
+        Selection::Random => calib::stats::split_by_pose(&table, spec.test_fraction, id.seed),
+        Selection::Planned => {
+            let n_train = split_counts(id.poses, spec.test_fraction).0 as i64;
+            (0..table.len()).partition(|&r| table.pose[r] < n_train)
+        }
+    };
     let train = Dataset {
         table: &table,
         rows: train_rows,
@@ -628,6 +654,31 @@ mod tests {
         assert!((quantile(&v, 0.9) - 3.7).abs() < 1e-12);
         assert_eq!(quantile(&[5.0], 0.9), 5.0);
         assert!(quantile(&[], 0.5).is_nan());
+    }
+
+    #[test]
+    fn split_counts_follow_calibs_split_by_pose() {
+        use sim::measurement_table::{MeasurementTable, OptionalColumns, Row};
+        for n in 1..120 {
+            let mut t = MeasurementTable::new(1, OptionalColumns::NONE);
+            for k in 0..n {
+                t.push_row(&Row {
+                    pose: k as i64,
+                    q: &[0.0],
+                    position: [0.0; 3],
+                    ..Row::default()
+                })
+                .unwrap();
+            }
+            for f in [0.05, 0.3, 0.5, 0.9] {
+                let (train, test) = calib::stats::split_by_pose(&t, f, 3);
+                assert_eq!(
+                    split_counts(n, f),
+                    (train.len(), test.len()),
+                    "n {n}, f {f}"
+                );
+            }
+        }
     }
 
     #[test]
