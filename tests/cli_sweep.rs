@@ -69,6 +69,8 @@ fn columns(path: &Path) -> BTreeMap<String, Vec<f64>> {
             } else if let Some(x) = a.downcast_ref::<UInt64Array>() {
                 // Seeds: keep them exact as bit patterns through f64::from_bits.
                 x.values().iter().map(|v| f64::from_bits(*v)).collect()
+            } else if let Some(x) = a.downcast_ref::<arrow_array::Int8Array>() {
+                x.values().iter().map(|v| f64::from(*v)).collect()
             } else if let Some(x) = a.downcast_ref::<BooleanArray>() {
                 (0..x.len())
                     .map(|i| f64::from(u8::from(x.value(i))))
@@ -204,7 +206,15 @@ fn held_out_error_follows_the_predicted_inverse_sqrt_trend() {
         .sum::<f64>()
         / n_comb;
     eprintln!("pooled mean z² {z2:.3} over {n_comb} combinations");
-    assert!(c["param_combinations"].iter().all(|n| *n == 31.0));
+    eprintln!(
+        "combinations per run: {:?} rank {:?}",
+        c["param_combinations"], c["rank"]
+    );
+    // Every identifiable combination of the calibration is scored: at most 31 for the iiwa 7 (4R + 2P +
+    // 3); fewer where the scenario's reflector, on the last joint's axis, leaves weak ones below
+    // calibrate's singular-value floor.
+    assert_eq!(c["param_combinations"], c["rank"]);
+    assert!(c["rank"].iter().all(|n| (28.0..=31.0).contains(n)));
     assert!((0.75..=1.35).contains(&z2), "pooled mean z² {z2}");
     let _ = std::fs::remove_dir_all(&d);
 }

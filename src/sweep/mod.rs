@@ -468,6 +468,7 @@ fn run_inner(ctx: &Context<'_>, id: &RunId) -> Result<SweepRow, RunError> {
         } else {
             (nom2 / nt).sqrt()
         },
+        rank: r as i64,
         param_combinations: combos,
         param_z2_mean: if combos > 0 {
             z2 / combos as f64
