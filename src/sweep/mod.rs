@@ -715,11 +715,11 @@ mod tests {
         // Run 17 = cell 4 (17 / 4), rep 1; cell 4 = noise index 1, pose index 1.
         let id = spec.run_id(17);
         assert_eq!((id.cell, id.rep, id.noise_scale, id.poses), (4, 1, 1.0, 40));
-        let mut seen = vec![0; 24];
+        let mut seen = [0; 24];
         for k in 0..5 {
-            for r in 0..24 {
+            for (r, count) in seen.iter_mut().enumerate() {
                 if (Subset::Shard { k, n: 5 }).contains(&spec.run_id(r)) {
-                    seen[r] += 1;
+                    *count += 1;
                 }
             }
         }
