@@ -814,6 +814,27 @@ mod tests {
     }
 
     #[test]
+    fn a_given_pose_list_is_cycled_and_checked() {
+        let m = robots::load_builtin("iiwa7").unwrap();
+        let a = vec![0.1, 0.5, 0.0, -1.0, 0.0, 0.7, 0.2];
+        let b = vec![-0.3, 0.8, 0.4, -1.4, 0.1, 0.5, -0.6];
+        let mut spec = CampaignSpec::random(5);
+        spec.sampling = Sampling::List {
+            q: vec![a.clone(), b.clone()],
+        };
+        let p = plan(&m, &spec, 3, "test").unwrap();
+        assert_eq!(p.n_poses, 5);
+        for (k, want) in [&a, &b, &a, &b, &a].iter().enumerate() {
+            assert_eq!(p.q_row(k), want.as_slice());
+        }
+        spec.sampling = Sampling::List {
+            q: vec![a, vec![0.0; 6]],
+        };
+        let e = plan(&m, &spec, 3, "test").unwrap_err().to_string();
+        assert!(e.contains("pose 1") && e.contains("6 joint values"), "{e}");
+    }
+
+    #[test]
     fn move_directions_follow_the_sign_of_the_motion() {
         let m = robots::load_builtin("iiwa7").unwrap();
         let mut spec = CampaignSpec::random(30);
