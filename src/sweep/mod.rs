@@ -496,6 +496,8 @@ pub struct CellSummary {
     pub runs: usize,
     /// Runs whose fit did not converge.
     pub not_converged: usize,
+    /// Median of `sigma_rms_m`: the tracker noise per axis (m).
+    pub sigma_median_m: f64,
     /// Median of `test_error_rms_m` (m).
     pub test_error_median_m: f64,
     /// Its 10 % quantile (m).
@@ -535,6 +537,7 @@ pub fn summarize(spec: &SweepSpec, rows: &[SweepRow]) -> Vec<CellSummary> {
             poses: spec.poses[cell % np],
             runs: mine.len(),
             not_converged: mine.iter().filter(|r| !r.converged).count(),
+            sigma_median_m: quantile(&sorted(&|r| r.sigma_rms_m), 0.5),
             test_error_median_m: quantile(&err, 0.5),
             test_error_p10_m: quantile(&err, 0.1),
             test_error_p90_m: quantile(&err, 0.9),
@@ -549,12 +552,13 @@ pub fn summarize(spec: &SweepSpec, rows: &[SweepRow]) -> Vec<CellSummary> {
 /// The summary table (text for stderr).
 pub fn summary_text(cells: &[CellSummary]) -> String {
     let mut s = String::from(
-        " noise  poses  runs   held-out error vs truth (µm): median [10 %, 90 %]   predicted   measured/predicted   z² mean   condition\n",
+        " noise  σ (µm)  poses  runs   held-out error vs truth (µm): median [10 %, 90 %]   predicted   measured/predicted   z² mean   condition\n",
     );
     for c in cells {
         s.push_str(&format!(
-            " {:>5}  {:>5}  {:>4}   {:>10.3} [{:>9.3}, {:>9.3}]              {:>9.3}   {:>18.3}   {:>7.3}   {:>9.3e}{}\n",
+            " {:>5}  {:>6.2}  {:>5}  {:>4}   {:>10.3} [{:>9.3}, {:>9.3}]              {:>9.3}   {:>18.3}   {:>7.3}   {:>9.3e}{}\n",
             c.noise_scale,
+            c.sigma_median_m * 1e6,
             c.poses,
             c.runs,
             c.test_error_median_m * 1e6,

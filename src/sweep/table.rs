@@ -294,6 +294,17 @@ mod tests {
     }
 
     #[test]
+    fn every_column_is_documented_in_docs_sweep_md() {
+        let doc = include_str!("../../docs/sweep.md");
+        for (name, _) in COLUMNS {
+            assert!(
+                doc.contains(&format!("| `{name}` |")),
+                "docs/sweep.md misses column {name}"
+            );
+        }
+    }
+
+    #[test]
     fn a_file_that_is_not_a_sweep_is_refused_by_name() {
         let dir = std::env::temp_dir().join(format!("robocal_sweep_bad_{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
