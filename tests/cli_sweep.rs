@@ -459,6 +459,25 @@ fn bad_input_exits_2_naming_the_flag() {
         ),
         (
             [
+                "sweep",
+                "--scenario",
+                &s,
+                "--noise",
+                "1",
+                "--poses",
+                "30",
+                "--reps",
+                "1",
+                "--out",
+                "/nonexistent/x.parquet",
+            ]
+            .iter()
+            .map(|x| x.to_string())
+            .collect(),
+            "--out",
+        ),
+        (
+            [
                 base("1", "30", "1"),
                 vec!["--test-fraction".into(), "0".into()],
             ]

@@ -268,6 +268,15 @@ pub fn run(args: Args) -> CliResult {
         .and_then(|c| c.checked_mul(reps))
         .filter(|r| *r <= 100_000_000)
         .ok_or_else(|| input("--reps", &args.reps, "the grid has more than 10⁸ runs"))?;
+    if let Some(dir) = args.out.parent().filter(|d| !d.as_os_str().is_empty())
+        && !dir.is_dir()
+    {
+        return Err(input(
+            "--out",
+            &args.out.display().to_string(),
+            &format!("folder {} does not exist", dir.display()),
+        ));
+    }
     let scenario = Scenario::load(&args.scenario)?;
     // Check the scenario and the smallest pose count once, before any work.
     let probe = scenario.resolve(&Overrides {

@@ -350,16 +350,20 @@ fn run_inner(ctx: &Context<'_>, id: &RunId) -> Result<SweepRow, RunError> {
 
     // Held-out poses: error against the truth and the covariance's prediction.
     let (mut e2, mut emax, mut pred2) = (0.0, 0.0f64, 0.0);
-    let mut jl = DMatrix::zeros(3, r);
+    // trace(J C Jᵀ) = ‖J L‖²_F, accumulated row by row without allocating.
     for &row in &test.rows {
         chain.forward(&mut scratch, table.q_row(row));
         let e = (scratch.p_tracker - p_true[row]).norm();
         e2 += e * e;
         emax = emax.max(e);
         chain.position_jacobian(&scratch, &layout, &mut jbuf);
-        let j = DMatrix::from_row_slice(3, np, &jbuf);
-        j.mul_to(&l, &mut jl);
-        pred2 += jl.norm_squared();
+        for a in 0..3 {
+            let ja = &jbuf[a * np..(a + 1) * np];
+            for c in 0..r {
+                let v: f64 = ja.iter().zip(l.column(c).iter()).map(|(x, y)| x * y).sum();
+                pred2 += v * v;
+            }
+        }
     }
     let nt = test.rows.len().max(1) as f64;
     let nominal = Chain::new(model, &cal.before);
