@@ -24,11 +24,12 @@
 
 pub mod table;
 
-use calib::calibrate::{CalibrationOptions, Dataset, calibrate};
+use calib::calibrate::{Calibration, CalibrationOptions, Dataset, calibrate};
 use calib::chain::{Chain, ChainScratch};
 use calib::params::ParamLayout;
 use nalgebra::{DMatrix, DVector, Vector3};
 use sim::campaign::splitmix64;
+use sim::measurement_table::MeasurementTable;
 use sim::scenario::{Overrides, Scenario};
 use table::SweepRow;
 
@@ -325,97 +326,10 @@ fn run_inner(ctx: &Context<'_>, id: &RunId) -> Result<SweepRow, RunError> {
     let report = &cal.report;
     let model = &res.model;
     let layout = ParamLayout::new(model, cal.params.r_flange_target.is_some());
-    let np = layout.len();
 
-    // L with C = L Lᵀ: L = σ̂ D V_r Σ_r⁻¹ (np × r), σ̂² the variance factor of the covariance.
-    let sub = &cal.subspace;
-    let r = sub.rank;
-    let vf = if report.dof > 0 {
-        report.chi2_per_dof
-    } else {
-        1.0
-    };
-    let sf = vf.sqrt();
-    let mut l = DMatrix::zeros(np, r);
-    for c in 0..r {
-        let s = sub.singular_values[c];
-        for k in 0..np {
-            l[(k, c)] = sf * sub.scales[k] * sub.v[(k, c)] / s;
-        }
-    }
-
-    let chain = Chain::new(model, &cal.params);
-    let mut scratch = ChainScratch::new(model.nq());
-    let mut jbuf = vec![0.0; 3 * np];
-
-    // Held-out poses: error against the truth and the covariance's prediction.
-    let (mut e2, mut emax, mut pred2) = (0.0, 0.0f64, 0.0);
-    // trace(J C Jᵀ) = ‖J L‖²_F, accumulated row by row without allocating.
-    for &row in &test.rows {
-        chain.forward(&mut scratch, table.q_row(row));
-        let e = (scratch.p_tracker - p_true[row]).norm();
-        e2 += e * e;
-        emax = emax.max(e);
-        chain.position_jacobian(&scratch, &layout, &mut jbuf);
-        for a in 0..3 {
-            let ja = &jbuf[a * np..(a + 1) * np];
-            for c in 0..r {
-                let v: f64 = ja.iter().zip(l.column(c).iter()).map(|(x, y)| x * y).sum();
-                pred2 += v * v;
-            }
-        }
-    }
-    let nt = test.rows.len().max(1) as f64;
-    let nominal = Chain::new(model, &cal.before);
-    let mut nom2 = 0.0;
-    for &row in &test.rows {
-        nominal.forward(&mut scratch, table.q_row(row));
-        nom2 += (scratch.p_tracker - p_true[row]).norm_squared();
-    }
-
-    // Identifiable combinations at the training poses (one row per distinct pose): B = J L = U S Wᵀ;
-    // the combinations are U's columns, predicted σ S, error z = S⁻¹ Uᵀ (p_est − p_true).
-    let mut first_rows: Vec<usize> = Vec::with_capacity(train.rows.len());
-    let mut last_pose = None;
-    for &row in &train.rows {
-        if last_pose != Some(table.pose[row]) {
-            first_rows.push(row);
-            last_pose = Some(table.pose[row]);
-        }
-    }
-    let m = 3 * first_rows.len();
-    let mut jtrain = DMatrix::zeros(m, np);
-    let mut d = DVector::zeros(m);
-    for (i, &row) in first_rows.iter().enumerate() {
-        chain.forward(&mut scratch, table.q_row(row));
-        chain.position_jacobian(&scratch, &layout, &mut jbuf);
-        for a in 0..3 {
-            for k in 0..np {
-                jtrain[(3 * i + a, k)] = jbuf[a * np + k];
-            }
-            d[3 * i + a] = scratch.p_tracker[a] - p_true[row][a];
-        }
-    }
-    let b = &jtrain * &l;
-    let (mut z2, mut zmax, mut beyond, mut combos) = (0.0, 0.0f64, 0i64, 0i64);
-    if r > 0 {
-        let svd = b.svd(true, false);
-        if let Some(u) = &svd.u {
-            let smax = svd.singular_values.max();
-            for (c, &s) in svd.singular_values.iter().enumerate() {
-                if s <= 1e-8 * smax || s == 0.0 {
-                    continue;
-                }
-                let z = u.column(c).dot(&d) / s;
-                combos += 1;
-                z2 += z * z;
-                zmax = zmax.max(z.abs());
-                if z.abs() > 3.0 {
-                    beyond += 1;
-                }
-            }
-        }
-    }
+    let l = covariance_factor(&cal);
+    let held = held_out_scores(model, &cal, &layout, &l, &table, &test.rows, &p_true);
+    let scores = parameter_scores(model, &cal, &layout, &l, &table, &train.rows, &p_true);
 
     let rows_n = simulation.rows.len().max(1) as f64;
     let sigma_rms = (simulation
@@ -456,35 +370,177 @@ fn run_inner(ctx: &Context<'_>, id: &RunId) -> Result<SweepRow, RunError> {
         chi2_per_dof: report.chi2_per_dof,
         train_rms_m: report.after.train.rms_m,
         test_rms_measured_m: report.after.test.as_ref().map_or(f64::NAN, |t| t.rms_m),
-        test_error_rms_m: if test.rows.is_empty() {
-            f64::NAN
-        } else {
-            (e2 / nt).sqrt()
-        },
-        test_error_max_m: if test.rows.is_empty() { f64::NAN } else { emax },
-        test_error_predicted_m: if test.rows.is_empty() {
-            f64::NAN
-        } else {
-            (pred2 / nt).sqrt()
-        },
-        test_error_nominal_rms_m: if test.rows.is_empty() {
-            f64::NAN
-        } else {
-            (nom2 / nt).sqrt()
-        },
-        rank: r as i64,
-        param_combinations: combos,
-        param_z2_mean: if combos > 0 {
-            z2 / combos as f64
-        } else {
-            f64::NAN
-        },
-        param_z_abs_max: zmax,
-        param_beyond_3sigma: beyond,
+        test_error_rms_m: held.rms_m,
+        test_error_max_m: held.max_m,
+        test_error_predicted_m: held.predicted_m,
+        test_error_nominal_rms_m: held.nominal_rms_m,
+        rank: cal.subspace.rank as i64,
+        param_combinations: scores.combinations as i64,
+        param_z2_mean: scores.z2_mean,
+        param_z_abs_max: scores.z_abs_max,
+        param_beyond_3sigma: scores.beyond_3sigma as i64,
         condition_number: o.condition_number,
         sigma_min: o.sigma_min,
         log_det_information: o.log_det_information,
     })
+}
+
+/// `L` (np × r, physical units) with `C = L Lᵀ` the calibration's covariance:
+/// `L = σ̂ D V_r Σ_r⁻¹`, `σ̂²` the variance factor (`χ²/dof`, or 1 without degrees of freedom).
+fn covariance_factor(cal: &Calibration) -> DMatrix<f64> {
+    let sub = &cal.subspace;
+    let (np, r) = (sub.n_params(), sub.rank);
+    let vf = if cal.report.dof > 0 {
+        cal.report.chi2_per_dof
+    } else {
+        1.0
+    };
+    let sf = vf.sqrt();
+    let mut l = DMatrix::zeros(np, r);
+    for c in 0..r {
+        let s = sub.singular_values[c];
+        for k in 0..np {
+            l[(k, c)] = sf * sub.scales[k] * sub.v[(k, c)] / s;
+        }
+    }
+    l
+}
+
+/// Held-out scores (m; NaN without held-out rows).
+struct HeldOut {
+    rms_m: f64,
+    max_m: f64,
+    predicted_m: f64,
+    nominal_rms_m: f64,
+}
+
+/// Errors of the calibrated and of the nominal (base and target only) model against the noise-free
+/// truth `p_true` (tracker frame, m, per table row) on `rows`, and the covariance's prediction
+/// `√(mean trace(J C Jᵀ))`, with `trace(J C Jᵀ) = ‖J L‖²_F` accumulated without allocating.
+fn held_out_scores(
+    model: &sim::Model,
+    cal: &Calibration,
+    layout: &ParamLayout,
+    l: &DMatrix<f64>,
+    table: &MeasurementTable,
+    rows: &[usize],
+    p_true: &[Vector3<f64>],
+) -> HeldOut {
+    if rows.is_empty() {
+        return HeldOut {
+            rms_m: f64::NAN,
+            max_m: f64::NAN,
+            predicted_m: f64::NAN,
+            nominal_rms_m: f64::NAN,
+        };
+    }
+    let np = layout.len();
+    let chain = Chain::new(model, &cal.params);
+    let nominal = Chain::new(model, &cal.before);
+    let mut scratch = ChainScratch::new(model.nq());
+    let mut jbuf = vec![0.0; 3 * np];
+    let (mut e2, mut emax, mut pred2, mut nom2) = (0.0, 0.0f64, 0.0, 0.0);
+    for &row in rows {
+        nominal.forward(&mut scratch, table.q_row(row));
+        nom2 += (scratch.p_tracker - p_true[row]).norm_squared();
+        chain.forward(&mut scratch, table.q_row(row));
+        let e = (scratch.p_tracker - p_true[row]).norm();
+        e2 += e * e;
+        emax = emax.max(e);
+        chain.position_jacobian(&scratch, layout, &mut jbuf);
+        for a in 0..3 {
+            let ja = &jbuf[a * np..(a + 1) * np];
+            for c in 0..l.ncols() {
+                let v: f64 = ja.iter().zip(l.column(c).iter()).map(|(x, y)| x * y).sum();
+                pred2 += v * v;
+            }
+        }
+    }
+    let n = rows.len() as f64;
+    HeldOut {
+        rms_m: (e2 / n).sqrt(),
+        max_m: emax,
+        predicted_m: (pred2 / n).sqrt(),
+        nominal_rms_m: (nom2 / n).sqrt(),
+    }
+}
+
+/// Errors of the identifiable combinations in units of their predicted σ.
+struct ParameterScores {
+    combinations: usize,
+    z2_mean: f64,
+    z_abs_max: f64,
+    beyond_3sigma: usize,
+}
+
+/// The identifiable combinations at the training poses (one position per distinct pose, as in
+/// `calib/tests/recovery.rs`): `B = J L = U S Wᵀ`; the combinations are U's columns, their predicted
+/// σ the singular values `S` (m), their errors `z = S⁻¹ Uᵀ (p_estimated − p_true)`.
+fn parameter_scores(
+    model: &sim::Model,
+    cal: &Calibration,
+    layout: &ParamLayout,
+    l: &DMatrix<f64>,
+    table: &MeasurementTable,
+    rows: &[usize],
+    p_true: &[Vector3<f64>],
+) -> ParameterScores {
+    let np = layout.len();
+    let mut first_rows: Vec<usize> = Vec::with_capacity(rows.len());
+    let mut last_pose = None;
+    for &row in rows {
+        if last_pose != Some(table.pose[row]) {
+            first_rows.push(row);
+            last_pose = Some(table.pose[row]);
+        }
+    }
+    let chain = Chain::new(model, &cal.params);
+    let mut scratch = ChainScratch::new(model.nq());
+    let mut jbuf = vec![0.0; 3 * np];
+    let m = 3 * first_rows.len();
+    let mut j = DMatrix::zeros(m, np);
+    let mut d = DVector::zeros(m);
+    for (i, &row) in first_rows.iter().enumerate() {
+        chain.forward(&mut scratch, table.q_row(row));
+        chain.position_jacobian(&scratch, layout, &mut jbuf);
+        for a in 0..3 {
+            for k in 0..np {
+                j[(3 * i + a, k)] = jbuf[a * np + k];
+            }
+            d[3 * i + a] = scratch.p_tracker[a] - p_true[row][a];
+        }
+    }
+    let mut out = ParameterScores {
+        combinations: 0,
+        z2_mean: f64::NAN,
+        z_abs_max: 0.0,
+        beyond_3sigma: 0,
+    };
+    if l.ncols() == 0 || m == 0 {
+        return out;
+    }
+    let svd = (&j * l).svd(true, false);
+    let Some(u) = &svd.u else {
+        return out;
+    };
+    let smax = svd.singular_values.max();
+    let mut z2 = 0.0;
+    for (c, &s) in svd.singular_values.iter().enumerate() {
+        if s <= 1e-8 * smax || s == 0.0 {
+            continue;
+        }
+        let z = u.column(c).dot(&d) / s;
+        out.combinations += 1;
+        z2 += z * z;
+        out.z_abs_max = out.z_abs_max.max(z.abs());
+        if z.abs() > 3.0 {
+            out.beyond_3sigma += 1;
+        }
+    }
+    if out.combinations > 0 {
+        out.z2_mean = z2 / out.combinations as f64;
+    }
+    out
 }
 
 /// Per-cell statistics of a set of rows (for the summary table, the plot and `--json`).
