@@ -1,6 +1,8 @@
 //! `robocal`: robot calibration testbed command line (see `shared/spec/cli.md` and the README).
 
 mod cli;
+mod dataset;
+mod sweep;
 
 use clap::Parser;
 use std::process::ExitCode;

@@ -159,38 +159,33 @@ fn rms_position_sigma(a: &[DMatrix<f64>], pinv: &DMatrix<f64>, sigma: f64) -> f6
     (s / n).sqrt() * sigma
 }
 
-/// Selects `options.select` poses of `options.candidates` random ones for calibrating `model`.
-pub fn plan_poses(model: &Model, options: &PlanOptions) -> Result<PosePlan> {
+/// The D-optimal selection of `options.select` of `candidates` (see the module docs), with what the
+/// comparisons need.
+struct Selection {
+    a: Vec<DMatrix<f64>>,
+    r: usize,
+    set: Vec<usize>,
+    current: f64,
+    jall: DMatrix<f64>,
+    np: usize,
+    scales: nalgebra::DVector<f64>,
+}
+
+fn select(model: &Model, candidates: &[Vec<f64>], options: &PlanOptions) -> Result<Selection> {
     let bad = |field: &str, value: String, problem: String| CalibError::BadValue {
         context: "plan-poses".into(),
         field: field.into(),
         value,
         problem,
     };
-    let (n, k) = (options.candidates, options.select);
-    if k == 0 {
+    let (n, k) = (candidates.len(), options.select);
+    if k == 0 || n < k {
         return Err(bad(
             "--select",
-            "0".into(),
-            "select at least one pose".into(),
+            k.to_string(),
+            format!("select at least one pose and at most the {n} candidates"),
         ));
     }
-    if n < k {
-        return Err(bad(
-            "--candidates",
-            n.to_string(),
-            format!("fewer candidates than poses to select ({k})"),
-        ));
-    }
-    if options.sigma_m.is_nan() || options.sigma_m <= 0.0 {
-        return Err(bad(
-            "sigma",
-            format!("{:?}", options.sigma_m),
-            "must be > 0 m".into(),
-        ));
-    }
-    let mut rng = rand::rngs::StdRng::seed_from_u64(options.seed);
-    let candidates: Vec<Vec<f64>> = (0..n).map(|_| random_q(model, &mut rng)).collect();
     let layout = ParamLayout::new(model, false);
     let np = layout.len();
     let mut params = KinematicParams::nominal(model.nq(), false);
@@ -294,6 +289,81 @@ pub fn plan_poses(model: &Model, options: &PlanOptions) -> Result<PosePlan> {
             break;
         }
     }
+    Ok(Selection {
+        a,
+        r,
+        set,
+        current,
+        jall,
+        np,
+        scales,
+    })
+}
+
+/// Selects `options.select` of the given `candidates` (joint positions, rad or m) D-optimally, as
+/// [`plan_poses`] does with its random candidates (`options.candidates` and `options.seed` are not
+/// used). Returns the chosen candidate indices in selection order.
+pub fn select_from(
+    model: &Model,
+    candidates: &[Vec<f64>],
+    options: &PlanOptions,
+) -> Result<Vec<usize>> {
+    if let Some((i, c)) = candidates
+        .iter()
+        .enumerate()
+        .find(|(_, c)| c.len() != model.nq())
+    {
+        return Err(CalibError::BadValue {
+            context: "pose selection".into(),
+            field: format!("candidate {i}"),
+            value: format!("{} joint values", c.len()),
+            problem: format!("robot '{}' has {} joints", model.name, model.nq()),
+        });
+    }
+    Ok(select(model, candidates, options)?.set)
+}
+
+/// Selects `options.select` poses of `options.candidates` random ones for calibrating `model`.
+pub fn plan_poses(model: &Model, options: &PlanOptions) -> Result<PosePlan> {
+    let bad = |field: &str, value: String, problem: String| CalibError::BadValue {
+        context: "plan-poses".into(),
+        field: field.into(),
+        value,
+        problem,
+    };
+    let (n, k) = (options.candidates, options.select);
+    if k == 0 {
+        return Err(bad(
+            "--select",
+            "0".into(),
+            "select at least one pose".into(),
+        ));
+    }
+    if n < k {
+        return Err(bad(
+            "--candidates",
+            n.to_string(),
+            format!("fewer candidates than poses to select ({k})"),
+        ));
+    }
+    if options.sigma_m.is_nan() || options.sigma_m <= 0.0 {
+        return Err(bad(
+            "sigma",
+            format!("{:?}", options.sigma_m),
+            "must be > 0 m".into(),
+        ));
+    }
+    let mut rng = rand::rngs::StdRng::seed_from_u64(options.seed);
+    let candidates: Vec<Vec<f64>> = (0..n).map(|_| random_q(model, &mut rng)).collect();
+    let Selection {
+        a,
+        r,
+        set,
+        current,
+        jall,
+        np,
+        scales,
+    } = select(model, &candidates, options)?;
     let pinv = inverse_info(&a, &set, r).ok_or_else(|| CalibError::BadValue {
         context: "plan-poses".into(),
         field: "--candidates".into(),

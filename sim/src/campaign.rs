@@ -139,6 +139,12 @@ pub enum Sampling {
         /// Margin kept from each limit (rad or m).
         joint_margin_rad: f64,
     },
+    /// Joint positions given directly (rad or m, one list per pose), e.g. chosen by a pose planner;
+    /// cycled or cut to `poses` like a file.
+    List {
+        /// Joint positions per pose.
+        q: Vec<Vec<f64>>,
+    },
     /// Joint positions from a measurement table.
     File {
         /// CSV or Parquet measurement table, as opened.
@@ -614,6 +620,21 @@ fn pose_list(model: &Model, spec: &CampaignSpec, seed: u64, file: &str) -> Resul
             }
             cycle(list, true)
         }
+        Sampling::List { q } => {
+            for (k, qk) in q.iter().enumerate() {
+                if qk.len() != n {
+                    return Err(err(
+                        file,
+                        "campaign",
+                        format!(
+                            "pose {k} of the given list has {} joint values, but the robot has {n} joints",
+                            qk.len()
+                        ),
+                    ));
+                }
+            }
+            cycle(q.clone(), true)
+        }
         Sampling::File { path, .. } => {
             let table = crate::measurement_table::read(path)?;
             if table.n_joints != n {
@@ -790,6 +811,27 @@ mod tests {
         let p = (d.flange * nalgebra::Point3::from(pf)).coords;
         assert!((p - target).norm() < 1e-11);
         assert!((d.flange.rotation.matrix() - r0).amax() < 1e-11);
+    }
+
+    #[test]
+    fn a_given_pose_list_is_cycled_and_checked() {
+        let m = robots::load_builtin("iiwa7").unwrap();
+        let a = vec![0.1, 0.5, 0.0, -1.0, 0.0, 0.7, 0.2];
+        let b = vec![-0.3, 0.8, 0.4, -1.4, 0.1, 0.5, -0.6];
+        let mut spec = CampaignSpec::random(5);
+        spec.sampling = Sampling::List {
+            q: vec![a.clone(), b.clone()],
+        };
+        let p = plan(&m, &spec, 3, "test").unwrap();
+        assert_eq!(p.n_poses, 5);
+        for (k, want) in [&a, &b, &a, &b, &a].iter().enumerate() {
+            assert_eq!(p.q_row(k), want.as_slice());
+        }
+        spec.sampling = Sampling::List {
+            q: vec![a, vec![0.0; 6]],
+        };
+        let e = plan(&m, &spec, 3, "test").unwrap_err().to_string();
+        assert!(e.contains("pose 1") && e.contains("6 joint values"), "{e}");
     }
 
     #[test]

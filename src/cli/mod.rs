@@ -1,6 +1,7 @@
 //! Subcommands, one module each, and the error type that decides the exit code.
 
 mod calibrate;
+mod dataset;
 mod demo;
 mod diagnose;
 mod fk;
@@ -9,6 +10,7 @@ mod info;
 mod plan_poses;
 mod predict;
 mod robot_arg;
+mod sweep;
 
 use clap::{Parser, Subcommand};
 
@@ -38,6 +40,12 @@ enum Command {
     Diagnose(diagnose::Args),
     /// The whole loop on the embedded iiwa 7: hide an effect, generate, calibrate, diagnose, compare.
     Demo(demo::Args),
+    /// Sensitivity study: generate, calibrate and score runs over noise levels and pose counts.
+    Sweep(sweep::Args),
+    /// Join the shards of one sweep into the file a single run would have written.
+    SweepMerge(sweep::MergeArgs),
+    /// Write a versioned benchmark suite (train/test data, truth, SHA-256 manifest).
+    Dataset(dataset::Args),
 }
 
 /// A failed command: bad input (exit 2) or a runtime failure (exit 1).
@@ -87,6 +95,9 @@ pub fn run(cli: Cli) -> CliResult {
         Command::PlanPoses(a) => plan_poses::run(a),
         Command::Diagnose(a) => diagnose::run(a),
         Command::Demo(a) => demo::run(a),
+        Command::Sweep(a) => sweep::run(a),
+        Command::SweepMerge(a) => sweep::run_merge(a),
+        Command::Dataset(a) => dataset::run(a),
     }
 }
 

@@ -1,0 +1,512 @@
+//! `robocal sweep`: a sensitivity study over noise levels and pose counts (see `crate::sweep` and
+//! `docs/sweep.md`), and `robocal sweep-merge`, which joins the shards of one sweep.
+
+use super::{CliError, CliResult, print_json};
+use crate::sweep::table::{self, META_SUBSET, META_SWEEP, SweepRow};
+use crate::sweep::{self as sw, Context, Selection, Subset, SweepSpec};
+use calib::calibrate::CalibrationOptions;
+use sim::scenario::{Overrides, Scenario};
+use std::io::IsTerminal;
+use std::path::{Path, PathBuf};
+
+/// Arguments of `robocal sweep`.
+#[derive(clap::Args, Debug)]
+pub struct Args {
+    /// Scenario file (TOML), as for `robocal generate`.
+    #[arg(long, value_name = "FILE.toml")]
+    scenario: PathBuf,
+    /// Noise multipliers, comma-separated (each as `robocal generate --noise`: a factor on the
+    /// scenario's tracker noise model; 1 = the scenario's noise, 0 = none).
+    #[arg(long, value_name = "LIST", allow_hyphen_values = true)]
+    noise: String,
+    /// Poses generated per run, comma-separated (each as `robocal generate --poses`); the training set
+    /// is the part not held out (--test-fraction).
+    #[arg(long, value_name = "LIST", allow_hyphen_values = true)]
+    poses: String,
+    /// Runs (repetitions) per cell (noise level × pose count).
+    #[arg(long, value_name = "N", allow_hyphen_values = true)]
+    reps: String,
+    /// Output Parquet file, one row per run; the plot goes beside it as FILE.svg.
+    #[arg(long, value_name = "FILE.parquet")]
+    out: PathBuf,
+    /// Sweep seed; every run derives its own seed from it, its cell and its repetition.
+    #[arg(long, value_name = "N", default_value_t = 0)]
+    seed: u64,
+    /// Fitted model; only `kinematic` for now.
+    #[arg(long, value_name = "MODEL", default_value = "kinematic")]
+    model: String,
+    /// Pose selection: `random` (the scenario's campaign) or `planned` (D-optimal choice among
+    /// --candidates poses drawn by the scenario's campaign).
+    #[arg(long, value_name = "random|planned", default_value = "random")]
+    selection: String,
+    /// Candidate poses per planned run (default: 10 × the pose count).
+    #[arg(long, value_name = "N")]
+    candidates: Option<usize>,
+    /// Fraction of each run's poses held out for scoring (as `robocal calibrate --test-fraction`).
+    #[arg(long, value_name = "F", default_value_t = 0.3)]
+    test_fraction: f64,
+    /// Run only shard K of N (0 ≤ K < N): the runs whose index is K modulo N. Merge the shards
+    /// with `robocal sweep-merge`.
+    #[arg(long, value_name = "K/N")]
+    shard: Option<String>,
+    /// Run only cell K (0-based, as the `cell` column): to reproduce one cell alone.
+    #[arg(long, value_name = "K")]
+    only_cell: Option<usize>,
+    /// Print the per-cell summary as one JSON document on stdout.
+    #[arg(long)]
+    json: bool,
+}
+
+/// Arguments of `robocal sweep-merge`.
+#[derive(clap::Args, Debug)]
+pub struct MergeArgs {
+    /// Output Parquet file (byte-identical to a single-machine run of the same sweep); the plot goes
+    /// beside it as FILE.svg.
+    #[arg(long, value_name = "F.parquet")]
+    out: PathBuf,
+    /// Shard files written by `robocal sweep --shard K/N` (or `--only-cell`) of one sweep.
+    #[arg(value_name = "SHARD", required = true)]
+    shards: Vec<PathBuf>,
+    /// Print the per-cell summary as one JSON document on stdout.
+    #[arg(long)]
+    json: bool,
+}
+
+fn input(flag: &str, value: &str, problem: &str) -> CliError {
+    CliError::Input(format!("{flag} {value}: {problem}"))
+}
+
+/// Parses a comma-separated list with `parse`, refusing empty items and duplicates.
+fn parse_list<T: PartialEq + Copy>(
+    flag: &str,
+    text: &str,
+    what: &str,
+    parse: impl Fn(&str) -> Option<T>,
+) -> Result<Vec<T>, CliError> {
+    let mut out = Vec::new();
+    for (i, item) in text.split(',').enumerate() {
+        let item = item.trim();
+        let v = parse(item).ok_or_else(|| {
+            input(
+                flag,
+                text,
+                &format!("item {} ('{item}') is not {what}", i + 1),
+            )
+        })?;
+        if out.contains(&v) {
+            return Err(input(
+                flag,
+                text,
+                &format!("item {} ('{item}') repeats an earlier one", i + 1),
+            ));
+        }
+        out.push(v);
+    }
+    Ok(out)
+}
+
+/// `--noise`: finite multipliers ≥ 0.
+pub(crate) fn parse_noise(text: &str) -> Result<Vec<f64>, CliError> {
+    parse_list("--noise", text, "a finite multiplier ≥ 0", |s| {
+        s.parse::<f64>().ok().filter(|v| v.is_finite() && *v >= 0.0)
+    })
+}
+
+/// `--poses`: integers ≥ 1.
+pub(crate) fn parse_poses(text: &str) -> Result<Vec<usize>, CliError> {
+    parse_list("--poses", text, "a whole number ≥ 1", |s| {
+        s.parse::<usize>().ok().filter(|v| *v >= 1)
+    })
+}
+
+/// `--shard K/N` with `0 ≤ K < N`.
+pub(crate) fn parse_shard(text: &str) -> Result<Subset, CliError> {
+    let bad = |p: &str| input("--shard", text, p);
+    let (k, n) = text
+        .split_once('/')
+        .ok_or_else(|| bad("expected K/N, e.g. 0/4 (shard K of N, 0-based)"))?;
+    let k: usize = k
+        .trim()
+        .parse()
+        .map_err(|_| bad("K is not a whole number"))?;
+    let n: usize = n
+        .trim()
+        .parse()
+        .map_err(|_| bad("N is not a whole number"))?;
+    if n == 0 {
+        return Err(bad("N must be ≥ 1"));
+    }
+    if k >= n {
+        return Err(bad(&format!("K must be between 0 and N − 1 = {}", n - 1)));
+    }
+    Ok(Subset::Shard { k, n })
+}
+
+/// The plot's path beside `out`: `out` with the extension `svg`.
+fn plot_path(out: &Path) -> PathBuf {
+    out.with_extension("svg")
+}
+
+fn write(path: &Path, bytes: &[u8]) -> CliResult {
+    calib::io::write_atomic(path, bytes).map_err(|e| CliError::Runtime(e.to_string()))
+}
+
+/// Writes the sweep file (and, for a complete sweep, its plot) and reports on stderr / stdout.
+fn finish(
+    spec: &SweepSpec,
+    rows: &[SweepRow],
+    subset: Option<String>,
+    out: &Path,
+    json: bool,
+) -> CliResult {
+    let columns: serde_json::Map<String, serde_json::Value> = table::COLUMNS
+        .iter()
+        .map(|(n, d)| (n.to_string(), serde_json::Value::from(*d)))
+        .collect();
+    let mut meta = vec![
+        (META_SWEEP.to_string(), spec.to_json()),
+        (
+            table::META_COLUMNS.to_string(),
+            serde_json::Value::Object(columns).to_string(),
+        ),
+    ];
+    if let Some(s) = &subset {
+        meta.push((META_SUBSET.to_string(), s.clone()));
+    }
+    let bytes = table::parquet_bytes(rows, &meta).map_err(CliError::Runtime)?;
+    write(out, &bytes)?;
+    let cells = sw::summarize(spec, rows);
+    let plot = if subset.is_none() {
+        let p = plot_path(out);
+        write(&p, sw::plot_svg(spec, &cells).as_bytes())?;
+        Some(p)
+    } else {
+        None
+    };
+    eprint!("{}", sw::summary_text(&cells));
+    eprintln!(
+        "wrote {} ({} runs{}){}",
+        out.display(),
+        rows.len(),
+        subset.as_ref().map_or(String::new(), |s| format!(", {s}")),
+        plot.as_ref()
+            .map_or(String::new(), |p| format!(" and {}", p.display()))
+    );
+    if json {
+        print_json(&serde_json::json!({
+            "out": out.display().to_string(),
+            "plot": plot.map(|p| p.display().to_string()),
+            "subset": subset,
+            "runs": rows.len(),
+            "cells": cells,
+        }))?;
+    }
+    Ok(())
+}
+
+/// Runs `robocal sweep`.
+pub fn run(args: Args) -> CliResult {
+    let noise = parse_noise(&args.noise)?;
+    let poses = parse_poses(&args.poses)?;
+    let reps: usize = args
+        .reps
+        .trim()
+        .parse()
+        .ok()
+        .filter(|v| *v >= 1)
+        .ok_or_else(|| input("--reps", &args.reps, "must be a whole number ≥ 1"))?;
+    if args.model != "kinematic" {
+        super::calibrate::check_model(&args.model)?;
+        return Err(input(
+            "--model",
+            &args.model,
+            "sweep fits only the kinematic model for now",
+        ));
+    }
+    let selection = match args.selection.as_str() {
+        "random" => Selection::Random,
+        "planned" => Selection::Planned,
+        other => return Err(input("--selection", other, "expected random or planned")),
+    };
+    if args.candidates.is_some() && selection != Selection::Planned {
+        return Err(input(
+            "--candidates",
+            &args.candidates.unwrap_or(0).to_string(),
+            "only with --selection planned",
+        ));
+    }
+    if !(args.test_fraction > 0.0 && args.test_fraction < 1.0) {
+        return Err(input(
+            "--test-fraction",
+            &args.test_fraction.to_string(),
+            "must be in (0, 1): the sweep scores on held-out poses",
+        ));
+    }
+    let subset = match (&args.shard, args.only_cell) {
+        (Some(_), Some(_)) => {
+            return Err(CliError::Input(
+                "--shard and --only-cell: give one of them, not both".into(),
+            ));
+        }
+        (Some(s), None) => parse_shard(s)?,
+        (None, Some(c)) => {
+            let cells = noise.len() * poses.len();
+            if c >= cells {
+                return Err(input(
+                    "--only-cell",
+                    &c.to_string(),
+                    &format!("the grid has {cells} cells (0 … {})", cells - 1),
+                ));
+            }
+            Subset::Cell(c)
+        }
+        (None, None) => Subset::All,
+    };
+    let runs = noise
+        .len()
+        .checked_mul(poses.len())
+        .and_then(|c| c.checked_mul(reps))
+        .filter(|r| *r <= 100_000_000)
+        .ok_or_else(|| input("--reps", &args.reps, "the grid has more than 10⁸ runs"))?;
+    if let Some(dir) = args.out.parent().filter(|d| !d.as_os_str().is_empty())
+        && !dir.is_dir()
+    {
+        return Err(input(
+            "--out",
+            &args.out.display().to_string(),
+            &format!("folder {} does not exist", dir.display()),
+        ));
+    }
+    let scenario = Scenario::load(&args.scenario)?;
+    // Check the scenario and the smallest pose count once, before any work.
+    let probe = scenario.resolve(&Overrides {
+        seed: Some(args.seed),
+        poses: Some(poses[0]),
+        noise: Some(noise[0]),
+    })?;
+    let options = CalibrationOptions::default();
+    let orientation = probe.tracker.six_dof;
+    let rank = calib::calibrate::generic_rank(&probe.model, orientation, &options);
+    let dim = if orientation { 6 } else { 3 };
+    let needed = (rank + 1).div_ceil(dim);
+    for &n in &poses {
+        let (n_train, n_test) = sw::split_counts(n, args.test_fraction);
+        if n_train < needed {
+            return Err(input(
+                "--poses",
+                &args.poses,
+                &format!(
+                    "{n} poses leave {n_train} for calibration after holding out {n_test}, but the kinematic \
+                     model of '{}' has {rank} identifiable combinations: at least {needed} calibration \
+                     poses are needed",
+                    probe.model.name
+                ),
+            ));
+        }
+    }
+    let scenario_file = args.scenario.file_name().map_or_else(
+        || args.scenario.display().to_string(),
+        |n| n.to_string_lossy().into_owned(),
+    );
+    let spec = SweepSpec {
+        format: "robocal-sweep".into(),
+        format_version: sw::FORMAT_VERSION,
+        software_version: env!("CARGO_PKG_VERSION").into(),
+        scenario_file,
+        scenario_fnv1a64: format!("{:016x}", sim::scenario::fnv1a64(scenario.text.as_bytes())),
+        scenario_text: scenario.text.clone(),
+        noise_scale: noise,
+        poses,
+        reps,
+        seed: args.seed,
+        test_fraction: args.test_fraction,
+        model: "kinematic".into(),
+        selection,
+        candidates: args.candidates,
+        cells: runs / reps,
+        runs,
+    };
+    let ctx = Context {
+        scenario: &scenario,
+        spec: &spec,
+        options,
+    };
+    let todo = (0..runs)
+        .filter(|&r| subset.contains(&spec.run_id(r)))
+        .count();
+    let bar = std::io::stderr().is_terminal().then(|| {
+        let b = indicatif::ProgressBar::new(todo as u64);
+        if let Ok(style) = indicatif::ProgressStyle::with_template(
+            "{spinner} sweep {pos}/{len} runs [{bar:40}] {elapsed} (eta {eta})",
+        ) {
+            b.set_style(style.progress_chars("=> "));
+        }
+        b
+    });
+    let tick = || {
+        if let Some(b) = &bar {
+            b.inc(1);
+        }
+    };
+    let started = std::time::Instant::now();
+    let rows = sw::run_sweep(&ctx, subset, &tick);
+    if let Some(b) = &bar {
+        b.finish_and_clear();
+    }
+    let rows = rows.map_err(|e| match e {
+        sw::RunError::Input(m) => CliError::Input(m),
+        sw::RunError::Runtime(m) => CliError::Runtime(m),
+    })?;
+    eprintln!(
+        "sweep of {}: {} noise level(s) × {} pose count(s) × {} reps; {} run(s) in {:.1} s on {} thread(s) ({} model, {} poses)",
+        spec.scenario_file,
+        spec.noise_scale.len(),
+        spec.poses.len(),
+        spec.reps,
+        rows.len(),
+        started.elapsed().as_secs_f64(),
+        rayon::current_num_threads(),
+        spec.model,
+        match spec.selection {
+            Selection::Random => "random",
+            Selection::Planned => "planned",
+        }
+    );
+    finish(&spec, &rows, subset.describe(), &args.out, args.json)
+}
+
+/// Runs `robocal sweep-merge`.
+pub fn run_merge(args: MergeArgs) -> CliResult {
+    let mut spec_text: Option<(String, PathBuf)> = None;
+    let mut owner: Vec<Option<usize>> = Vec::new();
+    let mut rows: Vec<Option<SweepRow>> = Vec::new();
+    let mut spec: Option<SweepSpec> = None;
+    for (f, path) in args.shards.iter().enumerate() {
+        let file = table::read(path).map_err(CliError::Input)?;
+        let name = path.display().to_string();
+        let text = file
+            .meta(META_SWEEP)
+            .ok_or_else(|| {
+                CliError::Input(format!(
+                    "{name}: no '{META_SWEEP}' metadata: not a robocal sweep file"
+                ))
+            })?
+            .to_string();
+        match &spec_text {
+            None => {
+                let s: SweepSpec = serde_json::from_str(&text).map_err(|e| {
+                    CliError::Input(format!(
+                        "{name}: '{META_SWEEP}' metadata is not a sweep description: {e}"
+                    ))
+                })?;
+                if s.runs != s.cells * s.reps || s.cells != s.noise_scale.len() * s.poses.len() {
+                    return Err(CliError::Input(format!(
+                        "{name}: inconsistent sweep description (cells {}, reps {}, runs {})",
+                        s.cells, s.reps, s.runs
+                    )));
+                }
+                owner = vec![None; s.runs];
+                rows = vec![None; s.runs];
+                spec = Some(s);
+                spec_text = Some((text, path.clone()));
+            }
+            Some((first, first_path)) if *first != text => {
+                return Err(CliError::Input(format!(
+                    "{name}: from a different sweep than {} (scenario, grid, seed or settings differ)",
+                    first_path.display()
+                )));
+            }
+            Some(_) => {}
+        }
+        let s = spec
+            .as_ref()
+            .ok_or_else(|| CliError::Runtime("no sweep".into()))?;
+        for row in file.rows {
+            let r = usize::try_from(row.run)
+                .ok()
+                .filter(|r| *r < s.runs)
+                .ok_or_else(|| {
+                    CliError::Input(format!(
+                        "{name}: run {} is outside the sweep's 0 … {}",
+                        row.run,
+                        s.runs - 1
+                    ))
+                })?;
+            let id = s.run_id(r);
+            if row.cell != id.cell as i64 || row.rep != id.rep as i64 || row.seed != id.seed {
+                return Err(CliError::Input(format!(
+                    "{name}: run {r} does not match the sweep's grid (cell {}, rep {}, seed {})",
+                    row.cell, row.rep, row.seed
+                )));
+            }
+            if let Some(other) = owner[r] {
+                return Err(CliError::Input(format!(
+                    "{name}: run {r} (cell {}, rep {}) is also in {}: the shards overlap",
+                    id.cell,
+                    id.rep,
+                    args.shards[other].display()
+                )));
+            }
+            owner[r] = Some(f);
+            rows[r] = Some(row);
+        }
+    }
+    let spec = spec.ok_or_else(|| CliError::Input("sweep-merge: no shard files given".into()))?;
+    let missing: Vec<usize> = (0..spec.runs).filter(|&r| rows[r].is_none()).collect();
+    if !missing.is_empty() {
+        let first = spec.run_id(missing[0]);
+        return Err(CliError::Input(format!(
+            "sweep-merge: {} of {} runs are missing, the first run {} (cell {}, rep {}): a shard was not given",
+            missing.len(),
+            spec.runs,
+            first.run,
+            first.cell,
+            first.rep
+        )));
+    }
+    let rows: Vec<SweepRow> = rows.into_iter().flatten().collect();
+    eprintln!(
+        "merged {} file(s) of the sweep of {}: {} runs",
+        args.shards.len(),
+        spec.scenario_file,
+        rows.len()
+    );
+    finish(&spec, &rows, None, &args.out, args.json)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn msg(e: CliError) -> String {
+        assert_eq!(e.exit_code(), 2);
+        e.to_string()
+    }
+
+    #[test]
+    fn lists_parse_and_bad_items_are_named() {
+        assert_eq!(
+            parse_noise("0, 0.5,1,2e0").unwrap(),
+            vec![0.0, 0.5, 1.0, 2.0]
+        );
+        assert_eq!(parse_poses("20,40").unwrap(), vec![20, 40]);
+        let e = msg(parse_noise("1,abc").unwrap_err());
+        assert!(e.starts_with("--noise 1,abc: item 2 ('abc')"), "{e}");
+        assert!(msg(parse_noise("-1").unwrap_err()).contains("≥ 0"));
+        assert!(msg(parse_noise("1,,2").unwrap_err()).contains("item 2 ('')"));
+        assert!(msg(parse_noise("nan").unwrap_err()).starts_with("--noise"));
+        assert!(msg(parse_poses("20,0").unwrap_err()).starts_with("--poses 20,0: item 2"));
+        assert!(msg(parse_poses("20,20").unwrap_err()).contains("repeats"));
+        assert!(msg(parse_poses("2.5").unwrap_err()).starts_with("--poses"));
+    }
+
+    #[test]
+    fn shards_are_0_based_and_checked() {
+        assert_eq!(parse_shard("0/4").unwrap(), Subset::Shard { k: 0, n: 4 });
+        assert_eq!(parse_shard("3/4").unwrap(), Subset::Shard { k: 3, n: 4 });
+        for bad in ["4/4", "1/0", "x/2", "2", "-1/3", "1/2/3"] {
+            let e = msg(parse_shard(bad).unwrap_err());
+            assert!(e.starts_with(&format!("--shard {bad}:")), "{e}");
+        }
+    }
+}

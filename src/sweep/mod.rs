@@ -1,0 +1,792 @@
+//! Sensitivity studies: generate, calibrate and score many datasets over a grid of noise levels and
+//! pose counts (`robocal sweep`), in shards that merge to the same bytes (`robocal sweep-merge`).
+//!
+//! A sweep is a [`SweepSpec`]: a scenario, the noise multipliers, the pose counts, the repetitions per
+//! cell, a seed, the fitted model and the pose selection. Cell `c = i · P + j` pairs noise level `i` with
+//! pose count `j` (`P` pose counts); run `r = c · reps + k` is repetition `k` of cell `c`. Run `r` uses
+//! the seed `splitmix64(splitmix64(splitmix64(seed) ^ c) ^ k)` ([`run_seed`]) for everything random in
+//! it (the scenario's parameter draws, poses, tracker noise, the train/test split), so it depends on
+//! nothing but the sweep seed, its cell and its repetition: it can be re-run alone (`--only-cell`, or
+//! `robocal generate --seed S --poses N --noise M` and `robocal calibrate --seed S`, see
+//! `docs/sweep.md`), on any machine, with any number of threads.
+//!
+//! Each run ([`run_one`]):
+//! 1. resolves the scenario with the run's seed, pose count and noise multiplier and simulates the
+//!    campaign in memory (`sim::generate`, the same code as `robocal generate`);
+//! 2. splits the poses into training and held-out ones (`calib::stats::split_by_pose`, as `robocal
+//!    calibrate --test-fraction F --seed S`; with planned selection the training poses are the planned
+//!    ones and the held-out ones random, see [`split_counts`]) and calibrates the kinematic model on the training rows
+//!    (`calib::calibrate`, default options);
+//! 3. scores the result against the truth: the held-out prediction error against the noise-free true
+//!    target positions and what the covariance predicts for it, the error of each identifiable
+//!    parameter combination in units of its predicted standard deviation, and the observability of the
+//!    training poses ([`table::COLUMNS`]).
+
+pub mod table;
+
+use calib::calibrate::{Calibration, CalibrationOptions, Dataset, calibrate};
+use calib::chain::{Chain, ChainScratch};
+use calib::params::ParamLayout;
+use nalgebra::{DMatrix, DVector, Vector3};
+use sim::campaign::splitmix64;
+use sim::measurement_table::MeasurementTable;
+use sim::scenario::{Overrides, Scenario};
+use table::SweepRow;
+
+/// Version of the sweep file layout (columns and metadata).
+pub const FORMAT_VERSION: u32 = 1;
+
+/// How the calibration poses of a run are chosen.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Selection {
+    /// The scenario's own campaign (random poses for the shipped scenarios).
+    Random,
+    /// D-optimal selection (`calib::plan`) from random candidate configurations.
+    Planned,
+}
+
+/// Everything that decides a sweep's rows; stored as JSON in every file of the sweep.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct SweepSpec {
+    /// `robocal-sweep`.
+    pub format: String,
+    /// [`FORMAT_VERSION`].
+    pub format_version: u32,
+    /// Software version that wrote the file.
+    pub software_version: String,
+    /// The scenario's file name (no folder: the bytes must not depend on where it lies).
+    pub scenario_file: String,
+    /// The scenario's text, FNV-1a 64 hash (hex).
+    pub scenario_fnv1a64: String,
+    /// The scenario's text.
+    pub scenario_text: String,
+    /// Noise multipliers (as `robocal generate --noise`), in grid order.
+    pub noise_scale: Vec<f64>,
+    /// Pose counts per run (as `robocal generate --poses`), in grid order.
+    pub poses: Vec<usize>,
+    /// Repetitions per cell.
+    pub reps: usize,
+    /// Sweep seed.
+    pub seed: u64,
+    /// Fraction of each run's poses held out (as `robocal calibrate --test-fraction`).
+    pub test_fraction: f64,
+    /// Fitted model (`kinematic`).
+    pub model: String,
+    /// Pose selection.
+    pub selection: Selection,
+    /// Candidates per planned selection (`selection = planned` only).
+    pub candidates: Option<usize>,
+    /// Cells (noise levels × pose counts).
+    pub cells: usize,
+    /// Runs (cells × reps).
+    pub runs: usize,
+}
+
+/// Run `r` of a sweep: its cell, repetition and grid values.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RunId {
+    /// Run index.
+    pub run: usize,
+    /// Cell index.
+    pub cell: usize,
+    /// Repetition.
+    pub rep: usize,
+    /// Noise multiplier.
+    pub noise_scale: f64,
+    /// Poses generated.
+    pub poses: usize,
+    /// The run's seed ([`run_seed`]).
+    pub seed: u64,
+}
+
+/// The seed of repetition `rep` of cell `cell` under the sweep seed `seed`.
+pub fn run_seed(seed: u64, cell: usize, rep: usize) -> u64 {
+    splitmix64(splitmix64(splitmix64(seed) ^ cell as u64) ^ rep as u64)
+}
+
+impl SweepSpec {
+    /// Run `r` (`r < runs`).
+    pub fn run_id(&self, r: usize) -> RunId {
+        let cell = r / self.reps;
+        let rep = r % self.reps;
+        let np = self.poses.len();
+        RunId {
+            run: r,
+            cell,
+            rep,
+            noise_scale: self.noise_scale[cell / np],
+            poses: self.poses[cell % np],
+            seed: run_seed(self.seed, cell, rep),
+        }
+    }
+
+    /// The metadata entry of this spec.
+    pub fn to_json(&self) -> String {
+        serde_json::to_string(self).unwrap_or_default()
+    }
+}
+
+/// Which runs of the grid to do.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Subset {
+    /// Every run.
+    All,
+    /// Runs `r` with `r mod n = k` (0-based `k < n`): round robin, so that every shard gets a similar
+    /// mix of small and large pose counts.
+    Shard {
+        /// This shard, 0-based.
+        k: usize,
+        /// Number of shards.
+        n: usize,
+    },
+    /// The runs of one cell.
+    Cell(usize),
+}
+
+impl Subset {
+    /// True when run `id` belongs to the subset.
+    pub fn contains(&self, id: &RunId) -> bool {
+        match *self {
+            Subset::All => true,
+            Subset::Shard { k, n } => id.run % n == k,
+            Subset::Cell(c) => id.cell == c,
+        }
+    }
+
+    /// The metadata value of a partial file, `None` for [`Subset::All`].
+    pub fn describe(&self) -> Option<String> {
+        match *self {
+            Subset::All => None,
+            Subset::Shard { k, n } => Some(format!("shard {k}/{n}")),
+            Subset::Cell(c) => Some(format!("cell {c}")),
+        }
+    }
+}
+
+/// A failed run: bad input (the scenario, too few poses) or a runtime failure.
+#[derive(Clone, Debug, PartialEq)]
+pub enum RunError {
+    /// The input cannot work (exit 2).
+    Input(String),
+    /// The work failed (exit 1).
+    Runtime(String),
+}
+
+impl RunError {
+    fn prefixed(self, id: &RunId) -> RunError {
+        let p = format!(
+            "run {} (cell {}, rep {}, noise {}, poses {}, seed {})",
+            id.run, id.cell, id.rep, id.noise_scale, id.poses, id.seed
+        );
+        match self {
+            RunError::Input(m) => RunError::Input(format!("{p}: {m}")),
+            RunError::Runtime(m) => RunError::Runtime(format!("{p}: {m}")),
+        }
+    }
+}
+
+/// What every run shares: the parsed scenario and the settings.
+pub struct Context<'a> {
+    /// The scenario.
+    pub scenario: &'a Scenario,
+    /// The sweep.
+    pub spec: &'a SweepSpec,
+    /// Calibration settings (defaults, as `robocal calibrate`).
+    pub options: CalibrationOptions,
+}
+
+/// Quantile `q ∈ [0, 1]` of sorted finite values by linear interpolation between order statistics
+/// (Hyndman and Fan type 7, numpy's default); NaN when empty.
+pub fn quantile(sorted: &[f64], q: f64) -> f64 {
+    if sorted.is_empty() {
+        return f64::NAN;
+    }
+    let h = (sorted.len() - 1) as f64 * q.clamp(0.0, 1.0);
+    let lo = h.floor() as usize;
+    let hi = (lo + 1).min(sorted.len() - 1);
+    sorted[lo] + (h - lo as f64) * (sorted[hi] - sorted[lo])
+}
+
+/// Held-out and training pose counts of `n` poses for the test fraction `f`, by the rule of
+/// `calib::stats::split_by_pose`: `round(f · n)` held out, at least one when `f > 0` and `n ≥ 2`, never
+/// all. Returns `(train, test)`.
+pub fn split_counts(n: usize, f: f64) -> (usize, usize) {
+    let mut t = (f.clamp(0.0, 1.0) * n as f64).round() as usize;
+    if f > 0.0 && t == 0 && n >= 2 {
+        t = 1;
+    }
+    t = t.min(n.saturating_sub(1));
+    (n - t, t)
+}
+
+/// The poses of a planned run: `train` configurations chosen D-optimally among `candidates` drawn by
+/// the scenario's own campaign (so they obey its reachability rules), followed by `test` held-out
+/// configurations, the first candidates not chosen (random poses: the score is over the workspace,
+/// not over the planner's favourite poses). The campaign is re-planned on exactly that list, so poses
+/// `0 … train − 1` are the training poses.
+fn planned_plan(
+    res: &sim::scenario::Resolved,
+    (train, test): (usize, usize),
+    candidates: usize,
+    options: &CalibrationOptions,
+) -> Result<sim::campaign::Plan, RunError> {
+    let mut cand_res = res.clone();
+    cand_res.campaign.poses = Some(candidates.max(2 * (train + test)));
+    let cand = sim::generate::plan_of(&cand_res).map_err(|e| RunError::Input(e.to_string()))?;
+    let configs: Vec<Vec<f64>> = (0..cand.n_poses)
+        .map(|k| cand.q_row(k * cand.repeats).to_vec())
+        .collect();
+    let mut po = calib::plan::PlanOptions::new(configs.len(), train, res.seed);
+    po.target_offset = res.tracker.p_flange;
+    po.calibration = *options;
+    po.random_sets = 0;
+    let chosen = calib::plan::select_from(&res.model, &configs, &po)
+        .map_err(|e| RunError::Input(e.to_string()))?;
+    let mut list: Vec<Vec<f64>> = chosen.iter().map(|&c| configs[c].clone()).collect();
+    list.extend(
+        (0..configs.len())
+            .filter(|c| !chosen.contains(c))
+            .take(test)
+            .map(|c| configs[c].clone()),
+    );
+    let mut spec = res.campaign.clone();
+    spec.poses = Some(train + test);
+    spec.sampling = sim::campaign::Sampling::List { q: list };
+    sim::campaign::plan(&res.model, &spec, res.seed, &res.scenario.label)
+        .map_err(|e| RunError::Input(e.to_string()))
+}
+
+/// One run: generate, split, calibrate, score (see the module docs).
+pub fn run_one(ctx: &Context<'_>, id: &RunId) -> Result<SweepRow, RunError> {
+    run_inner(ctx, id).map_err(|e| e.prefixed(id))
+}
+
+fn run_inner(ctx: &Context<'_>, id: &RunId) -> Result<SweepRow, RunError> {
+    let spec = ctx.spec;
+    let res = ctx
+        .scenario
+        .resolve(&Overrides {
+            seed: Some(id.seed),
+            poses: Some(id.poses),
+            noise: Some(id.noise_scale),
+        })
+        .map_err(|e| RunError::Input(e.to_string()))?;
+    let plan = match spec.selection {
+        Selection::Random => {
+            sim::generate::plan_of(&res).map_err(|e| RunError::Input(e.to_string()))?
+        }
+        Selection::Planned => planned_plan(
+            &res,
+            split_counts(id.poses, spec.test_fraction),
+            spec.candidates.unwrap_or(10 * id.poses),
+            &ctx.options,
+        )?,
+    };
+    let truth = sim::effects::Truth::new(&res.model, &res.effects)
+        .map_err(|e| RunError::Input(e.to_string()))?;
+    let simulation =
+        sim::generate::simulate(&truth, &res.tracker, &res.gravity, &plan, id.seed, None)
+            .map_err(|e| RunError::Runtime(e.to_string()))?;
+    let table = sim::generate::measurement_table(&plan, &simulation, &res.tracker);
+    let p_true: Vec<Vector3<f64>> = simulation
+        .rows
+        .iter()
+        .map(|r| Vector3::from(r.reading.p_true))
+        .collect();
+    let (train_rows, test_rows) = match spec.selection {
+        Selection::Random => calib::stats::split_by_pose(&table, spec.test_fraction, id.seed),
+        Selection::Planned => {
+            let n_train = split_counts(id.poses, spec.test_fraction).0 as i64;
+            (0..table.len()).partition(|&r| table.pose[r] < n_train)
+        }
+    };
+    let train = Dataset {
+        table: &table,
+        rows: train_rows,
+        name: "training set".into(),
+    };
+    let test = Dataset {
+        table: &table,
+        rows: test_rows,
+        name: "test set".into(),
+    };
+    let cal = calibrate(
+        &res.model,
+        &train,
+        (!test.rows.is_empty()).then_some(&test),
+        &ctx.options,
+    )
+    .map_err(|e| match e {
+        calib::CalibError::TooFewPoses { .. } | calib::CalibError::BadValue { .. } => {
+            RunError::Input(e.to_string())
+        }
+        other => RunError::Runtime(other.to_string()),
+    })?;
+    let report = &cal.report;
+    let model = &res.model;
+    let layout = ParamLayout::new(model, cal.params.r_flange_target.is_some());
+
+    let l = covariance_factor(&cal);
+    let held = held_out_scores(model, &cal, &layout, &l, &table, &test.rows, &p_true);
+    let scores = parameter_scores(model, &cal, &layout, &l, &table, &train.rows, &p_true);
+
+    let rows_n = simulation.rows.len().max(1) as f64;
+    let sigma_rms = (simulation
+        .rows
+        .iter()
+        .map(|r| r.reading.sigma_m * r.reading.sigma_m)
+        .sum::<f64>()
+        / rows_n)
+        .sqrt();
+    let injected = (simulation
+        .rows
+        .iter()
+        .map(|r| {
+            let t = r.contribution.total();
+            t[0] * t[0] + t[1] * t[1] + t[2] * t[2]
+        })
+        .sum::<f64>()
+        / rows_n)
+        .sqrt();
+    let o = &report.observability;
+    Ok(SweepRow {
+        run: id.run as i64,
+        cell: id.cell as i64,
+        rep: id.rep as i64,
+        noise_scale: id.noise_scale,
+        poses: id.poses as i64,
+        seed: id.seed,
+        train_poses: report.n_train_poses as i64,
+        test_poses: report.n_test_poses as i64,
+        sigma_rms_m: if res.tracker.noise_scale > 0.0 {
+            sigma_rms
+        } else {
+            0.0
+        },
+        injected_rms_m: injected,
+        converged: report.was_successful(),
+        iterations: report.after.solver.iterations as i64,
+        chi2_per_dof: report.chi2_per_dof,
+        train_rms_m: report.after.train.rms_m,
+        test_rms_measured_m: report.after.test.as_ref().map_or(f64::NAN, |t| t.rms_m),
+        test_error_rms_m: held.rms_m,
+        test_error_max_m: held.max_m,
+        test_error_predicted_m: held.predicted_m,
+        test_error_nominal_rms_m: held.nominal_rms_m,
+        rank: cal.subspace.rank as i64,
+        param_combinations: scores.combinations as i64,
+        param_z2_mean: scores.z2_mean,
+        param_z_abs_max: scores.z_abs_max,
+        param_beyond_3sigma: scores.beyond_3sigma as i64,
+        condition_number: o.condition_number,
+        sigma_min: o.sigma_min,
+        log_det_information: o.log_det_information,
+    })
+}
+
+/// `L` (np × r, physical units) with `C = L Lᵀ` the calibration's covariance:
+/// `L = σ̂ D V_r Σ_r⁻¹`, `σ̂²` the variance factor (`χ²/dof`, or 1 without degrees of freedom).
+fn covariance_factor(cal: &Calibration) -> DMatrix<f64> {
+    let sub = &cal.subspace;
+    let (np, r) = (sub.n_params(), sub.rank);
+    let vf = if cal.report.dof > 0 {
+        cal.report.chi2_per_dof
+    } else {
+        1.0
+    };
+    let sf = vf.sqrt();
+    let mut l = DMatrix::zeros(np, r);
+    for c in 0..r {
+        let s = sub.singular_values[c];
+        for k in 0..np {
+            l[(k, c)] = sf * sub.scales[k] * sub.v[(k, c)] / s;
+        }
+    }
+    l
+}
+
+/// Held-out scores (m; NaN without held-out rows).
+struct HeldOut {
+    rms_m: f64,
+    max_m: f64,
+    predicted_m: f64,
+    nominal_rms_m: f64,
+}
+
+/// Errors of the calibrated and of the nominal (base and target only) model against the noise-free
+/// truth `p_true` (tracker frame, m, per table row) on `rows`, and the covariance's prediction
+/// `√(mean trace(J C Jᵀ))`, with `trace(J C Jᵀ) = ‖J L‖²_F` accumulated without allocating.
+fn held_out_scores(
+    model: &sim::Model,
+    cal: &Calibration,
+    layout: &ParamLayout,
+    l: &DMatrix<f64>,
+    table: &MeasurementTable,
+    rows: &[usize],
+    p_true: &[Vector3<f64>],
+) -> HeldOut {
+    if rows.is_empty() {
+        return HeldOut {
+            rms_m: f64::NAN,
+            max_m: f64::NAN,
+            predicted_m: f64::NAN,
+            nominal_rms_m: f64::NAN,
+        };
+    }
+    let np = layout.len();
+    let chain = Chain::new(model, &cal.params);
+    let nominal = Chain::new(model, &cal.before);
+    let mut scratch = ChainScratch::new(model.nq());
+    let mut jbuf = vec![0.0; 3 * np];
+    let (mut e2, mut emax, mut pred2, mut nom2) = (0.0, 0.0f64, 0.0, 0.0);
+    for &row in rows {
+        nominal.forward(&mut scratch, table.q_row(row));
+        nom2 += (scratch.p_tracker - p_true[row]).norm_squared();
+        chain.forward(&mut scratch, table.q_row(row));
+        let e = (scratch.p_tracker - p_true[row]).norm();
+        e2 += e * e;
+        emax = emax.max(e);
+        chain.position_jacobian(&scratch, layout, &mut jbuf);
+        for a in 0..3 {
+            let ja = &jbuf[a * np..(a + 1) * np];
+            for c in 0..l.ncols() {
+                let v: f64 = ja.iter().zip(l.column(c).iter()).map(|(x, y)| x * y).sum();
+                pred2 += v * v;
+            }
+        }
+    }
+    let n = rows.len() as f64;
+    HeldOut {
+        rms_m: (e2 / n).sqrt(),
+        max_m: emax,
+        predicted_m: (pred2 / n).sqrt(),
+        nominal_rms_m: (nom2 / n).sqrt(),
+    }
+}
+
+/// Errors of the identifiable combinations in units of their predicted σ.
+struct ParameterScores {
+    combinations: usize,
+    z2_mean: f64,
+    z_abs_max: f64,
+    beyond_3sigma: usize,
+}
+
+/// The identifiable combinations at the training poses (one position per distinct pose, as in
+/// `calib/tests/recovery.rs`): `B = J L = U S Wᵀ`; the combinations are U's columns, their predicted
+/// σ the singular values `S` (m), their errors `z = S⁻¹ Uᵀ (p_estimated − p_true)`.
+fn parameter_scores(
+    model: &sim::Model,
+    cal: &Calibration,
+    layout: &ParamLayout,
+    l: &DMatrix<f64>,
+    table: &MeasurementTable,
+    rows: &[usize],
+    p_true: &[Vector3<f64>],
+) -> ParameterScores {
+    let np = layout.len();
+    let mut first_rows: Vec<usize> = Vec::with_capacity(rows.len());
+    let mut last_pose = None;
+    for &row in rows {
+        if last_pose != Some(table.pose[row]) {
+            first_rows.push(row);
+            last_pose = Some(table.pose[row]);
+        }
+    }
+    let chain = Chain::new(model, &cal.params);
+    let mut scratch = ChainScratch::new(model.nq());
+    let mut jbuf = vec![0.0; 3 * np];
+    let m = 3 * first_rows.len();
+    let mut j = DMatrix::zeros(m, np);
+    let mut d = DVector::zeros(m);
+    for (i, &row) in first_rows.iter().enumerate() {
+        chain.forward(&mut scratch, table.q_row(row));
+        chain.position_jacobian(&scratch, layout, &mut jbuf);
+        for a in 0..3 {
+            for k in 0..np {
+                j[(3 * i + a, k)] = jbuf[a * np + k];
+            }
+            d[3 * i + a] = scratch.p_tracker[a] - p_true[row][a];
+        }
+    }
+    let mut out = ParameterScores {
+        combinations: 0,
+        z2_mean: f64::NAN,
+        z_abs_max: 0.0,
+        beyond_3sigma: 0,
+    };
+    if l.ncols() == 0 || m == 0 {
+        return out;
+    }
+    let svd = (&j * l).svd(true, false);
+    let Some(u) = &svd.u else {
+        return out;
+    };
+    let smax = svd.singular_values.max();
+    let mut z2 = 0.0;
+    for (c, &s) in svd.singular_values.iter().enumerate() {
+        if s <= 1e-8 * smax || s == 0.0 {
+            continue;
+        }
+        let z = u.column(c).dot(&d) / s;
+        out.combinations += 1;
+        z2 += z * z;
+        out.z_abs_max = out.z_abs_max.max(z.abs());
+        if z.abs() > 3.0 {
+            out.beyond_3sigma += 1;
+        }
+    }
+    if out.combinations > 0 {
+        out.z2_mean = z2 / out.combinations as f64;
+    }
+    out
+}
+
+/// Per-cell statistics of a set of rows (for the summary table, the plot and `--json`).
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct CellSummary {
+    /// Cell index.
+    pub cell: usize,
+    /// Noise multiplier.
+    pub noise_scale: f64,
+    /// Poses per run.
+    pub poses: usize,
+    /// Runs found.
+    pub runs: usize,
+    /// Runs whose fit did not converge.
+    pub not_converged: usize,
+    /// Median of `sigma_rms_m`: the tracker noise per axis (m).
+    pub sigma_median_m: f64,
+    /// Median of `test_error_rms_m` (m).
+    pub test_error_median_m: f64,
+    /// Its 10 % quantile (m).
+    pub test_error_p10_m: f64,
+    /// Its 90 % quantile (m).
+    pub test_error_p90_m: f64,
+    /// Median of `test_error_predicted_m` (m).
+    pub predicted_median_m: f64,
+    /// Median of `param_z2_mean`.
+    pub param_z2_mean_median: f64,
+    /// Median of `condition_number`.
+    pub condition_number_median: f64,
+}
+
+/// Summaries of the cells present in `rows`, in cell order.
+pub fn summarize(spec: &SweepSpec, rows: &[SweepRow]) -> Vec<CellSummary> {
+    let np = spec.poses.len();
+    let mut out = Vec::new();
+    for cell in 0..spec.cells {
+        let mine: Vec<&SweepRow> = rows.iter().filter(|r| r.cell as usize == cell).collect();
+        if mine.is_empty() {
+            continue;
+        }
+        let sorted = |f: &dyn Fn(&SweepRow) -> f64| {
+            let mut v: Vec<f64> = mine
+                .iter()
+                .map(|r| f(r))
+                .filter(|x| x.is_finite())
+                .collect();
+            v.sort_by(f64::total_cmp);
+            v
+        };
+        let err = sorted(&|r| r.test_error_rms_m);
+        out.push(CellSummary {
+            cell,
+            noise_scale: spec.noise_scale[cell / np],
+            poses: spec.poses[cell % np],
+            runs: mine.len(),
+            not_converged: mine.iter().filter(|r| !r.converged).count(),
+            sigma_median_m: quantile(&sorted(&|r| r.sigma_rms_m), 0.5),
+            test_error_median_m: quantile(&err, 0.5),
+            test_error_p10_m: quantile(&err, 0.1),
+            test_error_p90_m: quantile(&err, 0.9),
+            predicted_median_m: quantile(&sorted(&|r| r.test_error_predicted_m), 0.5),
+            param_z2_mean_median: quantile(&sorted(&|r| r.param_z2_mean), 0.5),
+            condition_number_median: quantile(&sorted(&|r| r.condition_number), 0.5),
+        });
+    }
+    out
+}
+
+/// The summary table (text for stderr).
+pub fn summary_text(cells: &[CellSummary]) -> String {
+    let mut s = String::from(
+        " noise  σ (µm)  poses  runs   held-out error vs truth (µm): median [10 %, 90 %]   predicted   measured/predicted   z² mean   condition\n",
+    );
+    for c in cells {
+        s.push_str(&format!(
+            " {:>5}  {:>6.2}  {:>5}  {:>4}   {:>10.3} [{:>9.3}, {:>9.3}]              {:>9.3}   {:>18.3}   {:>7.3}   {:>9.3e}{}\n",
+            c.noise_scale,
+            c.sigma_median_m * 1e6,
+            c.poses,
+            c.runs,
+            c.test_error_median_m * 1e6,
+            c.test_error_p10_m * 1e6,
+            c.test_error_p90_m * 1e6,
+            c.predicted_median_m * 1e6,
+            c.test_error_median_m / c.predicted_median_m,
+            c.param_z2_mean_median,
+            c.condition_number_median,
+            if c.not_converged > 0 {
+                format!("   ({} not converged)", c.not_converged)
+            } else {
+                String::new()
+            }
+        ));
+    }
+    s
+}
+
+/// The plot: held-out error against the truth vs poses per run, log-log, one colour per noise level;
+/// measured median (line and markers) with its 10–90 % band, and the covariance's prediction (dashed).
+pub fn plot_svg(spec: &SweepSpec, cells: &[CellSummary]) -> String {
+    use calib::plot::{Plot, Series, Style};
+    let mut series = Vec::new();
+    for &noise in &spec.noise_scale {
+        let mine: Vec<&CellSummary> = cells.iter().filter(|c| c.noise_scale == noise).collect();
+        let label = format!("noise ×{noise}");
+        let x = |c: &CellSummary| c.poses as f64;
+        series.push(Series {
+            label: label.clone(),
+            points: mine.iter().map(|c| (x(c), c.test_error_p10_m)).collect(),
+            style: Style::Band {
+                upper: mine.iter().map(|c| c.test_error_p90_m).collect(),
+            },
+        });
+        series.push(Series {
+            label: label.clone(),
+            points: mine.iter().map(|c| (x(c), c.test_error_median_m)).collect(),
+            style: Style::LineMarkers,
+        });
+        series.push(Series {
+            label,
+            points: mine.iter().map(|c| (x(c), c.predicted_median_m)).collect(),
+            style: Style::Dashed,
+        });
+    }
+    Plot {
+        title: format!(
+            "{}: held-out error vs truth — median (line), 10–90 % (band), predicted (dashed)",
+            spec.scenario_file
+        ),
+        x_label: format!(
+            "poses per run ({:.0} % calibrate, {:.0} % held out)",
+            100.0 * (1.0 - spec.test_fraction),
+            100.0 * spec.test_fraction
+        ),
+        y_label: "held-out RMS error vs truth (m)".into(),
+        log_x: true,
+        log_y: true,
+        series,
+    }
+    .to_svg(800, 520)
+}
+
+/// Runs the runs of `subset` in parallel (rayon, the current pool) and returns their rows in run order;
+/// `tick` is called after each run. On failure, the error of the lowest failing run.
+pub fn run_sweep(
+    ctx: &Context<'_>,
+    subset: Subset,
+    tick: &(dyn Fn() + Sync),
+) -> Result<Vec<SweepRow>, RunError> {
+    use rayon::prelude::*;
+    let ids: Vec<RunId> = (0..ctx.spec.runs)
+        .map(|r| ctx.spec.run_id(r))
+        .filter(|id| subset.contains(id))
+        .collect();
+    let results: Vec<Result<SweepRow, RunError>> = ids
+        .par_iter()
+        .map(|id| {
+            let out = run_one(ctx, id);
+            tick();
+            out
+        })
+        .collect();
+    results.into_iter().collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn quantiles_interpolate_like_numpy() {
+        // numpy.quantile([1, 2, 3, 4], [0.1, 0.5, 0.9]) = [1.3, 2.5, 3.7]
+        let v = [1.0, 2.0, 3.0, 4.0];
+        assert!((quantile(&v, 0.1) - 1.3).abs() < 1e-12);
+        assert!((quantile(&v, 0.5) - 2.5).abs() < 1e-12);
+        assert!((quantile(&v, 0.9) - 3.7).abs() < 1e-12);
+        assert_eq!(quantile(&[5.0], 0.9), 5.0);
+        assert!(quantile(&[], 0.5).is_nan());
+    }
+
+    #[test]
+    fn split_counts_follow_calibs_split_by_pose() {
+        use sim::measurement_table::{MeasurementTable, OptionalColumns, Row};
+        for n in 1..120 {
+            let mut t = MeasurementTable::new(1, OptionalColumns::NONE);
+            for k in 0..n {
+                t.push_row(&Row {
+                    pose: k as i64,
+                    q: &[0.0],
+                    position: [0.0; 3],
+                    ..Row::default()
+                })
+                .unwrap();
+            }
+            for f in [0.05, 0.3, 0.5, 0.9] {
+                let (train, test) = calib::stats::split_by_pose(&t, f, 3);
+                assert_eq!(
+                    split_counts(n, f),
+                    (train.len(), test.len()),
+                    "n {n}, f {f}"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn run_seeds_depend_on_cell_and_rep_only() {
+        // splitmix64 of 0 is 0xE220A8397B1DCDAF (Steele, Lea and Flood's reference output).
+        assert_eq!(splitmix64(0), 0xE220_A839_7B1D_CDAF);
+        let a = run_seed(7, 3, 2);
+        assert_eq!(a, splitmix64(splitmix64(splitmix64(7) ^ 3) ^ 2));
+        assert_ne!(a, run_seed(7, 2, 3));
+        assert_ne!(a, run_seed(8, 3, 2));
+    }
+
+    #[test]
+    fn runs_are_numbered_cell_major_and_shards_partition_them() {
+        let spec = SweepSpec {
+            format: "robocal-sweep".into(),
+            format_version: FORMAT_VERSION,
+            software_version: "test".into(),
+            scenario_file: "s.toml".into(),
+            scenario_fnv1a64: "0".into(),
+            scenario_text: String::new(),
+            noise_scale: vec![0.5, 1.0],
+            poses: vec![20, 40, 80],
+            reps: 4,
+            seed: 1,
+            test_fraction: 0.3,
+            model: "kinematic".into(),
+            selection: Selection::Random,
+            candidates: None,
+            cells: 6,
+            runs: 24,
+        };
+        // Run 17 = cell 4 (17 / 4), rep 1; cell 4 = noise index 1, pose index 1.
+        let id = spec.run_id(17);
+        assert_eq!((id.cell, id.rep, id.noise_scale, id.poses), (4, 1, 1.0, 40));
+        let mut seen = [0; 24];
+        for k in 0..5 {
+            for (r, count) in seen.iter_mut().enumerate() {
+                if (Subset::Shard { k, n: 5 }).contains(&spec.run_id(r)) {
+                    *count += 1;
+                }
+            }
+        }
+        assert!(seen.iter().all(|&c| c == 1));
+    }
+}

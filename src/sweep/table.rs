@@ -1,0 +1,317 @@
+//! The sweep's Parquet file: one row per run ([`SweepRow`], columns documented in [`COLUMNS`]) and the
+//! sweep description in the file's key-value metadata.
+//!
+//! Bytes depend only on the rows and the metadata: every writer property is set explicitly, nothing
+//! records a time, a path, a host or a thread count, and rows are always written in run order. That is
+//! what makes a merge of shards byte-identical to a single run.
+
+use arrow_array::{
+    Array, ArrayRef, BooleanArray, Float64Array, Int64Array, RecordBatch, UInt64Array,
+};
+use arrow_schema::{DataType, Field, Schema};
+use std::path::Path;
+use std::sync::Arc;
+
+/// Metadata key holding the sweep description (JSON, see `super::SweepSpec`); identical in every
+/// shard of one sweep and in the merged file.
+pub const META_SWEEP: &str = "robocal.sweep";
+/// Metadata key holding the column documentation (JSON object: name → meaning with unit).
+pub const META_COLUMNS: &str = "robocal.sweep.columns";
+/// Metadata key present only in a partial file (a `--shard` or `--only-cell` run): which part it is.
+pub const META_SUBSET: &str = "robocal.sweep.subset";
+
+/// Rows per row group (a constant, so that the bytes do not depend on how rows arrived).
+const ROW_GROUP_ROWS: usize = 65_536;
+
+/// An Arrow column type of the sweep table.
+trait ColumnType: Sized + Copy {
+    fn data_type() -> DataType;
+    fn array(values: Vec<Self>) -> ArrayRef;
+    fn read(array: &dyn Array) -> Option<Vec<Self>>;
+}
+
+impl ColumnType for i64 {
+    fn data_type() -> DataType {
+        DataType::Int64
+    }
+    fn array(values: Vec<Self>) -> ArrayRef {
+        Arc::new(Int64Array::from(values))
+    }
+    fn read(array: &dyn Array) -> Option<Vec<Self>> {
+        let a = array.as_any().downcast_ref::<Int64Array>()?;
+        (a.null_count() == 0).then(|| a.values().to_vec())
+    }
+}
+
+impl ColumnType for u64 {
+    fn data_type() -> DataType {
+        DataType::UInt64
+    }
+    fn array(values: Vec<Self>) -> ArrayRef {
+        Arc::new(UInt64Array::from(values))
+    }
+    fn read(array: &dyn Array) -> Option<Vec<Self>> {
+        let a = array.as_any().downcast_ref::<UInt64Array>()?;
+        (a.null_count() == 0).then(|| a.values().to_vec())
+    }
+}
+
+impl ColumnType for f64 {
+    fn data_type() -> DataType {
+        DataType::Float64
+    }
+    fn array(values: Vec<Self>) -> ArrayRef {
+        Arc::new(Float64Array::from(values))
+    }
+    fn read(array: &dyn Array) -> Option<Vec<Self>> {
+        let a = array.as_any().downcast_ref::<Float64Array>()?;
+        (a.null_count() == 0).then(|| a.values().to_vec())
+    }
+}
+
+impl ColumnType for bool {
+    fn data_type() -> DataType {
+        DataType::Boolean
+    }
+    fn array(values: Vec<Self>) -> ArrayRef {
+        Arc::new(BooleanArray::from(values))
+    }
+    fn read(array: &dyn Array) -> Option<Vec<Self>> {
+        let a = array.as_any().downcast_ref::<BooleanArray>()?;
+        (a.null_count() == 0).then(|| (0..a.len()).map(|i| a.value(i)).collect())
+    }
+}
+
+/// Declares [`SweepRow`], [`COLUMNS`] and the conversions from one list of `name: type = "doc"`.
+macro_rules! sweep_columns {
+    ($( $field:ident : $ty:ty = $doc:literal ),* $(,)?) => {
+        /// One run of a sweep: what was generated, how the calibration went, and its scores against
+        /// the truth. Units are in the field names (`_m` metres); see [`COLUMNS`].
+        #[derive(Clone, Copy, Debug, PartialEq)]
+        pub struct SweepRow {
+            $( #[doc = $doc] pub $field: $ty, )*
+        }
+
+        /// Column names and their meaning (with units), in file order.
+        pub const COLUMNS: &[(&str, &str)] = &[ $( (stringify!($field), $doc) ),* ];
+
+        fn arrays(rows: &[SweepRow]) -> Vec<ArrayRef> {
+            vec![ $( <$ty as ColumnType>::array(rows.iter().map(|r| r.$field).collect()) ),* ]
+        }
+
+        fn fields() -> Vec<Field> {
+            vec![ $( Field::new(stringify!($field), <$ty as ColumnType>::data_type(), false) ),* ]
+        }
+
+        fn rows_of(batch: &RecordBatch, file: &str) -> Result<Vec<SweepRow>, String> {
+            $(
+                let $field: Vec<$ty> = {
+                    let name = stringify!($field);
+                    let col = batch
+                        .column_by_name(name)
+                        .ok_or_else(|| format!("{file}: column '{name}' is missing: not a sweep file"))?;
+                    <$ty as ColumnType>::read(col.as_ref()).ok_or_else(|| {
+                        format!("{file}: column '{name}' has type {} or nulls, expected {} without nulls",
+                            col.data_type(), <$ty as ColumnType>::data_type())
+                    })?
+                };
+            )*
+            Ok((0..batch.num_rows()).map(|i| SweepRow { $( $field: $field[i], )* }).collect())
+        }
+    };
+}
+
+sweep_columns! {
+    run: i64 = "run index, 0-based: cell · reps + rep",
+    cell: i64 = "cell index, 0-based: noise index · (number of pose counts) + pose-count index",
+    rep: i64 = "repetition within the cell, 0-based",
+    noise_scale: f64 = "tracker noise multiplier (the value of --noise, as in `robocal generate --noise`)",
+    poses: i64 = "poses generated for the run (as `robocal generate --poses`)",
+    seed: u64 = "seed of the run's dataset and split (`robocal generate --seed`, `robocal calibrate --seed`)",
+    train_poses: i64 = "poses the calibration used",
+    test_poses: i64 = "poses held out for scoring",
+    sigma_rms_m: f64 = "RMS over the rows of the tracker's per-axis standard deviation, the `sigma` column (m); 0 without noise",
+    injected_rms_m: f64 = "RMS over the rows of the displacement of the real target from the nominal one by all injected effects (m)",
+    converged: bool = "the kinematic fit converged",
+    iterations: i64 = "solver iterations of the kinematic fit",
+    chi2_per_dof: f64 = "χ²/dof of the kinematic fit (1 when the noise model is right and the model explains the data)",
+    train_rms_m: f64 = "RMS of |predicted − measured| on the training rows after calibration (m)",
+    test_rms_measured_m: f64 = "RMS of |predicted − measured| on the held-out rows (m): the test RMS `robocal calibrate` reports",
+    test_error_rms_m: f64 = "RMS of |predicted − true| on the held-out rows, against the noise-free true target (m)",
+    test_error_max_m: f64 = "largest |predicted − true| on the held-out rows (m)",
+    test_error_predicted_m: f64 = "what the covariance predicts for test_error_rms_m: √(mean over held-out rows of trace(J C Jᵀ)) (m)",
+    test_error_nominal_rms_m: f64 = "RMS of |predicted − true| on the held-out rows for the nominal robot with only base and target fitted (m)",
+    rank: i64 = "identifiable parameter combinations of the calibration (31 for the iiwa 7 from positions: 4R + 2P + 3)",
+    param_combinations: i64 = "identifiable parameter combinations scored (rank of J C Jᵀ at the training poses; equals rank unless the prediction Jacobian is degenerate)",
+    param_z2_mean: f64 = "mean of z_k² over the identifiable combinations, z_k = their error in units of the predicted σ (1 expected)",
+    param_z_abs_max: f64 = "largest |z_k| (about 3 expected for r ≈ 31)",
+    param_beyond_3sigma: i64 = "identifiable combinations with |z_k| > 3 (0.27 % of r expected)",
+    condition_number: f64 = "condition number σ₁/σ_r of the scaled, noise-weighted Jacobian of the training poses",
+    sigma_min: f64 = "smallest identifiable singular value σ_r of that Jacobian (dimensionless: scaled by the expected parameter magnitudes and the noise)",
+    log_det_information: f64 = "log det of the scaled information matrix in the identifiable subspace (the D-optimal criterion)",
+}
+
+/// Deterministic Parquet bytes of `rows` (in the order given) with the key-value `metadata`.
+pub fn parquet_bytes(rows: &[SweepRow], metadata: &[(String, String)]) -> Result<Vec<u8>, String> {
+    use parquet::arrow::ArrowWriter;
+    use parquet::basic::Compression;
+    use parquet::file::metadata::KeyValue;
+    use parquet::file::properties::{
+        DEFAULT_CREATED_BY, EnabledStatistics, WriterProperties, WriterVersion,
+    };
+    let kv: Vec<KeyValue> = metadata
+        .iter()
+        .map(|(k, v)| KeyValue::new(k.clone(), v.clone()))
+        .collect();
+    let props = WriterProperties::builder()
+        .set_writer_version(WriterVersion::PARQUET_1_0)
+        .set_created_by(DEFAULT_CREATED_BY.to_string())
+        .set_compression(Compression::SNAPPY)
+        .set_max_row_group_row_count(Some(ROW_GROUP_ROWS))
+        .set_max_row_group_bytes(None)
+        .set_write_batch_size(1024)
+        .set_data_page_size_limit(1024 * 1024)
+        .set_data_page_row_count_limit(20_000)
+        .set_statistics_enabled(EnabledStatistics::Chunk)
+        .set_bloom_filter_enabled(false)
+        .set_key_value_metadata(Some(kv))
+        .set_sorting_columns(None)
+        .set_dictionary_enabled(false)
+        .build();
+    let schema = Arc::new(Schema::new(fields()));
+    let batch = RecordBatch::try_new(schema.clone(), arrays(rows))
+        .map_err(|e| format!("cannot build the sweep table: {e}"))?;
+    let err = |e: parquet::errors::ParquetError| format!("cannot write Parquet: {e}");
+    let mut w = ArrowWriter::try_new(Vec::new(), schema, Some(props)).map_err(err)?;
+    let mut start = 0;
+    while start < rows.len() {
+        let len = (rows.len() - start).min(ROW_GROUP_ROWS);
+        w.write(&batch.slice(start, len)).map_err(err)?;
+        start += len;
+    }
+    w.into_inner().map_err(err)
+}
+
+/// A sweep file read back: its rows (file order) and key-value metadata.
+#[derive(Clone, Debug)]
+pub struct SweepFile {
+    /// Rows in file order.
+    pub rows: Vec<SweepRow>,
+    /// Key-value metadata.
+    pub metadata: Vec<(String, String)>,
+}
+
+impl SweepFile {
+    /// The value of metadata key `key`.
+    pub fn meta(&self, key: &str) -> Option<&str> {
+        self.metadata
+            .iter()
+            .find(|(k, _)| k == key)
+            .map(|(_, v)| v.as_str())
+    }
+}
+
+/// Reads a sweep Parquet file; errors are one line naming the file.
+pub fn read(path: &Path) -> Result<SweepFile, String> {
+    use parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder;
+    let file = path.display().to_string();
+    let f = std::fs::File::open(path).map_err(|e| format!("{file}: cannot open: {e}"))?;
+    let b = ParquetRecordBatchReaderBuilder::try_new(f)
+        .map_err(|e| format!("{file}: not a Parquet file: {e}"))?;
+    let metadata = b
+        .metadata()
+        .file_metadata()
+        .key_value_metadata()
+        .map(|kv| {
+            kv.iter()
+                .filter(|k| k.key != "ARROW:schema")
+                .map(|k| (k.key.clone(), k.value.clone().unwrap_or_default()))
+                .collect()
+        })
+        .unwrap_or_default();
+    let reader = b.build().map_err(|e| format!("{file}: cannot read: {e}"))?;
+    let mut rows = Vec::new();
+    for batch in reader {
+        let batch = batch.map_err(|e| format!("{file}: cannot read: {e}"))?;
+        rows.extend(rows_of(&batch, &file)?);
+    }
+    Ok(SweepFile { rows, metadata })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn row(run: i64) -> SweepRow {
+        SweepRow {
+            run,
+            cell: run / 3,
+            rep: run % 3,
+            noise_scale: 0.5,
+            poses: 40,
+            seed: u64::MAX - run as u64,
+            train_poses: 28,
+            test_poses: 12,
+            sigma_rms_m: 1.1e-5,
+            injected_rms_m: 3e-4,
+            converged: run % 2 == 0,
+            iterations: 4,
+            chi2_per_dof: 1.01,
+            train_rms_m: 1.6e-5,
+            test_rms_measured_m: 2.1e-5,
+            test_error_rms_m: 7.2e-6 + run as f64 * 1e-9,
+            test_error_max_m: 1.3e-5,
+            test_error_predicted_m: 7e-6,
+            test_error_nominal_rms_m: 8e-4,
+            rank: 31,
+            param_combinations: 31,
+            param_z2_mean: 0.97,
+            param_z_abs_max: 2.4,
+            param_beyond_3sigma: 0,
+            condition_number: 1.2e3,
+            sigma_min: 4.5,
+            log_det_information: 201.5,
+        }
+    }
+
+    #[test]
+    fn rows_and_metadata_round_trip_exactly_and_bytes_are_reproducible() {
+        let rows: Vec<SweepRow> = (0..7).map(row).collect();
+        let meta = vec![(META_SWEEP.to_string(), "{\"a\":1}".to_string())];
+        let bytes = parquet_bytes(&rows, &meta).unwrap();
+        assert_eq!(bytes, parquet_bytes(&rows, &meta).unwrap());
+        let dir = std::env::temp_dir().join(format!("robocal_sweep_table_{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let p = dir.join("t.parquet");
+        std::fs::write(&p, &bytes).unwrap();
+        let back = read(&p).unwrap();
+        assert_eq!(back.rows, rows);
+        assert_eq!(back.meta(META_SWEEP), Some("{\"a\":1}"));
+        assert_eq!(back.meta(META_SUBSET), None);
+        // Written again from what was read: the same bytes.
+        assert_eq!(parquet_bytes(&back.rows, &back.metadata).unwrap(), bytes);
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn every_column_is_documented_in_docs_sweep_md() {
+        let doc = include_str!("../../docs/sweep.md");
+        for (name, _) in COLUMNS {
+            assert!(
+                doc.contains(&format!("| `{name}` |")),
+                "docs/sweep.md misses column {name}"
+            );
+        }
+    }
+
+    #[test]
+    fn a_file_that_is_not_a_sweep_is_refused_by_name() {
+        let dir = std::env::temp_dir().join(format!("robocal_sweep_bad_{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let p = dir.join("junk.parquet");
+        std::fs::write(&p, b"not parquet").unwrap();
+        let e = read(&p).unwrap_err();
+        assert!(e.starts_with(&p.display().to_string()), "{e}");
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+}
