@@ -216,7 +216,7 @@ pub fn run(args: Args) -> CliResult {
         .filter(|v| *v >= 1)
         .ok_or_else(|| input("--reps", &args.reps, "must be a whole number ≥ 1"))?;
     if args.model != "kinematic" {
-        super::calibrate::check_model(&args.model)?;
+        calib::extensions::ModelSpec::parse(&args.model).map_err(super::calibrate::input)?;
         return Err(input(
             "--model",
             &args.model,
