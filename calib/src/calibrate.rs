@@ -21,7 +21,9 @@ use crate::extensions::{
 use crate::identifiability::{NullSpaceReport, Observability, describe_null_space};
 use crate::learned::LearnedResidual;
 use crate::lie3::{left_jacobian_inverse, log_rotation};
-use crate::lm::{LmOptions, LmWorkspace, MinimizationReport, Subspace, minimize};
+use crate::lm::{
+    LeastSquaresProblem, LmOptions, LmWorkspace, MinimizationReport, Subspace, minimize,
+};
 use crate::params::{KinematicParams, ParamKind, ParamLayout, ParameterScales};
 use crate::problem::{KinematicProblem, NoiseModel, Observations};
 use crate::stats::{ResidualStats, position_errors, residual_stats, stats_of_errors};
@@ -331,19 +333,33 @@ impl CalibrationReport {
             "parameters (σ from the covariance; * = determined on its own):".into(),
         );
         for p in &self.parameters {
-            let (scale, unit) = match p.unit.as_str() {
-                "m" => (1e3, "mm"),
-                _ => (1e3, "mrad"),
+            let mark = if p.identifiable_alone { '*' } else { ' ' };
+            let text = match p.unit.as_str() {
+                "m" | "rad" => {
+                    let unit = if p.unit == "m" { "mm" } else { "mrad" };
+                    format!(
+                        "  {mark} {:<32} {:>+14.6} ± {:<10.6} {unit}",
+                        p.name,
+                        p.value * 1e3,
+                        p.sigma * 1e3
+                    )
+                }
+                // Extension parameters, in their own units (rad/(N m), 1/K, …).
+                unit => format!(
+                    "  {mark} {:<32} {:>+14.4e} ± {:<10.2e} {unit}",
+                    p.name, p.value, p.sigma
+                ),
             };
+            line(&mut s, text);
+        }
+        if let Some(l) = &self.learned {
+            line(&mut s, format!("learned correction: {}", l.description));
+            let test = l.test.as_ref().map_or(String::new(), |t| {
+                format!(", test RMS {:.1} µm", t.rms_m * 1e6)
+            });
             line(
                 &mut s,
-                format!(
-                    "  {} {:<32} {:>+14.6} ± {:<10.6} {unit}",
-                    if p.identifiable_alone { '*' } else { ' ' },
-                    p.name,
-                    p.value * scale,
-                    p.sigma * scale
-                ),
+                format!("  with it: train RMS {:.1} µm{test}", l.train.rms_m * 1e6),
             );
         }
         if !self.strong_correlations.is_empty() {
@@ -552,9 +568,11 @@ pub fn calibrate(
 /// [`Regressors::build`]) and, with payload, re-estimate its centre of mass.
 pub const EQUILIBRIUM_REFITS: usize = 12;
 
-/// One Gauss–Newton step (m) for the payload's centre of mass in the flange frame, the other parameters
-/// held at `cal`: the weighted least-squares fit of the training errors by their central-difference
-/// change with each coordinate of the centre of mass.
+/// One Gauss–Newton step (m) for the payload's centre of mass in the flange frame, taken jointly with
+/// every other parameter at `cal`: the weighted least-squares step of the stacked Jacobian
+/// `[J D, J_c s_c]` (the analytic Jacobian of the identifiable parameters, scaled, and central
+/// differences of the residuals in each coordinate of the centre of mass, scaled by 1 cm), minimum-norm
+/// in the unidentifiable directions; only its centre-of-mass part is returned (the refit does the rest).
 fn payload_com_step(
     model: &Model,
     train: &Dataset<'_>,
@@ -563,43 +581,64 @@ fn payload_com_step(
     cal: &Calibration,
 ) -> Result<Vector3<f64>> {
     const H: f64 = 1e-3;
+    const COM_SCALE_M: f64 = 1e-2;
     let at = &cal.params.extension;
-    let errors = |s: &ExtensionSettings| -> Result<(Vec<Vector3<f64>>, Vec<f64>)> {
+    let residuals = |s: &ExtensionSettings| -> Result<Vec<f64>> {
         let obs = observations(model, train, options, Some(s), at)?;
-        Ok((position_errors(model, &cal.params, &obs), obs.sigma.clone()))
+        let all: Vec<usize> = (0..cal.layout.len()).collect();
+        let mut prob = KinematicProblem::new(model, &obs, cal.params.clone(), all);
+        let mut r = vec![0.0; prob.n_residuals()];
+        prob.set_params(&vec![0.0; cal.layout.len()]);
+        prob.residuals(&mut r);
+        Ok(r)
     };
-    let (e0, sigma) = errors(settings)?;
-    let mut cols = Vec::with_capacity(3);
+    let obs = observations(model, train, options, Some(settings), at)?;
+    let p = cal.layout.len();
+    let all: Vec<usize> = (0..p).collect();
+    let mut prob = KinematicProblem::new(model, &obs, cal.params.clone(), all);
+    let m = prob.n_residuals();
+    let mut r0 = vec![0.0; m];
+    prob.set_params(&vec![0.0; p]);
+    prob.residuals(&mut r0);
+    let mut j = DMatrix::zeros(m, p + 3);
+    let mut jk = DMatrix::zeros(m, p);
+    prob.jacobian(&mut jk);
+    let scales = options.scales.vector(&cal.layout);
+    for c in 0..p {
+        let s = if cal.subspace.scales.get(c).is_some_and(|v| *v == 0.0) {
+            0.0
+        } else {
+            scales[c]
+        };
+        for row in 0..m {
+            j[(row, c)] = jk[(row, c)] * s;
+        }
+    }
     for axis in 0..3 {
         let mut plus = settings.clone();
         plus.payload_com_m[axis] += H;
         let mut minus = settings.clone();
         minus.payload_com_m[axis] -= H;
-        let (ep, _) = errors(&plus)?;
-        let (em, _) = errors(&minus)?;
-        cols.push(
-            ep.iter()
-                .zip(&em)
-                .map(|(a, b)| (a - b) / (2.0 * H))
-                .collect::<Vec<_>>(),
-        );
-    }
-    let mut n = Matrix3::<f64>::zeros();
-    let mut g = Vector3::zeros();
-    for r in 0..e0.len() {
-        let w = 1.0 / (sigma[r] * sigma[r]);
-        for a in 0..3 {
-            g[a] -= w * cols[a][r].dot(&e0[r]);
-            for b in 0..3 {
-                n[(a, b)] += w * cols[a][r].dot(&cols[b][r]);
-            }
+        let (rp, rm) = (residuals(&plus)?, residuals(&minus)?);
+        for row in 0..m {
+            j[(row, p + axis)] = (rp[row] - rm[row]) / (2.0 * H) * COM_SCALE_M;
         }
     }
-    // Ridge of 1e-9 of the trace: a payload that never moves leaves its centre of mass at the start.
-    let ridge = 1e-9 * n.trace().max(f64::MIN_POSITIVE);
-    Ok((n + Matrix3::identity() * ridge)
-        .try_inverse()
-        .map_or(Vector3::zeros(), |inv| inv * g))
+    let svd = j.svd(true, true);
+    let smax = svd.singular_values.max();
+    let step = svd
+        .solve(&DVector::from_vec(r0), 1e-8 * smax)
+        .map_err(|e| CalibError::BadValue {
+            context: train.name.clone(),
+            field: "payload".into(),
+            value: String::new(),
+            problem: format!("payload centre of mass: {e}"),
+        })?;
+    Ok(Vector3::new(
+        -step[p] * COM_SCALE_M,
+        -step[p + 1] * COM_SCALE_M,
+        -step[p + 2] * COM_SCALE_M,
+    ))
 }
 
 /// [`calibrate_with`] for an extended model. With joint compliance it is refitted with the torques at
