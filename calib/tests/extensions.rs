@@ -267,3 +267,61 @@ fn the_model_file_carries_extensions_and_learned_correction_to_predict() {
     assert!(e.contains("m.json") && e.contains("extensions"), "{e}");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn thermal_drift_from_time_stamps_alone_finds_the_warm_up() {
+    // A 12 K warm-up with τ = 30 min, but the table keeps only the time stamps: the estimator must
+    // pick the time constant from its candidates and explain the growth as well as with temperatures.
+    let model = robots::load_builtin("iiwa7").unwrap();
+    let dir = std::env::temp_dir().join(format!("robocal_ext_warm_{}", std::process::id()));
+    let mut t = simulate(
+        "[effects.thermal]\nt_ref_c = 20.0\nalpha_per_k = 23e-6\nbeta_rad_per_k = 0.0\n\
+         [campaign.temperature]\nwarm_up = { t0_c = 20.0, delta_c = 12.0, tau_s = 1800.0 }\n",
+        9,
+        &dir,
+    );
+    let with_temp = calibrate_model(
+        &model,
+        &Dataset::all(&t, "sim"),
+        None,
+        &ModelSpec::parse("kinematic+thermal_drift").unwrap(),
+        &CalibrationOptions::default(),
+    )
+    .unwrap();
+    t.temp = None;
+    let cal = calibrate_model(
+        &model,
+        &Dataset::all(&t, "sim"),
+        None,
+        &ModelSpec::parse("kinematic+thermal_drift").unwrap(),
+        &CalibrationOptions::default(),
+    )
+    .unwrap();
+    match cal.extensions.as_ref().unwrap().thermal {
+        Some(calib::extensions::ThermalInput::WarmUp { tau_s, .. }) => {
+            assert!((1200.0..=2700.0).contains(&tau_s), "τ = {tau_s} s")
+        }
+        other => panic!("expected a warm-up from time stamps, got {other:?}"),
+    }
+    let (a, b) = (
+        with_temp.report.after.train.rms_m,
+        cal.report.after.train.rms_m,
+    );
+    assert!(
+        b < 1.05 * a,
+        "time stamps only: {b:e} m vs with temperature {a:e} m"
+    );
+    // The growth per unit of warm-up is α ΔT = 23e-6 · 12 K.
+    let e = cal
+        .layout
+        .extensions
+        .iter()
+        .position(|p| p.name == "link growth")
+        .unwrap();
+    let growth = cal.params.extension[e];
+    assert!(
+        (growth / (23e-6 * 12.0) - 1.0).abs() < 0.1,
+        "growth per warm-up {growth:e}"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
