@@ -163,6 +163,44 @@ fn calibrate_auto_and_predict_carry_the_extended_model() {
     ]);
     assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
     assert!(stderr(&o).contains("temp"), "{}", stderr(&o));
+    // With it, a joint-only CSV predicts, and a warmer robot reaches further (the links grew).
+    std::fs::write(
+        &poses,
+        "pose,q1,q2,q3,q4,q5,q6,q7,temp\n0,0,0.5,0,-1,0,0.5,0,20\n1,0,0.5,0,-1,0,0.5,0,30\n",
+    )
+    .unwrap();
+    let p2 = d.join("p2.csv");
+    let o = robocal(&[
+        "predict",
+        "--model",
+        model.to_str().unwrap(),
+        "--data",
+        poses.to_str().unwrap(),
+        "--out",
+        p2.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let rows: Vec<Vec<f64>> = std::fs::read_to_string(&p2)
+        .unwrap()
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').skip(1).map(|v| v.parse().unwrap()).collect())
+        .collect();
+    let base: Vec<f64> = file["parameters"]["t_tracker_base"]["translation_m"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_f64().unwrap())
+        .collect();
+    let reach = |r: &[f64]| {
+        ((r[0] - base[0]).powi(2) + (r[1] - base[1]).powi(2) + (r[2] - base[2]).powi(2)).sqrt()
+    };
+    // 10 K of aluminium (23e-6 /K) on a reach of about a metre: some 0.2 mm.
+    let grown = reach(&rows[1]) - reach(&rows[0]);
+    assert!(
+        (1e-4..4e-4).contains(&grown),
+        "growth over 10 K: {grown:e} m"
+    );
     let _ = std::fs::remove_dir_all(&d);
 }
 

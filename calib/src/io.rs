@@ -58,88 +58,26 @@ pub fn csv_text(header: &[String], rows: &[(i64, Vec<f64>)]) -> String {
     s
 }
 
-/// Reads a CSV of joint configurations without measured positions (`pose, q1..qN`, other columns
-/// ignored), as `plan-poses` writes it, into a [`sim::measurement_table::MeasurementTable`] whose
-/// positions are zero. For `predict`, whose input needs no `x, y, z`. Errors name the file, the row
-/// and the column.
+/// Reads a CSV of joint configurations without measured positions (`pose, q1..qN` and any optional
+/// columns of the measurement contract: `t`, `temp`, `dir1..dirN`, `payload`, …), as `plan-poses`
+/// writes it, into a [`sim::measurement_table::MeasurementTable`] whose positions are zero. For
+/// `predict`, whose input needs no `x, y, z`. The file is read by the contract's own CSV reader, so
+/// errors name the file, the row and the column as for any measurement table.
 pub fn read_joint_csv(path: &Path) -> Result<sim::measurement_table::MeasurementTable> {
-    use sim::measurement_table::{MeasurementTable, OptionalColumns, Row};
     let file = path.display().to_string();
     let text = std::fs::read_to_string(path).map_err(|e| CalibError::Io {
         path: file.clone(),
         message: e.to_string(),
     })?;
-    let bad = |row: Option<usize>, column: &str, value: &str, problem: &str| CalibError::BadValue {
-        context: match row {
-            Some(r) => format!("{file}: row {r}"),
-            None => file.clone(),
-        },
-        field: column.to_string(),
-        value: value.to_string(),
-        problem: problem.to_string(),
-    };
-    let mut lines = text
-        .trim_start_matches('\u{feff}')
-        .lines()
-        .filter(|l| !l.trim().is_empty());
-    let header: Vec<String> = lines
-        .next()
-        .ok_or_else(|| bad(None, "header", "", "the file is empty"))?
-        .split(',')
-        .map(|c| c.trim().trim_matches('"').to_string())
-        .collect();
-    let pose_col = header
-        .iter()
-        .position(|c| c == "pose")
-        .ok_or_else(|| bad(None, "pose", "", "missing required column"))?;
-    let mut q_cols = Vec::new();
-    while let Some(c) = header
-        .iter()
-        .position(|h| *h == format!("q{}", q_cols.len() + 1))
-    {
-        q_cols.push(c);
-    }
-    if q_cols.is_empty() {
-        return Err(bad(None, "q1", "", "missing required column"));
-    }
-    let mut t = MeasurementTable::new(q_cols.len(), OptionalColumns::NONE);
-    let mut q = vec![0.0; q_cols.len()];
-    for (i, line) in lines.enumerate() {
-        let row = i + 1;
-        let cells: Vec<&str> = line
-            .split(',')
-            .map(|c| c.trim().trim_matches('"'))
-            .collect();
-        let cell = |c: usize, name: &str| -> Result<&str> {
-            cells
-                .get(c)
-                .copied()
-                .ok_or_else(|| bad(Some(row), name, "", "the row is too short"))
-        };
-        let ps = cell(pose_col, "pose")?;
-        let pose: i64 = ps
-            .parse()
-            .map_err(|_| bad(Some(row), "pose", ps, "not an integer"))?;
-        for (j, &c) in q_cols.iter().enumerate() {
-            let name = format!("q{}", j + 1);
-            let s = cell(c, &name)?;
-            let v: f64 = s
-                .parse()
-                .map_err(|_| bad(Some(row), &name, s, "not a number"))?;
-            if !v.is_finite() {
-                return Err(bad(Some(row), &name, s, "not finite"));
-            }
-            q[j] = v;
+    let mut out = String::with_capacity(text.len() + 16 * text.lines().count());
+    let mut header = true;
+    for line in text.trim_start_matches('\u{feff}').lines() {
+        if line.trim().is_empty() {
+            continue;
         }
-        t.push_row(&Row {
-            pose,
-            q: &q,
-            position: [0.0; 3],
-            ..Row::default()
-        })?;
+        out.push_str(line.trim_end_matches('\r'));
+        out.push_str(if header { ",x,y,z\n" } else { ",0,0,0\n" });
+        header = false;
     }
-    if t.is_empty() {
-        return Err(bad(None, "rows", "0", "no data rows"));
-    }
-    Ok(t)
+    Ok(sim::measurement_table::read_csv_str(&out, &file)?)
 }
