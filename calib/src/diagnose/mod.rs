@@ -9,7 +9,10 @@
 //!    (`Δχ² / (χ²₁/dof₁)` against `χ²` with `Δrank` degrees of freedom, as a normal `z`,
 //!    [`significance::chi2_to_z`]), and (b) it predicts the test poses better (a paired test of the
 //!    per-pose squared errors, [`significance::paired`]), each at level `α` divided by the number of
-//!    candidates (Bonferroni), and (c) it lowers the test RMS by at least [`DiagnoseOptions::min_gain`].
+//!    candidates (Bonferroni), (c) it lowers the test RMS by at least [`DiagnoseOptions::min_gain`],
+//!    and (d) it gains more on the test poses than an error periodic in one joint's angle would
+//!    ([`unexplained::probes`]): a cause that is really there explains its residual better than a
+//!    generic term, and structure that a generic term explains better is no known cause's.
 //! 3. The significant candidate with the largest test `z` is adopted; the loop repeats with the
 //!    remaining causes until none is significant.
 //! 4. The joints of a finding are those whose parameter of that cause is determined on its own and
@@ -142,6 +145,9 @@ pub struct Trial {
     pub gain: f64,
     /// Whether it passed every test.
     pub significant: bool,
+    /// The unexplained-structure probe that predicts the test poses at least as well, if any: then the
+    /// residual is not this cause's, whatever its significance.
+    pub beaten_by: Option<String>,
 }
 
 /// The full result; its JSON form is the `diagnose --json` contract.
@@ -584,6 +590,11 @@ pub fn diagnose_with_progress(
             break;
         }
         let z_crit = significance::normal_upper_quantile(options.alpha / remaining.len() as f64);
+        // The competitor no known cause names: an error periodic in one joint's angle. A cause that
+        // is really there explains its residual better than such a generic term can.
+        let competitor = unexplained::probes(model, &split, &current, &[], options.seed)
+            .into_iter()
+            .max_by(|a, b| a.gain.total_cmp(&b.gain));
         let mut best: Option<(Evaluated, f64, f64)> = None;
         for cause in remaining {
             let spec = current.spec.with(cause);
@@ -596,7 +607,12 @@ pub fn diagnose_with_progress(
             let tz = significance::paired(&current.pose_sq, &cand.pose_sq).z;
             let trz = train_z(&current.cal, &cand.cal);
             let gain = 1.0 - cand.step.test_rms_m / current.step.test_rms_m;
-            let significant = tz > z_crit && trz > z_crit && gain >= options.min_gain;
+            let beaten_by = competitor
+                .as_ref()
+                .filter(|p| p.gain >= gain)
+                .map(|p| p.name.clone());
+            let significant =
+                tz > z_crit && trz > z_crit && gain >= options.min_gain && beaten_by.is_none();
             trials.push(Trial {
                 round,
                 cause: cause.name().into(),
@@ -605,6 +621,7 @@ pub fn diagnose_with_progress(
                 train_z: trz,
                 gain,
                 significant,
+                beaten_by,
             });
             if significant && best.as_ref().is_none_or(|(_, z, _)| tz > *z) {
                 best = Some((cand, tz, trz));

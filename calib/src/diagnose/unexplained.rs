@@ -122,14 +122,16 @@ fn harmonic_probe(
         .collect()
 }
 
-/// Examines the residual of `current` (the final physical model).
-pub(crate) fn analyse(
+/// The probes on the residual of `current`: harmonics of each joint angle, then the learned models
+/// `learned_kinds` (folds drawn from `seed`), each fitted on the training rows and judged on the test
+/// poses.
+pub(crate) fn probes(
     model: &Model,
     split: &Split<'_>,
     current: &Evaluated,
-    noise_floor_m: f64,
-    options: &DiagnoseOptions,
-) -> Result<Unexplained> {
+    learned_kinds: &[String],
+    seed: u64,
+) -> Vec<Probe> {
     let n = model.nq();
     let gather = |rows: &[usize]| -> Vec<f64> {
         rows.iter()
@@ -178,8 +180,8 @@ pub(crate) fn analyse(
         );
         judge(format!("harmonics of joint {}", j + 1), Some(j + 1), &c);
     }
-    for kind in &options.learned_kinds {
-        let Ok(l) = crate::learned::fit(kind, &q_train, n, &residual, options.seed) else {
+    for kind in learned_kinds {
+        let Ok(l) = crate::learned::fit(kind, &q_train, n, &residual, seed) else {
             continue;
         };
         let c: Vec<Vector3<f64>> = (0..split.test.rows.len())
@@ -187,6 +189,19 @@ pub(crate) fn analyse(
             .collect();
         judge(format!("learned:{kind}"), None, &c);
     }
+    probes
+}
+
+/// Examines the residual of `current` (the final physical model).
+pub(crate) fn analyse(
+    model: &Model,
+    split: &Split<'_>,
+    current: &Evaluated,
+    noise_floor_m: f64,
+    options: &DiagnoseOptions,
+) -> Result<Unexplained> {
+    let before = rms(&current.test_err);
+    let probes = probes(model, split, current, &options.learned_kinds, options.seed);
     let z_crit = normal_upper_quantile(options.alpha / probes.len().max(1) as f64);
     let significant = |p: &&Probe| p.z > z_crit && p.gain >= options.min_gain;
     let best_of =
