@@ -245,14 +245,7 @@ pub fn run(args: Args) -> CliResult {
             if f.joints.is_empty() {
                 String::new()
             } else {
-                format!(
-                    " at joints {}",
-                    f.joints
-                        .iter()
-                        .map(|j| j.to_string())
-                        .collect::<Vec<_>>()
-                        .join(", ")
-                )
+                format!(" at joints {}", f.joint_list())
             }
         );
     }

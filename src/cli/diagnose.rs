@@ -69,14 +69,7 @@ pub(crate) fn text(d: &Diagnosis, data: &str) -> String {
         let joints = if f.joints.is_empty() {
             String::new()
         } else {
-            format!(
-                " at joints {}",
-                f.joints
-                    .iter()
-                    .map(|j| j.to_string())
-                    .collect::<Vec<_>>()
-                    .join(", ")
-            )
+            format!(" at joints {}", f.joint_list())
         };
         s.push_str(&format!(
             "  {}{joints}: test RMS {:.1} -> {:.1} µm (gain {:.0} %)\n    {}\n",

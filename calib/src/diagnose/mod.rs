@@ -128,6 +128,17 @@ pub struct Finding {
     pub parameters: Vec<FoundParameter>,
 }
 
+impl Finding {
+    /// The joints as text, e.g. `2, 4` (empty without joints).
+    pub fn joint_list(&self) -> String {
+        self.joints
+            .iter()
+            .map(|j| j.to_string())
+            .collect::<Vec<_>>()
+            .join(", ")
+    }
+}
+
 /// A candidate tried in one round.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Trial {

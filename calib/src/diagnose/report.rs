@@ -126,14 +126,7 @@ pub fn summary_markdown(d: &Diagnosis, data_name: &str) -> String {
         let joints = if f.joints.is_empty() {
             String::new()
         } else {
-            format!(
-                " (joints {})",
-                f.joints
-                    .iter()
-                    .map(|j| j.to_string())
-                    .collect::<Vec<_>>()
-                    .join(", ")
-            )
+            format!(" (joints {})", f.joint_list())
         };
         s.push_str(&format!(
             "- **{}**{joints}: {}. Test RMS {} → {} (gain {:.0} %, held-out z = {:.1}).\n",

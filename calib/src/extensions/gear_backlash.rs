@@ -6,7 +6,7 @@
 //! holding torque, onto the loaded flank). A joint always approached from the same side cannot be told
 //! from a zero offset; the solver reports that and leaves `hᵢ` at zero.
 
-use super::{BacklashSign, Cause, ExtensionParam, Term};
+use super::{BacklashSign, Cause, ExtensionParam, per_joint_params};
 use sim::Model;
 
 /// Expected half lost motion (rad): harmonic drives have about 1 arc-min (2.9e-4 rad) of lost motion.
@@ -14,22 +14,14 @@ pub const SCALE_RAD: f64 = 1e-4;
 
 /// One half-lost-motion per joint.
 pub fn params(model: &Model) -> Vec<ExtensionParam> {
-    model
-        .joints
-        .iter()
-        .enumerate()
-        .map(|(i, j)| ExtensionParam {
-            cause: Cause::GearBacklash,
-            term: Term::JointAngle { joint: i },
-            name: format!("joint {} half lost motion", i + 1),
-            unit: if j.kind.is_rotational() {
-                "rad".into()
-            } else {
-                "m".into()
-            },
-            scale: SCALE_RAD,
-        })
-        .collect()
+    per_joint_params(
+        model,
+        Cause::GearBacklash,
+        "half lost motion",
+        "rad",
+        "m",
+        SCALE_RAD,
+    )
 }
 
 /// Regressors `−sᵢ` (−1, 0 or +1) of one row, from its approach signs `dir` or its holding torques

@@ -8,7 +8,7 @@
 //! A joint whose torque does not change over the data (joint 1 of an upright arm) cannot be identified;
 //! the solver says so and leaves its compliance at zero.
 
-use super::{Cause, ExtensionParam, Term};
+use super::{Cause, ExtensionParam, per_joint_params};
 use sim::Model;
 
 /// Expected compliance (rad/(N m)): harmonic-drive joints of lightweight arms are 5e3–2e4 N m/rad.
@@ -16,22 +16,14 @@ pub const SCALE_RAD_PER_NM: f64 = 1e-4;
 
 /// One compliance per joint.
 pub fn params(model: &Model) -> Vec<ExtensionParam> {
-    model
-        .joints
-        .iter()
-        .enumerate()
-        .map(|(i, j)| ExtensionParam {
-            cause: Cause::JointCompliance,
-            term: Term::JointAngle { joint: i },
-            name: format!("joint {} compliance", i + 1),
-            unit: if j.kind.is_rotational() {
-                "rad/(N m)".into()
-            } else {
-                "m/N".into()
-            },
-            scale: SCALE_RAD_PER_NM,
-        })
-        .collect()
+    per_joint_params(
+        model,
+        Cause::JointCompliance,
+        "compliance",
+        "rad/(N m)",
+        "m/N",
+        SCALE_RAD_PER_NM,
+    )
 }
 
 /// Regressors `−τᵢ` (N m) of one row from its gravity torques `tau` (N m, one per joint).

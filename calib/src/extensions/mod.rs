@@ -88,6 +88,35 @@ pub struct ExtensionParam {
     pub scale: f64,
 }
 
+/// One parameter per joint of `model` for `cause`: named `joint i {what}`, in `rotational_unit` (or
+/// `prismatic_unit` for a prismatic joint), with expected magnitude `scale`.
+pub(crate) fn per_joint_params(
+    model: &Model,
+    cause: Cause,
+    what: &str,
+    rotational_unit: &str,
+    prismatic_unit: &str,
+    scale: f64,
+) -> Vec<ExtensionParam> {
+    model
+        .joints
+        .iter()
+        .enumerate()
+        .map(|(i, j)| ExtensionParam {
+            cause,
+            term: Term::JointAngle { joint: i },
+            name: format!("joint {} {what}", i + 1),
+            unit: if j.kind.is_rotational() {
+                rotational_unit
+            } else {
+                prismatic_unit
+            }
+            .into(),
+            scale,
+        })
+        .collect()
+}
+
 /// Parsed `--model` value: `kinematic`, optionally `+cause` words and one `+learned:KIND`.
 #[derive(Clone, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 pub struct ModelSpec {

@@ -12,7 +12,7 @@
 //! training mean) from the `t` column, and the parameters are per unit of warm-up (rad, 1); the time
 //! constant τ (s) is found by the calibration's search over candidates ([`WARM_UP_TAUS_S`]).
 
-use super::{Cause, ExtensionParam, ExtensionSettings, Term, ThermalInput};
+use super::{Cause, ExtensionParam, ExtensionSettings, Term, ThermalInput, per_joint_params};
 use crate::error::{CalibError, Result};
 use sim::Model;
 use sim::measurement_table::MeasurementTable;
@@ -71,18 +71,14 @@ pub fn params(model: &Model, settings: &ExtensionSettings) -> Vec<ExtensionParam
     } else {
         (" per warm-up", 10.0)
     };
-    let mut out: Vec<ExtensionParam> = model
-        .joints
-        .iter()
-        .enumerate()
-        .map(|(i, j)| ExtensionParam {
-            cause: Cause::ThermalDrift,
-            term: Term::JointAngle { joint: i },
-            name: format!("joint {} zero drift", i + 1),
-            unit: format!("{}{per}", if j.kind.is_rotational() { "rad" } else { "m" }),
-            scale: BETA_SCALE_RAD_PER_K * gain,
-        })
-        .collect();
+    let mut out = per_joint_params(
+        model,
+        Cause::ThermalDrift,
+        "zero drift",
+        &format!("rad{per}"),
+        &format!("m{per}"),
+        BETA_SCALE_RAD_PER_K * gain,
+    );
     out.push(ExtensionParam {
         cause: Cause::ThermalDrift,
         term: Term::Growth,
