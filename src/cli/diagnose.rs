@@ -23,7 +23,8 @@ pub struct Args {
     #[arg(long, value_name = "DIR")]
     report: Option<PathBuf>,
     /// Fraction of the poses held out to judge every decision (repeats of a pose stay together).
-    #[arg(long, value_name = "F", default_value_t = 1.0 / 3.0)]
+    /// A decimal or a ratio such as `1/3`.
+    #[arg(long, value_name = "F", default_value = "1/3", value_parser = parse_fraction)]
     test_fraction: f64,
     /// Seed of the train/test split and of the learned models' folds.
     #[arg(long, value_name = "N", default_value_t = 0)]
@@ -31,6 +32,21 @@ pub struct Args {
     /// False-alarm level of each decision (family-wise over the candidates of a round).
     #[arg(long, value_name = "P", default_value_t = 1e-3)]
     alpha: f64,
+}
+
+/// A fraction given as a decimal (`0.25`) or a ratio (`1/3`).
+fn parse_fraction(text: &str) -> Result<f64, String> {
+    let bad = || format!("'{text}' is not a fraction (e.g. 0.3 or 1/3)");
+    match text.split_once('/') {
+        Some((a, b)) => {
+            let (a, b): (f64, f64) = (
+                a.trim().parse().map_err(|_| bad())?,
+                b.trim().parse().map_err(|_| bad())?,
+            );
+            Ok(a / b)
+        }
+        None => text.trim().parse().map_err(|_| bad()),
+    }
 }
 
 /// Human-readable summary of a diagnosis.
