@@ -32,6 +32,10 @@ pub struct Args {
     /// False-alarm level of each decision (family-wise over the candidates of a round).
     #[arg(long, value_name = "P", default_value_t = 1e-3)]
     alpha: f64,
+    /// The noise floor (m, RMS of the position error norm) when known better than the data tell, e.g.
+    /// a robot's repeatability; by default estimated from repeated poses, `sigma` or the tracker model.
+    #[arg(long, value_name = "M")]
+    noise_floor: Option<f64>,
 }
 
 /// A fraction given as a decimal (`0.25`) or a ratio (`1/3`).
@@ -159,7 +163,15 @@ pub(crate) fn run_diagnosis(
 
 /// Runs `robocal diagnose`.
 pub fn run(args: Args) -> CliResult {
-    let options = options(args.test_fraction, args.seed, args.alpha)?;
+    let mut options = options(args.test_fraction, args.seed, args.alpha)?;
+    if let Some(v) = args.noise_floor {
+        if !(v > 0.0 && v.is_finite() && v < 0.1) {
+            return Err(CliError::Input(format!(
+                "--noise-floor {v}: must be a position error in m, > 0 and < 0.1"
+            )));
+        }
+        options.noise_floor_m = Some(v);
+    }
     let spec = ChainSpec {
         base_link: args.robot.base_link.clone(),
         tip_link: args.robot.tip_link.clone(),

@@ -60,6 +60,9 @@ pub struct DiagnoseOptions {
     pub candidates: Vec<Cause>,
     /// Learned models tried on what is left (default `kernel`, `poly`).
     pub learned_kinds: Vec<String>,
+    /// The noise floor (RMS position error norm, m) when the user knows it better than the data tell,
+    /// e.g. a robot's repeatability; `None` estimates it ([`noise_floor::estimate`]).
+    pub noise_floor_m: Option<f64>,
 }
 
 impl Default for DiagnoseOptions {
@@ -73,6 +76,7 @@ impl Default for DiagnoseOptions {
             joint_z: 5.0,
             candidates: Cause::ALL.to_vec(),
             learned_kinds: vec!["kernel".into(), "poly".into()],
+            noise_floor_m: None,
         }
     }
 }
@@ -691,8 +695,10 @@ pub fn diagnose_with_progress(
             model, &split, &current, cause, &f.joints, growth,
         ));
     }
-    let (noise_floor_m, noise_floor_source) =
-        noise_floor::estimate(table, &split.test.rows, &options.calibration.noise);
+    let (noise_floor_m, noise_floor_source) = match options.noise_floor_m {
+        Some(v) => (v, "given (--noise-floor)".to_string()),
+        None => noise_floor::estimate(table, &split.test.rows, &options.calibration.noise),
+    };
     progress("unexplained structure");
     let unexplained = unexplained::analyse(model, &split, &current, noise_floor_m, options)?;
     plots.test_errors_final_m = current.test_err.iter().map(|e| e.norm()).collect();
