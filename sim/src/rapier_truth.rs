@@ -76,6 +76,9 @@ use nalgebra::{Matrix3, Quaternion, Rotation3, UnitQuaternion, Vector3};
 use rapier3d_f64::prelude as rp;
 use rayon::prelude::*;
 
+/// The engine and version this module is built against (recorded in `truth.json`).
+pub const ENGINE: &str = "rapier3d-f64 0.36";
+
 /// Largest accepted sag `|qᵢ − θᵢ|` during settling (rad or m): beyond it the joints are too soft for
 /// the load (no equilibrium near the commanded pose) and settling fails.
 pub const MAX_DEFLECTION_RAD: f64 = 0.5;
