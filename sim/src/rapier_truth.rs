@@ -47,6 +47,12 @@
 //! (scalar analysis of the step); joints that soft against the load are reported as not settled, and
 //! a smaller `dt` settles them.
 //!
+//! # In the generator
+//!
+//! `[truth] model = "rapier"` in a scenario makes [`crate::effects::Truth`] settle its compliance stage
+//! with this module, on an arm built from the real geometry of each measurement (see
+//! [`crate::effects::rapier_compliance`]).
+//!
 //! # Units and frames
 //!
 //! SI throughout: joint positions in rad (m for prismatic joints), stiffness in N m/rad (N/m), masses in
