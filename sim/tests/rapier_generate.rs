@@ -250,3 +250,33 @@ fn an_arm_that_does_not_settle_is_an_error_naming_the_pose() {
     assert!(!dir.join("out").join("measurements.parquet").exists());
     let _ = std::fs::remove_dir_all(dir);
 }
+
+#[test]
+fn progress_callback_counts_every_rapier_row() {
+    let path = common::repo_root().join("scenarios/iiwa7_compliance_rapier.toml");
+    let ov = Overrides {
+        poses: Some(37),
+        ..Overrides::default()
+    };
+    let res = Scenario::load(&path).unwrap().resolve(&ov).unwrap();
+    let plan = generate::plan_of(&res).unwrap();
+    let truth = generate::truth_of(&res).unwrap();
+    let rows = std::sync::atomic::AtomicU64::new(0);
+    let calls = std::sync::atomic::AtomicU64::new(0);
+    let tick = |k: u64| {
+        rows.fetch_add(k, std::sync::atomic::Ordering::Relaxed);
+        calls.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    };
+    generate::simulate(
+        &truth,
+        &res.tracker,
+        &res.gravity,
+        &plan,
+        res.seed,
+        Some(&tick),
+    )
+    .unwrap();
+    assert_eq!(rows.into_inner(), 37);
+    // Rapier rows are slow enough to report in small batches: more than the final call.
+    assert!(calls.into_inner() > 1);
+}
