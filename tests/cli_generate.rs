@@ -52,6 +52,7 @@ fn every_shipped_scenario_generates_a_valid_dataset() {
         "iiwa7_backlash",
         "iiwa7_clean",
         "iiwa7_compliance",
+        "iiwa7_compliance_rapier",
         "iiwa7_kinematic",
         "iiwa7_thermal",
         "ur5_kinematic",
@@ -222,4 +223,69 @@ fn bad_input_exits_2_naming_the_key_and_write_failures_exit_1() {
     ]);
     assert_eq!(o.status.code(), Some(1), "{}", text(&o.stderr));
     let _ = std::fs::remove_dir_all(dir);
+}
+
+/// Noise-free positions of the shipped rapier scenario and of its analytic twin (same seed and
+/// campaign, so the same poses) agree within 1 µm; `truth.json` says which truth made each; a truth
+/// model that does not exist is bad input naming the key.
+#[test]
+fn rapier_truth_scenario_matches_its_analytic_twin_and_a_bad_truth_model_exits_2() {
+    let (a, r) = (out_dir("twin_analytic"), out_dir("twin_rapier"));
+    for (name, out) in [("iiwa7_compliance", &a), ("iiwa7_compliance_rapier", &r)] {
+        let s = repo().join(format!("scenarios/{name}.toml"));
+        let o = robocal(&[
+            "generate",
+            "--scenario",
+            s.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+            "--poses",
+            "8",
+            "--noise",
+            "0",
+        ]);
+        assert!(o.status.success(), "{name}: {}", text(&o.stderr));
+    }
+    let read = |d: &Path| sim::measurement_table::read(&d.join("measurements.parquet")).unwrap();
+    let (ta, tr) = (read(&a), read(&r));
+    assert_eq!(ta.q, tr.q, "the twins must command the same poses");
+    assert_eq!(tr.len(), 8);
+    for (k, (pa, pr)) in ta.position.iter().zip(&tr.position).enumerate() {
+        let d =
+            ((pa[0] - pr[0]).powi(2) + (pa[1] - pr[1]).powi(2) + (pa[2] - pr[2]).powi(2)).sqrt();
+        assert!(d < 1e-6, "pose {k}: rapier and analytic differ by {d:e} m");
+    }
+    let model = |d: &Path| -> serde_json::Value {
+        serde_json::from_str(&std::fs::read_to_string(d.join("truth.json")).unwrap()).unwrap()
+    };
+    assert_eq!(model(&a)["truth_model"], "analytic");
+    assert_eq!(model(&r)["truth_model"], "rapier");
+    assert_eq!(model(&r)["truth"]["engine"], "rapier3d-f64 0.36");
+
+    let bad = a.join("bad.toml");
+    std::fs::write(
+        &bad,
+        "[robot]\nname = \"iiwa7\"\n[effects.compliance]\nstiffness_nm_per_rad = 1e4\n\
+         [truth]\nmodel = \"mujoco\"\n",
+    )
+    .unwrap();
+    let o = robocal(&[
+        "generate",
+        "--scenario",
+        bad.to_str().unwrap(),
+        "--out",
+        a.join("o").to_str().unwrap(),
+    ]);
+    assert_eq!(o.status.code(), Some(2));
+    let e = text(&o.stderr);
+    assert!(
+        e.contains("bad.toml")
+            && e.contains("[truth] model")
+            && e.contains("mujoco")
+            && e.lines().count() == 1,
+        "{e}"
+    );
+    for d in [a, r] {
+        let _ = std::fs::remove_dir_all(d);
+    }
 }

@@ -1,12 +1,13 @@
 //! Speed of the rapier physics-engine truth (`sim::rapier_truth`): settled poses per second on one core
 //! for the iiwa 7 with a 3 kg payload, for the stiff and the soft joint sets of
 //! `golden/settle_iiwa7.csv`, next to the analytic compliance equilibrium (`sim::effects::Truth`) on the
-//! same poses. Target (issue 6): ≥ 1,000 settled poses per second per core with rapier.
+//! same poses, and the generator's truth with its compliance stage settled by rapier
+//! (`truth_rapier_*`, `[truth] model = "rapier"`). Target (issue 6): ≥ 1,000 settled poses per second per core with rapier.
 
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use nalgebra::Vector3;
 use sim::effects::joint_compliance::JointCompliance;
-use sim::effects::{Conditions, Effects, Truth};
+use sim::effects::{ComplianceSolver, Conditions, Effects, Truth};
 use sim::rapier_truth::{RapierArm, SettleOptions};
 use sim::{Payload, robots};
 use std::hint::black_box;
@@ -67,25 +68,35 @@ fn bench(c: &mut Criterion) {
             compliance: Some(JointCompliance::new(k.clone()).unwrap()),
             ..Effects::default()
         };
-        let truth = Truth::new(&model, &effects).unwrap();
-        let mut scratch = truth.scratch();
-        group.bench_function(format!("analytic_{name}"), |b| {
-            b.iter(|| {
-                for q in &qs {
-                    let cond = Conditions {
-                        q,
-                        dir: None,
-                        temp_c: 20.0,
-                        payload: Some(payload),
-                    };
-                    black_box(
-                        truth
-                            .target(&cond, &Vector3::zeros(), &gravity, &mut scratch)
-                            .unwrap(),
-                    );
-                }
-            })
-        });
+        // The generator's path: the analytic truth, and the same truth with its compliance stage
+        // settled by rapier (`[truth] model = "rapier"`; the arm is built once and cached per scratch).
+        for (label, solver) in [
+            ("analytic", ComplianceSolver::Analytic),
+            (
+                "truth_rapier",
+                ComplianceSolver::Rapier(SettleOptions::default()),
+            ),
+        ] {
+            let truth = Truth::with_solver(&model, &effects, solver).unwrap();
+            let mut scratch = truth.scratch();
+            group.bench_function(format!("{label}_{name}"), |b| {
+                b.iter(|| {
+                    for q in &qs {
+                        let cond = Conditions {
+                            q,
+                            dir: None,
+                            temp_c: 20.0,
+                            payload: Some(payload),
+                        };
+                        black_box(
+                            truth
+                                .target(&cond, &Vector3::zeros(), &gravity, &mut scratch)
+                                .unwrap(),
+                        );
+                    }
+                })
+            });
+        }
     }
     group.finish();
 }

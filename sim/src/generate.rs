@@ -4,8 +4,10 @@
 //! # Pipeline
 //!
 //! 1. [`crate::campaign::plan`]: the rows (pose, q, t, temp, dir, payload).
-//! 2. [`simulate`]: per row, the real robot's flange pose from the analytic truth
-//!    ([`crate::effects::Truth`]) and a tracker reading ([`crate::tracker::Tracker::measure`]). Rows are
+//! 2. [`simulate`]: per row, the real robot's flange pose from the truth ([`crate::effects::Truth`],
+//!    made by [`truth_of`]: with `[truth] model = "rapier"` its joint-compliance stage is settled by
+//!    the rapier physics engine on the same real geometry, see [`crate::effects::rapier_compliance`])
+//!    and a tracker reading ([`crate::tracker::Tracker::measure`]). Rows are
 //!    independent and run in parallel (rayon); the tracker noise of pose `k`, repeat `r` comes from its
 //!    own generator seeded by `(seed, k, r)` ([`crate::campaign::derive_seed`]), so the output does not
 //!    depend on the number of threads or their scheduling.
@@ -23,10 +25,13 @@
 //!   link-side joint positions `q_link1..N` and their first-order compliance approximation
 //!   `q_link_first_order1..N` (rad or m); the error added by the tracker `noise_{x,y,z}` (tracker
 //!   frame, m, outliers included), the `outlier` flag, the row's `sigma_radial` and
-//!   `sigma_transverse` (m), and `compliance_iterations`. With a 6-DoF probe also the true
+//!   `sigma_transverse` (m), and `compliance_iterations` (Newton iterations, or engine steps with the
+//!   rapier truth). With a 6-DoF probe also the true
 //!   orientation `qw_true..qz_true` and the rotation error `rot_noise_{x,y,z}` (rad, tracker frame).
 //!   Its column names differ from the contract's (`x`, `q1`, …), so it cannot be read as measurements.
-//! * `truth.json`: every injected parameter resolved to numbers, the scenario (text and parsed form),
+//! * `truth.json`: the truth model (`truth_model`, and `truth` with the compliance solver, its
+//!   settings and its step counts), every injected parameter resolved to numbers, the scenario (text
+//!   and parsed form),
 //!   the seed and overrides, the software version, the robot, the tracker placement, reflector offset
 //!   and noise model, the campaign settings, and the summary statistics.
 //!
@@ -55,10 +60,10 @@
 //! ```
 
 use crate::campaign::{Plan, STREAM_TRACKER, derive_seed, plan, rng_for};
-use crate::effects::{Conditions, Contributions, Truth};
+use crate::effects::{ComplianceSolver, Conditions, Contributions, Truth};
 use crate::error::{Result, SimError};
 use crate::measurement_table::{self, MeasurementTable, OptionalColumns};
-use crate::scenario::Resolved;
+use crate::scenario::{Resolved, TruthModel};
 use crate::statics::Payload;
 use crate::tracker::{Reading, Tracker};
 use arrow_array::{ArrayRef, BooleanArray, Float64Array, Int64Array, RecordBatch};
@@ -108,8 +113,32 @@ pub struct Simulation {
 /// Per-row progress callback: called with the number of rows just finished.
 pub type Progress<'a> = &'a (dyn Fn(u64) + Sync);
 
-/// Rows between progress callbacks.
-const PROGRESS_EVERY: usize = 4096;
+/// Rows between progress callbacks and the least rows per parallel task: analytic truth (≈ 4 µs a
+/// row) and rapier truth (≈ 200 µs a row, so a progress bar moves and two cores share 200 poses).
+const fn batching(solver: ComplianceSolver) -> (usize, usize) {
+    match solver {
+        ComplianceSolver::Analytic => (4096, 64),
+        ComplianceSolver::Rapier(_) => (16, 4),
+    }
+}
+
+/// The truth of a resolved scenario: [`Truth::with_solver`] with the solver its `[truth] model`
+/// names (rapier with the default [`crate::rapier_truth::SettleOptions`]). Errors name the scenario
+/// file and `effects` or `truth.model`.
+pub fn truth_of(res: &Resolved) -> Result<Truth> {
+    let (solver, key) = match res.truth_model {
+        TruthModel::Analytic => (ComplianceSolver::Analytic, "effects"),
+        TruthModel::Rapier => (
+            ComplianceSolver::Rapier(crate::rapier_truth::SettleOptions::default()),
+            "truth.model",
+        ),
+    };
+    Truth::with_solver(&res.model, &res.effects, solver).map_err(|e| SimError::Scenario {
+        file: res.scenario.label.clone(),
+        key: key.into(),
+        message: e.to_string(),
+    })
+}
 
 /// Simulates every row of `plan`: truth with `truth` under `gravity` (base frame, m/s²), reading with
 /// `tracker`, noise drawn from `seed` (see the module docs). Runs on the current rayon pool. Fails with
@@ -129,11 +158,12 @@ pub fn simulate(
     let mut q_first = vec![0.0; n * nq];
     let failure: Mutex<Option<(usize, SimError)>> = Mutex::new(None);
     let com = plan.payload_com_m;
+    let (every, min_len) = batching(truth.solver());
     rows.par_iter_mut()
         .zip(q_link.par_chunks_mut(nq))
         .zip(q_first.par_chunks_mut(nq))
         .enumerate()
-        .with_min_len(64)
+        .with_min_len(min_len)
         .for_each_init(
             || truth.scratch(),
             |scratch, (r, ((row, ql), qf))| {
@@ -170,9 +200,9 @@ pub fn simulate(
                     }
                 }
                 if let Some(p) = progress
-                    && (r + 1) % PROGRESS_EVERY == 0
+                    && (r + 1) % every == 0
                 {
-                    p(PROGRESS_EVERY as u64);
+                    p(every as u64);
                 }
             },
         );
@@ -184,7 +214,7 @@ pub fn simulate(
         });
     }
     if let Some(p) = progress {
-        p((n % PROGRESS_EVERY) as u64);
+        p((n % every) as u64);
     }
     Ok(Simulation {
         nq,
@@ -426,6 +456,11 @@ pub struct EffectSize {
 pub struct Summary {
     /// Robot name.
     pub robot: String,
+    /// How the truth was computed (`analytic` or `rapier`).
+    pub truth_model: TruthModel,
+    /// Compliance solve per row: mean and largest Newton iterations (analytic) or engine steps
+    /// (rapier); zeros without compliance.
+    pub compliance_steps_mean_max: [f64; 2],
     /// Seed in force.
     pub seed: u64,
     /// Poses.
@@ -499,8 +534,15 @@ impl Summary {
                 self.outliers
             )
         };
+        let truth = match self.truth_model {
+            TruthModel::Analytic => String::new(),
+            TruthModel::Rapier => format!(
+                " (rapier physics-engine compliance, {:.1} steps per pose on average)",
+                self.compliance_steps_mean_max[0]
+            ),
+        };
         format!(
-            "generated {} poses ({} measurements) of robot '{}', seed {}; {}; {}; wrote {}.",
+            "generated {} poses ({} measurements) of robot '{}'{truth}, seed {}; {}; {}; wrote {}.",
             self.poses,
             self.rows,
             self.robot,
@@ -554,8 +596,12 @@ fn summarize(res: &Resolved, plan: &Plan, sim: &Simulation, files: Vec<String>) 
         s2 += l * l;
         m += 1;
     }
+    let steps = sim.rows.iter().map(|r| r.compliance_iterations as f64);
+    let steps_max = steps.clone().fold(0.0, f64::max);
     Summary {
         robot: res.model.name.clone(),
+        truth_model: res.truth_model,
+        compliance_steps_mean_max: [steps.sum::<f64>() / n, steps_max],
         seed: res.seed,
         poses: plan.n_poses,
         rows: plan.len(),
@@ -586,7 +632,8 @@ struct TruthDoc {
     seed: u64,
     overrides: crate::scenario::Overrides,
     scenario_file: String,
-    truth_model: crate::scenario::TruthModel,
+    truth_model: TruthModel,
+    truth: serde_json::Value,
     robot: serde_json::Value,
     gravity_m_per_s2: [f64; 3],
     effects: serde_json::Value,
@@ -602,6 +649,37 @@ fn to_value<T: serde::Serialize>(v: &T) -> serde_json::Value {
     serde_json::to_value(v).unwrap_or(serde_json::Value::Null)
 }
 
+/// How the truth was computed, for `truth.json`: the compliance solver, its settings, its step
+/// counts and, for rapier, what the engine's model holds.
+fn truth_record(res: &Resolved, summary: &Summary) -> serde_json::Value {
+    use crate::effects::joint_compliance as jc;
+    let [mean, max] = summary.compliance_steps_mean_max;
+    match res.truth_model {
+        TruthModel::Analytic => json!({
+            "model": res.truth_model,
+            "compliance_solver": "Newton on K (q − θ) = τ_g(θ) in the real geometry (sim::effects::joint_compliance)",
+            "newton_tolerance_rad": jc::TOLERANCE_RAD,
+            "newton_max_iterations": jc::MAX_ITERATIONS,
+            "compliance_iterations_mean": mean,
+            "compliance_iterations_max": max,
+        }),
+        TruthModel::Rapier => {
+            let o = crate::rapier_truth::SettleOptions::default();
+            json!({
+                "model": res.truth_model,
+                "compliance_solver": "rapier multibody with joint springs settled to rest, built per temperature and payload from the real geometry: thermally grown links, kinematic error twists, base and tool errors; nominal inertials in the real joint frames; springs anchored at the motor angles after zero offsets, zero drift and backlash (sim::effects::rapier_compliance)",
+                "engine": crate::rapier_truth::ENGINE,
+                "settle_options": {
+                    "dt_s": o.dt, "damping_ratio": o.damping_ratio, "speed_tol_rad_per_s": o.speed_tol,
+                    "residual_tol_nm": o.residual_tol, "max_steps": o.max_steps,
+                },
+                "engine_steps_mean": mean,
+                "engine_steps_max": max,
+            })
+        }
+    }
+}
+
 /// The `truth.json` document.
 fn truth_json(res: &Resolved, plan: &Plan, summary: &Summary) -> TruthDoc {
     let sc = &res.scenario;
@@ -615,6 +693,7 @@ fn truth_json(res: &Resolved, plan: &Plan, summary: &Summary) -> TruthDoc {
         overrides: res.overrides,
         scenario_file: file_name,
         truth_model: res.truth_model,
+        truth: truth_record(res, summary),
         robot: json!({
             "name": res.model.name, "source": res.robot_source.source,
             "urdf_fnv1a64": res.robot_source.urdf_fnv1a64,
@@ -657,11 +736,7 @@ pub fn write_dataset(
     plan: &Plan,
     progress: Option<Progress<'_>>,
 ) -> Result<Summary> {
-    let truth = Truth::new(&res.model, &res.effects).map_err(|e| SimError::Scenario {
-        file: res.scenario.label.clone(),
-        key: "effects".into(),
-        message: e.to_string(),
-    })?;
+    let truth = truth_of(res)?;
     let sim = simulate(&truth, &res.tracker, &res.gravity, plan, res.seed, progress).map_err(
         |e| match e {
             SimError::Scenario { key, message, .. } => SimError::Scenario {

@@ -47,6 +47,12 @@
 //! (scalar analysis of the step); joints that soft against the load are reported as not settled, and
 //! a smaller `dt` settles them.
 //!
+//! # In the generator
+//!
+//! `[truth] model = "rapier"` in a scenario makes [`crate::effects::Truth`] settle its compliance stage
+//! with this module, on an arm built from the real geometry of each measurement (see
+//! [`crate::effects::rapier_compliance`]).
+//!
 //! # Units and frames
 //!
 //! SI throughout: joint positions in rad (m for prismatic joints), stiffness in N m/rad (N/m), masses in
@@ -75,6 +81,9 @@ use crate::statics::Payload;
 use nalgebra::{Matrix3, Quaternion, Rotation3, UnitQuaternion, Vector3};
 use rapier3d_f64::prelude as rp;
 use rayon::prelude::*;
+
+/// The engine and version this module is built against (recorded in `truth.json`).
+pub const ENGINE: &str = "rapier3d-f64 0.36";
 
 /// Largest accepted sag `|qᵢ − θᵢ|` during settling (rad or m): beyond it the joints are too soft for
 /// the load (no equilibrium near the commanded pose) and settling fails.

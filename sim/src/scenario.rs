@@ -64,7 +64,7 @@
 //! beta_rad_per_k = 0.0        # [n]
 //!
 //! [truth]
-//! model = "analytic"          # "rapier" is not available yet
+//! model = "analytic"          # or "rapier": joint compliance settled by the rapier physics engine
 //! ```
 //!
 //! Every effect table may carry `enabled = false` to switch it off without deleting it.
@@ -507,7 +507,9 @@ pub enum TruthModel {
     /// Closed-form kinematics with the injected effects ([`crate::effects::Truth`]).
     #[default]
     Analytic,
-    /// Physics-engine truth (a later issue; refused for now).
+    /// The analytic truth with its compliance stage settled by the rapier physics engine on the same
+    /// real geometry ([`crate::effects::ComplianceSolver::Rapier`] with the default
+    /// [`crate::rapier_truth::SettleOptions`]); needs `[effects.compliance]`.
     Rapier,
 }
 
@@ -1113,13 +1115,6 @@ impl Scenario {
     pub fn resolve(&self, overrides: &Overrides) -> Result<Resolved> {
         let f = self.label.as_str();
         let truth_model = self.file.truth.model.unwrap_or_default();
-        if truth_model == TruthModel::Rapier {
-            return Err(scenario_err(
-                f,
-                "truth.model",
-                "\"rapier\" (physics-engine truth) is not available yet; use \"analytic\"".into(),
-            ));
-        }
         let seed = overrides.seed.or(self.file.seed).unwrap_or(0);
         let (model, robot_source) = self.load_robot()?;
         let gravity = self
@@ -1139,6 +1134,15 @@ impl Scenario {
             ));
         }
         let effects = self.effects(&model, seed)?;
+        if truth_model == TruthModel::Rapier && effects.compliance.is_none() {
+            return Err(scenario_err(
+                f,
+                "truth.model",
+                "\"rapier\" settles the compliant joints in the physics engine: it needs an enabled \
+                 [effects.compliance] (without one the truth is purely kinematic; use \"analytic\")"
+                    .into(),
+            ));
+        }
         let (tracker, xyz, rpy) = self.tracker(seed, overrides.noise)?;
         let p_flange = [tracker.p_flange.x, tracker.p_flange.y, tracker.p_flange.z];
         let campaign = self.campaign(&model, overrides.poses, p_flange)?;

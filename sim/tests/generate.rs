@@ -511,7 +511,7 @@ fn bad_scenarios_are_refused_naming_the_key() {
         &dir,
     );
     assert!(
-        e.contains("truth.model") && e.contains("not available yet"),
+        e.contains("truth.model") && e.contains("[effects.compliance]"),
         "{e}"
     );
     let e = bad(

@@ -363,6 +363,30 @@ pub(crate) struct Equilibrium<'a> {
 }
 
 impl Equilibrium<'_> {
+    /// The first-order solution `θ₁ = q_motor − K⁻¹ τ_g(q_motor)` (rad or m) into `first`, with
+    /// `poses` and `flange` the chain evaluated at `q_motor`.
+    pub fn first_order(
+        &self,
+        q_motor: &[f64],
+        first: &mut [f64],
+        poses: &[Pose],
+        flange: &Pose,
+        ws: &mut GravityWork,
+    ) {
+        chain_gravity_torques(
+            self.chain,
+            poses,
+            flange,
+            self.bodies,
+            self.payload,
+            self.gravity,
+            ws,
+        );
+        for (i, f) in first.iter_mut().enumerate() {
+            *f = q_motor[i] - self.compliance[i] * ws.tau[i];
+        }
+    }
+
     /// Solves `θ = q_motor − K⁻¹ τ_g(θ)` (chain angles, rad or m) into `theta`, and the first-order
     /// solution into `first`. On entry `poses` and `flange` must hold the chain evaluated at `q_motor`
     /// (the caller has them already; this saves one evaluation). Returns the Newton steps taken and the

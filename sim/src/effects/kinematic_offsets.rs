@@ -352,6 +352,38 @@ impl Chain {
         self.joints.len()
     }
 
+    /// This chain at temperature offset `dt` (K) as a [`Model`] of the real robot: `nominal`'s names,
+    /// joint kinds, limits and inertials (masses, centres of mass and inertia tensors stay in their
+    /// joint frames), with the chain's joint origins `Oᵢ'(ΔT)` (the base pose folded into the first
+    /// origin, so the model's base frame is still the nominal base frame), flange offset, and the
+    /// derived home poses and screw axes. Its forward kinematics equal [`Chain::eval`] at `dt` (up to
+    /// rounding; a test checks it). `nominal` must be the model the chain was made from.
+    pub fn model_at(&self, nominal: &Model, dt: f64) -> Model {
+        let mut model = nominal.clone();
+        let mut home = self.base.unwrap_or_else(Pose::identity);
+        for (k, (joint, cj)) in model.joints.iter_mut().zip(&self.joints).enumerate() {
+            let local = pose_from(cj.origin_rot, cj.p0 + cj.dp * dt);
+            joint.origin = match (k, &self.base) {
+                (0, Some(b)) => b * local,
+                _ => local,
+            };
+            home *= local;
+            joint.home = home;
+            let w = home.rotation * cj.axis;
+            let v = if cj.rotational {
+                -w.cross(&home.translation.vector)
+            } else {
+                w
+            };
+            let w = if cj.rotational { w } else { Vector3::zeros() };
+            joint.screw = Vector6::new(w.x, w.y, w.z, v.x, v.y, v.z);
+            joint.refresh_derived();
+        }
+        model.flange_offset = pose_from(self.flange_rot, self.flange_p0 + self.flange_dp * dt);
+        model.home_flange = home * model.flange_offset;
+        model
+    }
+
     /// Joint frames `T_base_joint[i]` into `poses` and the flange pose `T_base_flange` (m), at joint
     /// angles `angles` (rad or m) and temperature offset `dt` (K).
     #[inline]
@@ -441,5 +473,48 @@ mod tests {
                 t *= exp_se3(s, q[i]);
             }
         }
+    }
+
+    #[test]
+    fn model_at_reproduces_the_real_chain_at_temperature() {
+        // The real chain (grown links, error twists, base and tool errors) as a Model: its own forward
+        // kinematics and its product of exponentials must both give the chain's frames.
+        let m = robots::load_builtin("iiwa7").unwrap();
+        let kin = KinematicOffsets::new(
+            (0..7).map(|k| twist(k, 0.02)).collect(),
+            vec![0.0; 7],
+            twist(11, 0.01),
+            twist(13, 0.01),
+        )
+        .unwrap();
+        let alpha: Vec<f64> = (0..8).map(|k| 20e-6 + 1e-6 * k as f64).collect();
+        let c = Chain::real(&m, Some(&alpha), &kin);
+        let dt = 7.5;
+        let real = c.model_at(&m, dt);
+        let mut d = Data::new(&real);
+        let mut poses = vec![Pose::identity(); 7];
+        for k in 0..10 {
+            let q: Vec<f64> = (0..7)
+                .map(|i| ((k * 7 + i) as f64 * 0.754_877_7).fract() * 4.0 - 2.0)
+                .collect();
+            let a = c.eval(&q, dt, &mut poses);
+            forward_kinematics(&real, &mut d, &q);
+            assert!((a.translation.vector - d.flange.translation.vector).amax() < 1e-14);
+            assert!((a.rotation.matrix() - d.flange.rotation.matrix()).amax() < 1e-14);
+            for (p, r) in poses.iter().zip(&d.joint_poses) {
+                assert!((p.translation.vector - r.translation.vector).amax() < 1e-14);
+                assert!((p.rotation.matrix() - r.rotation.matrix()).amax() < 1e-14);
+            }
+            let b = poe_pose(&real.screws(), &real.home_flange, &q);
+            assert!((a.translation.vector - b.translation.vector).amax() < 1e-14);
+            assert!((a.rotation.matrix() - b.rotation.matrix()).amax() < 1e-14);
+        }
+        // The growth is really in it: at another temperature the flange moves.
+        let cold = c.model_at(&m, 0.0);
+        assert!(
+            (cold.home_flange.translation.vector - real.home_flange.translation.vector).norm()
+                > 1e-5
+        );
+        assert_eq!(real.bodies, m.bodies);
     }
 }

@@ -5,7 +5,9 @@
 //! 1. thermal drift (link growth and joint-zero drift at the pose's temperature),
 //! 2. kinematic offsets (adjoint error twists, joint zero offsets, base and tool errors),
 //! 3. gear backlash (link-side angle shifted by half the dead band),
-//! 4. joint compliance (link-side angle settles where the joint springs balance gravity and payload).
+//! 4. joint compliance (link-side angle settles where the joint springs balance gravity and payload),
+//!    solved analytically or, with [`ComplianceSolver::Rapier`], by the rapier physics engine on the
+//!    same real geometry ([`rapier_compliance`]).
 //!
 //! The contributions are successive increments, so they add up to the total deviation from nominal:
 //! with `p₀` the nominal target position and `pₖ` the position with effects 1 … k applied,
@@ -67,7 +69,20 @@ use nalgebra::{Point3, Vector3};
 pub mod gear_backlash;
 pub mod joint_compliance;
 pub mod kinematic_offsets;
+pub mod rapier_compliance;
 pub mod thermal_drift;
+
+/// How the compliance stage (4) of [`Truth`] finds the link-side angles where the joint springs
+/// balance gravity and payload. Every other stage is the same for both.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub enum ComplianceSolver {
+    /// Newton's method on `K (q − θ) = τ_g(θ)` ([`joint_compliance`]).
+    #[default]
+    Analytic,
+    /// The real robot as a rapier multibody with joint springs, settled to rest
+    /// ([`rapier_compliance`], [`crate::rapier_truth`]). Needs a compliance effect.
+    Rapier(crate::rapier_truth::SettleOptions),
+}
 
 /// Every effect injected into one simulated robot; `None` = effect absent. Unknown keys are refused
 /// when deserializing, so a misspelt effect is an error rather than silently absent.
@@ -144,7 +159,8 @@ pub struct TrueTarget {
     pub q_link: Vec<f64>,
     /// Link-side positions from the first-order compliance solution, for comparison (rad or m).
     pub q_link_first_order: Vec<f64>,
-    /// Newton iterations the compliance equilibrium took (0 without compliance).
+    /// Newton iterations the compliance equilibrium took, or rapier engine steps with
+    /// [`ComplianceSolver::Rapier`] (0 without compliance).
     pub compliance_iterations: usize,
 }
 
@@ -180,7 +196,8 @@ pub struct TruePoint {
     pub p_base: Vector3<f64>,
     /// Displacement added by each effect (base frame, m).
     pub contribution: Contributions,
-    /// Newton iterations the compliance equilibrium took (0 without compliance).
+    /// Newton iterations the compliance equilibrium took, or rapier engine steps with
+    /// [`ComplianceSolver::Rapier`] (0 without compliance).
     pub compliance_iterations: usize,
 }
 
@@ -201,6 +218,8 @@ pub struct Truth {
     compliance: Option<Vec<f64>>,
     /// Mass (kg) and centre of mass (joint frame, m) of each moving body.
     bodies: Vec<(f64, Vector3<f64>)>,
+    /// The rapier compliance stage, when the truth was made with [`ComplianceSolver::Rapier`].
+    rapier: Option<rapier_compliance::RapierCompliance>,
 }
 
 /// Per-thread workspace of a [`Truth`]: made with [`Truth::scratch`], reused for every pose.
@@ -222,6 +241,8 @@ pub struct TruthScratch {
     work: GravityWork,
     /// Joint frames for a consistency check in debug builds.
     check_poses: Vec<Pose>,
+    /// Prepared rapier arms (rapier compliance only).
+    rapier: rapier_compliance::RapierCache,
 }
 
 impl TruthScratch {
@@ -256,10 +277,39 @@ fn arr(v: Vector3<f64>) -> [f64; 3] {
 }
 
 impl Truth {
-    /// Prepares the real robot: validates `effects` against `model` (see [`Effects::check_fits`]) and
-    /// precomputes the real chain (real screws, thermal growth per kelvin).
+    /// Prepares the real robot with the analytic compliance solve: validates `effects` against `model`
+    /// (see [`Effects::check_fits`]) and precomputes the real chain (real screws, thermal growth per
+    /// kelvin). Same as [`Truth::with_solver`] with [`ComplianceSolver::Analytic`].
     pub fn new(model: &Model, effects: &Effects) -> Result<Truth> {
+        Truth::with_solver(model, effects, ComplianceSolver::Analytic)
+    }
+
+    /// Prepares the real robot as [`Truth::new`], with the compliance stage computed by `solver`.
+    /// [`ComplianceSolver::Rapier`] fails without a compliance effect (there is nothing for the
+    /// engine to settle) and for bad [`crate::rapier_truth::SettleOptions`].
+    pub fn with_solver(
+        model: &Model,
+        effects: &Effects,
+        solver: ComplianceSolver,
+    ) -> Result<Truth> {
         effects.check_fits(model)?;
+        let rapier = match solver {
+            ComplianceSolver::Analytic => None,
+            ComplianceSolver::Rapier(options) => {
+                let c = effects.compliance.as_ref().ok_or_else(|| SimError::BadEffect {
+                    effect: "joint_compliance",
+                    field: "stiffness_nm_per_rad".into(),
+                    value: "absent".into(),
+                    problem: "the rapier truth settles the compliant joints: give a compliance effect"
+                        .into(),
+                })?;
+                Some(rapier_compliance::RapierCompliance::new(
+                    model,
+                    c.stiffness_nm_per_rad(),
+                    options,
+                )?)
+            }
+        };
         let alpha = effects.thermal.as_ref().map(|t| t.alpha_per_k());
         let grown = Chain::grown(model, alpha);
         let real = effects
@@ -278,7 +328,16 @@ impl Truth {
             backlash: effects.backlash.clone(),
             compliance: effects.compliance.as_ref().map(|c| c.compliance()),
             bodies: model.bodies.iter().map(|b| (b.mass, b.com)).collect(),
+            rapier,
         })
+    }
+
+    /// The compliance solver in use.
+    pub fn solver(&self) -> ComplianceSolver {
+        match &self.rapier {
+            Some(r) => ComplianceSolver::Rapier(*r.options()),
+            None => ComplianceSolver::Analytic,
+        }
     }
 
     /// Number of joints.
@@ -300,6 +359,7 @@ impl Truth {
             q_link_first: vec![0.0; n],
             work: GravityWork::new(n),
             check_poses: vec![Pose::identity(); n],
+            rapier: rapier_compliance::RapierCache::default(),
         }
     }
 
@@ -463,14 +523,30 @@ impl Truth {
                 flange,
                 "stage bookkeeping: the last evaluation must be at the post-backlash angles"
             );
-            let (it, f) = eq.solve(
-                &s.phib,
-                &mut s.theta,
-                &mut s.first,
-                &mut s.poses,
-                flange,
-                &mut s.work,
-            )?;
+            let (it, f) = match &self.rapier {
+                None => eq.solve(
+                    &s.phib,
+                    &mut s.theta,
+                    &mut s.first,
+                    &mut s.poses,
+                    flange,
+                    &mut s.work,
+                )?,
+                Some(r) => {
+                    // First-order solution from the analytic statics at the anchor angles, for the
+                    // `q_link_first_order` comparison; the rest state comes from the engine.
+                    eq.first_order(&s.phib, &mut s.first, &s.poses, &flange, &mut s.work);
+                    r.settle(
+                        geom,
+                        dt,
+                        payload,
+                        gravity,
+                        &s.phib,
+                        &mut s.theta,
+                        &mut s.rapier,
+                    )?
+                }
+            };
             iterations = it;
             flange = f;
             let p4 = point(&flange, p_flange);
