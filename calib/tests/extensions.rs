@@ -325,3 +325,55 @@ fn thermal_drift_from_time_stamps_alone_finds_the_warm_up() {
     );
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn compliance_is_recovered_from_the_physics_engine_truth() {
+    // The truth is rapier3d's multibody settled under gravity and payload (sim's rapier truth), not the
+    // spring balance the estimator solves: an independent physics, so agreement within the predicted σ
+    // checks the estimator's statics, equilibrium and payload handling at once.
+    let model = robots::load_builtin("iiwa7").unwrap();
+    let dir = std::env::temp_dir().join(format!("robocal_ext_rapier_{}", std::process::id()));
+    let k = [1.5e4, 1.0e4, 8.0e3];
+    let t = simulate(
+        &format!(
+            "[effects.compliance]\nstiffness_nm_per_rad = [inf, {:e}, inf, {:e}, inf, {:e}, inf]\n\
+             [campaign.payload]\nchoice_kg = [0.0, 3.0, 6.0]\ncom_m = [0.0, 0.01, 0.06]\n\
+             [truth]\nmodel = \"rapier\"\n",
+            k[0], k[1], k[2]
+        ),
+        4,
+        &dir,
+    );
+    let cal = calibrate_model(
+        &model,
+        &Dataset::all(&t, "rapier"),
+        None,
+        &ModelSpec::parse("kinematic+joint_compliance").unwrap(),
+        &CalibrationOptions::default(),
+    )
+    .unwrap();
+    let com = cal.extensions.as_ref().unwrap().payload_com_m;
+    assert!(
+        (com[1] - 0.01).abs() < 2e-3 && (com[2] - 0.06).abs() < 2e-3,
+        "payload centre of mass {com:?} m"
+    );
+    for (joint, stiffness) in [(2usize, k[0]), (4, k[1]), (6, k[2])] {
+        let name = format!("joint {joint} compliance");
+        let e = cal
+            .layout
+            .extensions
+            .iter()
+            .position(|p| p.name == name)
+            .unwrap();
+        let kk = cal.layout.extension(e);
+        let sigma = cal.covariance[(kk, kk)].sqrt();
+        let z = (cal.params.extension[e] - 1.0 / stiffness) / sigma;
+        assert!(
+            z.abs() < 4.0,
+            "{name}: {:.5e} ± {sigma:.1e} rad/(N m), rapier truth {:.5e} (z = {z:.2})",
+            cal.params.extension[e],
+            1.0 / stiffness
+        );
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
