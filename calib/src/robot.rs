@@ -20,7 +20,7 @@ impl Robot {
     /// [`sim::robots::load_robot`] does), keeping the URDF text.
     pub fn load(robot: &str, spec: &ChainSpec) -> Result<Self> {
         let path = Path::new(robot);
-        if path.exists() {
+        if path.is_file() {
             let text = std::fs::read_to_string(path).map_err(|e| CalibError::Io {
                 path: robot.to_string(),
                 message: e.to_string(),

@@ -37,7 +37,8 @@ pub fn load_builtin(name: &str) -> Result<Model> {
 /// Loads `robot`: a URDF file path if such a file exists, otherwise a built-in robot's name.
 pub fn load_robot(robot: &str, spec: &ChainSpec) -> Result<Model> {
     let path = Path::new(robot);
-    if path.exists() {
+    // A file wins over a built-in name; a folder that happens to share one (`./ur5/`) does not.
+    if path.is_file() {
         return load_file(path, spec);
     }
     match builtin_urdf(robot) {
