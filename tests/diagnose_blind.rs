@@ -109,6 +109,24 @@ fn draw(rng: &mut StdRng, seed: u64) -> Case {
             "compliance {joints:?} k = {:?} N m/rad",
             k.iter().map(|v| format!("{v:.0}")).collect::<Vec<_>>()
         ));
+        // Half of the compliance cases carry a gripper-like payload whose centre of mass the table
+        // does not give (only its mass): up to 7 kg (the iiwa 7's rating), 0-10 cm from the flange.
+        if rng.random::<bool>() {
+            let m = rng.random_range(2.0..7.0);
+            let com = [
+                rng.random_range(-0.02..0.02),
+                rng.random_range(-0.02..0.02),
+                rng.random_range(0.0..0.1),
+            ];
+            toml.push_str(&format!(
+                "\n[campaign.payload]\nchoice_kg = [0.0, {:e}, {m:e}]\ncom_m = [{:e}, {:e}, {:e}]\n",
+                m / 2.0,
+                com[0],
+                com[1],
+                com[2]
+            ));
+            description.push(format!("payload ≤ {m:.1} kg at {com:.3?} m"));
+        }
         used.extend(joints.iter().copied());
         hidden.insert("joint_compliance".to_string(), joints);
     }

@@ -29,7 +29,8 @@ pub struct Args {
     /// Seed of the train/test split and of the learned models' folds.
     #[arg(long, value_name = "N", default_value_t = 0)]
     seed: u64,
-    /// False-alarm level of each decision (family-wise over the candidates of a round).
+    /// False-alarm level of each round's training test (family-wise over its candidates); the
+    /// held-out test that must also pass is at 0.05.
     #[arg(long, value_name = "P", default_value_t = 1e-3)]
     alpha: f64,
     /// The noise floor (m, RMS of the position error norm) when known better than the data tell, e.g.

@@ -7,9 +7,9 @@
 //!    ([`crate::extensions::Cause`]) and refitted on the training poses. A candidate is **significant**
 //!    when both (a) its training `χ²` drops by more than its added identifiable parameters explain
 //!    (`Δχ² / (χ²₁/dof₁)` against `χ²` with `Δrank` degrees of freedom, as a normal `z`,
-//!    [`significance::chi2_to_z`]), and (b) it predicts the test poses better (a paired test of the
-//!    per-pose squared errors, [`significance::paired`]), each at level `α` divided by the number of
-//!    candidates (Bonferroni), (c) it lowers the test RMS by at least [`DiagnoseOptions::min_gain`],
+//!    [`significance::chi2_to_z`]) at level `α`, and (b) it predicts the test poses better (a paired
+//!    test of the per-pose squared errors, [`significance::paired`]) at level `α_held_out`, each
+//!    divided by the number of candidates (Bonferroni), (c) it lowers the test RMS by at least [`DiagnoseOptions::min_gain`],
 //!    and (d) it gains more on the test poses than an error periodic in one joint's angle would
 //!    ([`unexplained::probes`]): a cause that is really there explains its residual better than a
 //!    generic term, and structure that a generic term explains better is no known cause's.
@@ -50,8 +50,12 @@ pub struct DiagnoseOptions {
     pub seed: u64,
     /// Calibration settings.
     pub calibration: CalibrationOptions,
-    /// Family-wise false-alarm level of each round's decision (default 1e-3).
+    /// Family-wise false-alarm level of each round's training test (default 1e-3).
     pub alpha: f64,
+    /// Family-wise level of each round's held-out test (default 0.05). It guards against a model that
+    /// fits the training poses without predicting others; false alarms are held down by `alpha`, the
+    /// two tests together by their product.
+    pub held_out_alpha: f64,
     /// Smallest relative test-RMS reduction a finding must bring (default 0.02).
     pub min_gain: f64,
     /// A joint is named when its parameter differs from zero by this many standard deviations (default 4).
@@ -72,6 +76,7 @@ impl Default for DiagnoseOptions {
             seed: 0,
             calibration: CalibrationOptions::default(),
             alpha: 1e-3,
+            held_out_alpha: 0.05,
             min_gain: 0.02,
             joint_z: 5.0,
             candidates: Cause::ALL.to_vec(),
@@ -605,6 +610,8 @@ pub fn diagnose_with_progress(
             break;
         }
         let z_crit = significance::normal_upper_quantile(options.alpha / remaining.len() as f64);
+        let z_held =
+            significance::normal_upper_quantile(options.held_out_alpha / remaining.len() as f64);
         // The competitor no known cause names: an error periodic in one joint's angle. A cause that
         // is really there explains its residual better than such a generic term can.
         let competitor = unexplained::probes(model, &split, &current, &[], options.seed)
@@ -627,7 +634,7 @@ pub fn diagnose_with_progress(
                 .filter(|p| p.gain >= gain)
                 .map(|p| p.name.clone());
             let significant =
-                tz > z_crit && trz > z_crit && gain >= options.min_gain && beaten_by.is_none();
+                tz > z_held && trz > z_crit && gain >= options.min_gain && beaten_by.is_none();
             trials.push(Trial {
                 round,
                 cause: cause.name().into(),
