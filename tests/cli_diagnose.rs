@@ -111,6 +111,8 @@ fn diagnose_json_follows_the_contract_and_the_report_is_written() {
     );
     let html = std::fs::read_to_string(report.join("index.html")).unwrap();
     assert!(html.contains("gear_backlash") && html.contains("<img src=\"errors.svg\""));
+    // Why each candidate was or was not adopted, as a table.
+    assert!(html.contains("Candidates tried") && html.contains("<th>held-out z</th>"));
     let _ = std::fs::remove_dir_all(&d);
 }
 

@@ -138,6 +138,29 @@ pub fn summary_markdown(d: &Diagnosis, data_name: &str) -> String {
             f.test_z
         ));
     }
+    if !d.trials.is_empty() {
+        s.push_str(
+            "\n## Candidates tried\n\nA cause passes when its training z and held-out z both pass \
+             (Bonferroni over the round's candidates), it gains at least 2 % and no periodic joint-angle \
+             error explains the residual as well; of those passing, the one with the largest held-out z \
+             is adopted.\n\n\
+             | round | cause | test RMS | gain | held-out z | training z | passes | explained as well by |\n\
+             |---|---|---|---|---|---|---|---|\n",
+        );
+        for t in &d.trials {
+            s.push_str(&format!(
+                "| {} | {} | {} | {:.1} % | {:.1} | {:.1} | {} | {} |\n",
+                t.round,
+                t.cause,
+                um(t.test_rms_m),
+                100.0 * t.gain,
+                t.test_z,
+                t.train_z,
+                if t.significant { "yes" } else { "no" },
+                t.beaten_by.as_deref().unwrap_or("")
+            ));
+        }
+    }
     s.push_str(&format!(
         "\n## Unexplained\n\n{}: {}.\n\nModel for `calibrate --model auto`: `{}`.\n",
         if d.unexplained.present {
@@ -214,12 +237,10 @@ pub fn write(dir: &Path, d: &Diagnosis, plots: &PlotData, data_name: &str) -> Re
                 .split('|')
                 .map(str::trim)
                 .collect();
-            let tag = if cells.first() == Some(&"model") {
-                "th"
-            } else {
-                "td"
-            };
-            if tag == "th" {
+            // The first row of a table is its header.
+            let header = !html.ends_with("</tr>\n");
+            let tag = if header { "th" } else { "td" };
+            if header {
                 html.push_str("<table>\n");
             }
             html.push_str("<tr>");
