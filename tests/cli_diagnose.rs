@@ -27,6 +27,18 @@ fn stderr(o: &std::process::Output) -> String {
     String::from_utf8_lossy(&o.stderr).into_owned()
 }
 
+fn predict(model: &Path, data: &Path, out: &Path) -> std::process::Output {
+    robocal(&[
+        "predict",
+        "--model",
+        model.to_str().unwrap(),
+        "--data",
+        data.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ])
+}
+
 fn generate(scenario: &str, out: &Path) -> PathBuf {
     let o = robocal(&[
         "generate",
@@ -138,15 +150,7 @@ fn calibrate_auto_and_predict_carry_the_extended_model() {
     assert_eq!(file["model"], "kinematic+thermal_drift");
     assert!(file["extensions"]["values"].is_array());
     let pred = d.join("pred.csv");
-    let o = robocal(&[
-        "predict",
-        "--model",
-        model.to_str().unwrap(),
-        "--data",
-        data.to_str().unwrap(),
-        "--out",
-        pred.to_str().unwrap(),
-    ]);
+    let o = predict(&model, &data, &pred);
     assert!(o.status.success(), "{}", stderr(&o));
     let text = std::fs::read_to_string(&pred).unwrap();
     assert!(text.starts_with("pose,x,y,z"));
@@ -154,15 +158,7 @@ fn calibrate_auto_and_predict_carry_the_extended_model() {
     // Poses without the temperature column cannot be predicted by a thermal model: say which column.
     let poses = d.join("poses.csv");
     std::fs::write(&poses, "pose,q1,q2,q3,q4,q5,q6,q7\n0,0,0.5,0,-1,0,0.5,0\n").unwrap();
-    let o = robocal(&[
-        "predict",
-        "--model",
-        model.to_str().unwrap(),
-        "--data",
-        poses.to_str().unwrap(),
-        "--out",
-        d.join("p2.csv").to_str().unwrap(),
-    ]);
+    let o = predict(&model, &poses, &d.join("p2.csv"));
     assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
     assert!(stderr(&o).contains("temp"), "{}", stderr(&o));
     // With it, a joint-only CSV predicts, and a warmer robot reaches further (the links grew).
@@ -172,15 +168,7 @@ fn calibrate_auto_and_predict_carry_the_extended_model() {
     )
     .unwrap();
     let p2 = d.join("p2.csv");
-    let o = robocal(&[
-        "predict",
-        "--model",
-        model.to_str().unwrap(),
-        "--data",
-        poses.to_str().unwrap(),
-        "--out",
-        p2.to_str().unwrap(),
-    ]);
+    let o = predict(&model, &poses, &p2);
     assert!(o.status.success(), "{}", stderr(&o));
     let rows: Vec<Vec<f64>> = std::fs::read_to_string(&p2)
         .unwrap()
