@@ -154,29 +154,13 @@ sweep_columns! {
 /// Deterministic Parquet bytes of `rows` (in the order given) with the key-value `metadata`.
 pub fn parquet_bytes(rows: &[SweepRow], metadata: &[(String, String)]) -> Result<Vec<u8>, String> {
     use parquet::arrow::ArrowWriter;
-    use parquet::basic::Compression;
     use parquet::file::metadata::KeyValue;
-    use parquet::file::properties::{
-        DEFAULT_CREATED_BY, EnabledStatistics, WriterProperties, WriterVersion,
-    };
     let kv: Vec<KeyValue> = metadata
         .iter()
         .map(|(k, v)| KeyValue::new(k.clone(), v.clone()))
         .collect();
-    let props = WriterProperties::builder()
-        .set_writer_version(WriterVersion::PARQUET_1_0)
-        .set_created_by(DEFAULT_CREATED_BY.to_string())
-        .set_compression(Compression::SNAPPY)
-        .set_max_row_group_row_count(Some(ROW_GROUP_ROWS))
-        .set_max_row_group_bytes(None)
-        .set_write_batch_size(1024)
-        .set_data_page_size_limit(1024 * 1024)
-        .set_data_page_row_count_limit(20_000)
-        .set_statistics_enabled(EnabledStatistics::Chunk)
-        .set_bloom_filter_enabled(false)
+    let props = sim::measurement_table::deterministic_writer_properties(ROW_GROUP_ROWS)
         .set_key_value_metadata(Some(kv))
-        .set_sorting_columns(None)
-        .set_dictionary_enabled(false)
         .build();
     let schema = Arc::new(Schema::new(fields()));
     let batch = RecordBatch::try_new(schema.clone(), arrays(rows))

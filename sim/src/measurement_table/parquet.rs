@@ -14,7 +14,7 @@ use parquet::arrow::ProjectionMask;
 use parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder;
 use parquet::basic::Compression;
 use parquet::file::properties::{
-    DEFAULT_CREATED_BY, EnabledStatistics, WriterProperties, WriterVersion,
+    DEFAULT_CREATED_BY, EnabledStatistics, WriterProperties, WriterPropertiesBuilder, WriterVersion,
 };
 use parquet::schema::types::ColumnPath;
 use std::collections::HashMap;
@@ -34,13 +34,16 @@ pub fn write_parquet_bytes(table: &MeasurementTable) -> Result<Vec<u8>> {
     write_parquet_unchecked(table, IN_MEMORY)
 }
 
-/// Writer properties, all set explicitly so that the bytes depend on the table only.
-fn writer_properties(table: &MeasurementTable) -> WriterProperties {
-    let mut b = WriterProperties::builder()
+/// Writer properties with every setting that shapes the bytes fixed explicitly (writer version,
+/// creator, Snappy, row groups of at most `max_row_group_rows` rows, page sizes, chunk statistics, no
+/// bloom filters, no metadata, no dictionaries), so that the bytes depend on the data only, whatever
+/// the parquet crate's defaults become. Every deterministic Parquet file of the project starts here.
+pub fn deterministic_writer_properties(max_row_group_rows: usize) -> WriterPropertiesBuilder {
+    WriterProperties::builder()
         .set_writer_version(WriterVersion::PARQUET_1_0)
         .set_created_by(DEFAULT_CREATED_BY.to_string())
         .set_compression(Compression::SNAPPY)
-        .set_max_row_group_row_count(Some(PARQUET_MAX_ROW_GROUP_ROWS))
+        .set_max_row_group_row_count(Some(max_row_group_rows))
         .set_max_row_group_bytes(None)
         .set_write_batch_size(1024)
         .set_data_page_size_limit(1024 * 1024)
@@ -50,6 +53,12 @@ fn writer_properties(table: &MeasurementTable) -> WriterProperties {
         .set_key_value_metadata(None)
         .set_sorting_columns(None)
         .set_dictionary_enabled(false)
+}
+
+/// Writer properties of a measurement table, all set explicitly so that the bytes depend on the table
+/// only.
+fn writer_properties(table: &MeasurementTable) -> WriterProperties {
+    let mut b = deterministic_writer_properties(PARQUET_MAX_ROW_GROUP_ROWS)
         .set_column_dictionary_enabled(ColumnPath::from("pose"), true);
     if table.dir.is_some() {
         for j in 1..=table.n_joints {
