@@ -33,7 +33,7 @@ fn bench(c: &mut Criterion) {
     g.sample_size(10);
     for rows in [400usize, 1000] {
         let (q, r) = data(rows);
-        for kind in ["poly", "kernel"] {
+        for kind in [learned::LearnedKind::Poly, learned::LearnedKind::Kernel] {
             g.bench_function(format!("fit_{kind}_{rows}_poses"), |b| {
                 b.iter(|| black_box(learned::fit(kind, &q, 7, &r, 3).unwrap()))
             });

@@ -156,6 +156,20 @@ impl Chain {
         };
     }
 
+    /// `∂p_tracker/∂qᵢ` (tracker frame; m/rad, or m/m for a prismatic joint) at the last
+    /// [`Chain::forward`] configuration: how the target moves per unit of joint `i` (0-based), the
+    /// zero-offset column of [`Chain::position_jacobian`].
+    #[inline]
+    pub fn joint_direction(&self, s: &ChainScratch, i: usize) -> Vector3<f64> {
+        let f = &s.frames[i];
+        let w = f.rotation.matrix() * self.axis[i];
+        if self.kind[i].is_rotational() {
+            w.cross(&(s.p_tracker - f.translation.vector))
+        } else {
+            w
+        }
+    }
+
     /// Jacobian of the predicted target position (tracker frame, m per parameter unit) at the last
     /// [`Chain::forward`] configuration, row-major into `out` (3 rows of `layout.len()`).
     pub fn position_jacobian(&self, s: &ChainScratch, layout: &ParamLayout, out: &mut [f64]) {
@@ -179,12 +193,7 @@ impl Chain {
                     o[3 + c] = prev_r[(row, c)] - cur_r[(row, c)];
                 }
             }
-            let w = fr * self.axis[i];
-            let col = if self.kind[i].is_rotational() {
-                w.cross(&(p - f.translation.vector))
-            } else {
-                w
-            };
+            let col = self.joint_direction(s, i);
             let kz = layout.zero_offset(i);
             for row in 0..3 {
                 out[row * np + kz] = col[row];

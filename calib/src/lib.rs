@@ -99,9 +99,11 @@ pub mod model_file;
 pub mod params;
 pub mod plan;
 pub mod plot;
+pub mod predict;
 pub mod problem;
 pub mod robot;
 pub mod stats;
+pub mod units;
 
 pub use calibrate::{Calibration, CalibrationOptions, CalibrationReport, Dataset, calibrate};
 pub use error::{CalibError, Result};

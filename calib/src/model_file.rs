@@ -25,11 +25,13 @@
 use crate::calibrate::Calibration;
 use crate::chain::{Chain, ChainScratch};
 use crate::error::{CalibError, Result};
-use crate::extensions::{Cause, ExtensionSettings, ModelSpec, Regressors, predict_row};
+use crate::extensions::{Cause, ExtensionSettings, ModelSpec, Regressors};
 use crate::learned::LearnedResidual;
 use crate::lie3::{quaternion_from_rotation, rpy_from_rotation};
 use crate::params::KinematicParams;
+use crate::predict::Prediction;
 use crate::robot::Robot;
+use crate::units::Unit;
 use nalgebra::{Matrix3, Vector3, Vector6};
 use sim::lie::{Pose, exp_twist, pose_from};
 use sim::measurement_table::MeasurementTable;
@@ -137,7 +139,7 @@ pub struct ExtensionsJson {
     /// Parameter names, in order (for people; checked against the settings on load).
     pub names: Vec<String>,
     /// Parameter units, in order.
-    pub units: Vec<String>,
+    pub units: Vec<Unit>,
     /// Identified values, in order (units as `units`).
     pub values: Vec<f64>,
 }
@@ -192,13 +194,13 @@ impl CalibratedModel {
                     .layout
                     .extensions
                     .iter()
-                    .map(|e| e.name.clone())
+                    .map(|e| e.name())
                     .collect(),
                 units: cal
                     .layout
                     .extensions
                     .iter()
-                    .map(|e| e.unit.clone())
+                    .map(|e| e.unit)
                     .collect(),
                 values: p.extension.clone(),
             }),
@@ -506,27 +508,13 @@ impl Predictor {
             }
             None => Regressors::none(),
         };
-        let mut q_buf = vec![0.0; self.model.nq()];
-        for r in 0..table.len() {
-            let q = table.q_row(r);
-            let (mut p, _, _) = predict_row(
-                &self.chain,
-                &mut self.scratch,
-                &self.params,
-                &regs,
-                r,
-                q,
-                &mut q_buf,
-            );
-            if let Some(l) = &self.learned {
-                p += l.predict(q);
-            }
-            let rot = self.scratch.r_tracker_target;
-            out.position.push(p.into());
-            if let Some(o) = out.orientation.as_mut() {
-                o.push(quaternion_from_rotation(&rot));
-            }
-        }
+        let mut position = vec![Vector3::zeros(); table.len()];
+        let mut rotation = orientation.then(|| vec![Matrix3::identity(); table.len()]);
+        Prediction::new(&self.model, &self.params)
+            .with_learned(self.learned.as_ref())
+            .positions(&table.q, &regs, &mut position, rotation.as_deref_mut());
+        out.position = position.iter().map(|p| (*p).into()).collect();
+        out.orientation = rotation.map(|r| r.iter().map(quaternion_from_rotation).collect());
         Ok(out)
     }
 }

@@ -9,6 +9,7 @@
 
 use crate::extensions::ExtensionParam;
 use crate::lie3::exp_rotation;
+use crate::units::Unit;
 use nalgebra::{DVector, Matrix3, Vector3, Vector6};
 use sim::lie::{Pose, exp_twist, log_pose};
 use sim::{JointKind, Model};
@@ -180,30 +181,20 @@ impl ParamLayout {
             }
             ParamKind::TargetPosition { axis } => format!("target p_{}", AXES[axis]),
             ParamKind::TargetOrientation { axis } => format!("target rotation ρ_{}", AXES[axis]),
-            ParamKind::Extension { index } => self.extensions[index].name.clone(),
+            ParamKind::Extension { index } => self.extensions[index].name(),
         }
     }
 
     /// Unit of entry `k`: `rad` or `m` (extensions: their own, e.g. `rad/(N m)`).
-    pub fn unit(&self, k: usize) -> &str {
+    pub fn unit(&self, k: usize) -> Unit {
         match self.kind(k) {
             ParamKind::JointTwist { component, .. } | ParamKind::BaseTwist { component } => {
-                if component < 3 {
-                    "rad"
-                } else {
-                    "m"
-                }
+                Unit::angle_or_length(component < 3)
             }
-            ParamKind::ZeroOffset { joint } => {
-                if self.prismatic[joint] {
-                    "m"
-                } else {
-                    "rad"
-                }
-            }
-            ParamKind::TargetPosition { .. } => "m",
-            ParamKind::TargetOrientation { .. } => "rad",
-            ParamKind::Extension { index } => &self.extensions[index].unit,
+            ParamKind::ZeroOffset { joint } => Unit::angle_or_length(!self.prismatic[joint]),
+            ParamKind::TargetPosition { .. } => Unit::Metre,
+            ParamKind::TargetOrientation { .. } => Unit::Radian,
+            ParamKind::Extension { index } => self.extensions[index].unit,
         }
     }
 

@@ -7,9 +7,10 @@
 //! iteratively reweighted). The orientation rows' Jacobian includes the exact `J_l⁻¹` of the
 //! logarithm.
 
-use crate::chain::{Chain, ChainScratch};
+use crate::chain::Chain;
 use crate::error::{CalibError, Result};
-use crate::extensions::{Regressors, Term, predict_row};
+use crate::extensions::{Regressors, Term};
+use crate::predict::{PredictScratch, physical_row};
 use crate::lie3::{left_jacobian_inverse, log_rotation, rotation_from_quaternion};
 use crate::lm::LeastSquaresProblem;
 use crate::params::{KinematicParams, ParamLayout};
@@ -216,10 +217,9 @@ pub struct KinematicProblem<'a> {
     active: Vec<usize>,
     lin: KinematicParams,
     trial: KinematicParams,
-    /// Effective joint values of the current row (extensions applied).
-    q_eff: Vec<f64>,
     chain: Chain,
-    scratch: ChainScratch,
+    /// The current row's evaluation (effective joint values, frames).
+    scratch: PredictScratch,
     step_full: Vec<f64>,
     /// Jacobian rows of one measurement (dim × layout.len()), row-major.
     block: Vec<f64>,
@@ -265,8 +265,7 @@ impl<'a> KinematicProblem<'a> {
             model,
             obs,
             chain: Chain::new(model, &start),
-            scratch: ChainScratch::new(model.nq()),
-            q_eff: vec![0.0; model.nq()],
+            scratch: PredictScratch::new(model.nq()),
             trial: start.clone(),
             lin: start,
             step_full: vec![0.0; np],
@@ -302,23 +301,26 @@ impl<'a> KinematicProblem<'a> {
     /// residuals (first `dim` entries used) at the trial point.
     fn row_block(&mut self, r: usize, with_jacobian: bool) -> [f64; 6] {
         let obs = self.obs;
-        let (p, lever, growth) = predict_row(
+        let pred = physical_row(
             &self.chain,
-            &mut self.scratch,
             &self.trial,
             &obs.ext,
             r,
             obs.q_row(r),
-            &mut self.q_eff,
+            &mut self.scratch,
         );
+        let (p, lever, growth) = (pred.p_tracker, pred.lever, pred.growth);
         let sw = obs.weight[r].sqrt();
         let sp = sw / obs.sigma[r];
         let dp = p - obs.position[r];
         let mut res = [dp.x * sp, dp.y * sp, dp.z * sp, 0.0, 0.0, 0.0];
         let np = self.layout.len();
         if with_jacobian {
-            self.chain
-                .position_jacobian(&self.scratch, &self.layout, &mut self.block[..3 * np]);
+            self.chain.position_jacobian(
+                &self.scratch.chain,
+                &self.layout,
+                &mut self.block[..3 * np],
+            );
             if growth != 0.0 {
                 grow_columns(&self.layout, growth, &p, &mut self.block[..3 * np]);
             }
@@ -335,13 +337,13 @@ impl<'a> KinematicProblem<'a> {
         }
         if let Some(meas) = &obs.orientation {
             let so = sw / obs.sigma_rotation;
-            let e = log_rotation(&(self.scratch.r_tracker_target * meas[r].transpose()));
+            let e = log_rotation(&(self.scratch.chain.r_tracker_target * meas[r].transpose()));
             res[3] = e.x * so;
             res[4] = e.y * so;
             res[5] = e.z * so;
             if with_jacobian {
                 self.chain
-                    .orientation_jacobian(&self.scratch, &self.layout, &mut self.rot);
+                    .orientation_jacobian(&self.scratch.chain, &self.layout, &mut self.rot);
                 extension_columns(
                     &self.layout,
                     obs.ext.row(r),

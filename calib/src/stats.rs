@@ -1,10 +1,8 @@
 //! Residual statistics of a parameter point on a set of measurements, and the reproducible
 //! train/test split by pose.
 
-use crate::chain::{Chain, ChainScratch};
-use crate::extensions::predict_row;
-use crate::lie3::log_rotation;
 use crate::params::KinematicParams;
+use crate::predict::Prediction;
 use crate::problem::Observations;
 use nalgebra::Vector3;
 use rand::SeedableRng;
@@ -42,30 +40,18 @@ pub fn residual_stats(
     params: &KinematicParams,
     obs: &Observations,
 ) -> ResidualStats {
-    let mut st = stats_of_errors(&position_errors(model, params, obs), obs);
-    if let Some(o) = &obs.orientation {
-        let chain = Chain::new(model, params);
-        let mut s = ChainScratch::new(model.nq());
-        let mut q_buf = vec![0.0; model.nq()];
-        let (mut sum2r, mut maxr) = (0.0, 0.0f64);
-        for (r, meas) in o.iter().enumerate() {
-            predict_row(
-                &chain,
-                &mut s,
-                params,
-                &obs.ext,
-                r,
-                obs.q_row(r),
-                &mut q_buf,
-            );
-            let a = log_rotation(&(s.r_tracker_target * meas.transpose())).norm();
-            sum2r += a * a;
-            maxr = maxr.max(a);
-        }
-        if !obs.is_empty() {
-            st.rms_rad = Some((sum2r / obs.len() as f64).sqrt());
-            st.max_rad = Some(maxr);
-        }
+    prediction_stats(&Prediction::new(model, params), obs)
+}
+
+/// Errors of `prediction` (learned correction included when it has one) on the rows of `obs`.
+pub fn prediction_stats(prediction: &Prediction<'_>, obs: &Observations) -> ResidualStats {
+    let mut st = stats_of_errors(&prediction.errors(obs), obs);
+    if let Some(angles) = prediction.orientation_errors(obs)
+        && !obs.is_empty()
+    {
+        let sum2r: f64 = angles.iter().map(|a| a * a).sum();
+        st.rms_rad = Some((sum2r / obs.len() as f64).sqrt());
+        st.max_rad = Some(angles.iter().copied().fold(0.0, f64::max));
     }
     st
 }
@@ -107,23 +93,7 @@ pub fn position_errors(
     params: &KinematicParams,
     obs: &Observations,
 ) -> Vec<Vector3<f64>> {
-    let chain = Chain::new(model, params);
-    let mut s = ChainScratch::new(model.nq());
-    let mut q_buf = vec![0.0; model.nq()];
-    (0..obs.len())
-        .map(|r| {
-            let (p, _, _) = predict_row(
-                &chain,
-                &mut s,
-                params,
-                &obs.ext,
-                r,
-                obs.q_row(r),
-                &mut q_buf,
-            );
-            p - obs.position[r]
-        })
-        .collect()
+    Prediction::new(model, params).errors(obs)
 }
 
 /// Splits `table`'s rows into training and test rows by pose id: the distinct ids are shuffled with

@@ -66,7 +66,7 @@ fn extension_columns_match_central_differences() {
     let t = table_with_columns(&model, 15, 3);
     let rows: Vec<usize> = (0..t.len()).collect();
     let spec = ModelSpec::parse("kinematic+joint_compliance+gear_backlash+thermal_drift").unwrap();
-    let settings = ExtensionSettings::for_data(&model, &spec.causes, &t, &rows, None, "t").unwrap();
+    let settings = ExtensionSettings::for_data(&model, &spec.causes, &t, &rows, "t").unwrap();
     let data = Dataset::all(&t, "t");
     let n_ext = settings.params(&model).len();
     // Torques at a non-trivial equilibrium, and a linearisation point with every extension non-zero.
@@ -112,7 +112,7 @@ fn extension_columns_match_central_differences() {
             assert!(
                 (fd - j[(r, k)]).abs() <= 1e-6 * (1.0 + fd.abs()) + 8.0 * f64::EPSILON * scale / h,
                 "{}: row {r}: analytic {} vs central difference {fd}",
-                obs.ext.params[k - kin].name,
+                obs.ext.params[k - kin].name(),
                 j[(r, k)]
             );
         }
@@ -187,13 +187,13 @@ fn extensions_are_recovered_within_their_predicted_standard_deviations() {
                 continue; // joint 1 compliance (no torque), joint 7 backlash (no lever)…
             }
             let sigma = cal.covariance[(kk, kk)].sqrt();
-            let z = (cal.params.extension[e] - truth(&p.name)) / sigma;
+            let z = (cal.params.extension[e] - truth(&p.name())) / sigma;
             assert!(
                 z.abs() < 4.0,
                 "seed {seed}: {} = {:.4e} ± {sigma:.1e}, truth {:.4e} (z = {z:.2})",
-                p.name,
+                p.name(),
                 cal.params.extension[e],
-                truth(&p.name)
+                truth(&p.name())
             );
             z2.push(z * z);
         }
@@ -316,7 +316,7 @@ fn thermal_drift_from_time_stamps_alone_finds_the_warm_up() {
         .layout
         .extensions
         .iter()
-        .position(|p| p.name == "link growth")
+        .position(|p| p.name() == "link growth")
         .unwrap();
     let growth = cal.params.extension[e];
     assert!(
@@ -363,7 +363,7 @@ fn compliance_is_recovered_from_the_physics_engine_truth() {
             .layout
             .extensions
             .iter()
-            .position(|p| p.name == name)
+            .position(|p| p.name() == name)
             .unwrap();
         let kk = cal.layout.extension(e);
         let sigma = cal.covariance[(kk, kk)].sqrt();

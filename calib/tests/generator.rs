@@ -51,7 +51,7 @@ fn noise_free_generated_kinematic_errors_are_recovered_to_1e9_m() {
     assert!(cal.report.was_successful());
     let mut worst = 0.0f64;
     for &r in &test {
-        let (p, _, _) = prediction_and_jacobian(&model, &cal.params, table.q_row(r));
+        let (p, _, _) = prediction_and_jacobian(&model, &cal.params, table.q_row(r)).unwrap();
         worst = worst.max((p - Vector3::from(p_true[r])).norm());
     }
     eprintln!(
@@ -80,7 +80,7 @@ fn noisy_generated_data_held_out_error_matches_the_covariance() {
         .unwrap();
         assert!(cal.report.was_successful());
         for &r in &test {
-            let (p, _, j) = prediction_and_jacobian(&model, &cal.params, table.q_row(r));
+            let (p, _, j) = prediction_and_jacobian(&model, &cal.params, table.q_row(r)).unwrap();
             err2 += (p - Vector3::from(p_true[r])).norm_squared();
             pred2 += (&j * &cal.covariance * j.transpose()).trace();
             n += 1;

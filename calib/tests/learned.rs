@@ -10,6 +10,18 @@ use rand::rngs::StdRng;
 use rand::{RngExt, SeedableRng};
 use rand_distr::{Distribution, Normal};
 
+/// [`learned::fit`] for the kind named `kind`.
+fn fit(
+    kind: &str,
+    q: &[f64],
+    n_joints: usize,
+    r: &[Vector3<f64>],
+    seed: u64,
+) -> Result<learned::LearnedResidual, calib::CalibError> {
+    let kind = learned::LearnedKind::from_name(kind).expect("a learned kind");
+    learned::fit(kind, q, n_joints, r, seed)
+}
+
 const N_JOINTS: usize = 7;
 
 /// `rows` joint vectors uniform in ±`range` rad, row-major.
@@ -65,7 +77,7 @@ fn exact_polynomials_are_recovered_and_cv_picks_their_degree() {
         (3, cubic),
     ] {
         let r: Vec<Vector3<f64>> = rows(&q).map(f).collect();
-        let model = learned::fit("poly", &q, N_JOINTS, &r, 5).unwrap();
+        let model = fit("poly", &q, N_JOINTS, &r, 5).unwrap();
         let truth: Vec<Vector3<f64>> = rows(&q_fresh).map(f).collect();
         let err = rms_error(&model, &q_fresh, &truth);
         let max_err = rows(&q_fresh)
@@ -122,7 +134,7 @@ fn periodic_effect(seed: u64) {
     let floor = 3f64.sqrt() * sigma;
     let before = rms(&r_fresh);
     for (kind, factor) in [("kernel", 1.15), ("poly", 1.3)] {
-        let model = learned::fit(kind, &q, N_JOINTS, &r, 7).unwrap();
+        let model = fit(kind, &q, N_JOINTS, &r, 7).unwrap();
         let after = rms_error(&model, &q_fresh, &r_fresh);
         let excess = rms_error(&model, &q_fresh, &truth_fresh);
         eprintln!(
@@ -168,7 +180,7 @@ fn pure_noise_is_not_learned() {
     let r_fresh = draw(1000, &mut rng);
     let before = rms(&r_fresh);
     for kind in ["kernel", "poly", "poly3"] {
-        let model = learned::fit(kind, &q, N_JOINTS, &r, 3).unwrap();
+        let model = fit(kind, &q, N_JOINTS, &r, 3).unwrap();
         let after = rms_error(&model, &q_fresh, &r_fresh);
         let size = (rows(&q_fresh)
             .map(|qr| model.predict(qr).norm_squared())
@@ -206,14 +218,14 @@ fn same_seed_gives_identical_models() {
         })
         .collect();
     for kind in learned::KINDS {
-        let a = learned::fit(kind, &q, N_JOINTS, &r, 42).unwrap();
-        let b = learned::fit(kind, &q, N_JOINTS, &r, 42).unwrap();
+        let a = fit(kind, &q, N_JOINTS, &r, 42).unwrap();
+        let b = fit(kind, &q, N_JOINTS, &r, 42).unwrap();
         assert_eq!(
             serde_json::to_string(&a).unwrap(),
             serde_json::to_string(&b).unwrap(),
             "{kind}"
         );
-        assert_eq!(a.kind(), *kind);
+        assert_eq!(a.kind().name(), *kind);
         // The serialised model predicts the same bits.
         let c: LearnedResidual = serde_json::from_str(&serde_json::to_string(&a).unwrap()).unwrap();
         for qr in rows(&q).take(10) {
@@ -227,23 +239,24 @@ fn bad_input_is_an_error_naming_the_problem() {
     let q = vec![0.1; 20 * N_JOINTS];
     let r = vec![Vector3::new(1e-5, 0.0, 0.0); 20];
     let message = |e: calib::CalibError| e.to_string();
-    let e = message(learned::fit("spline", &q, N_JOINTS, &r, 0).unwrap_err());
-    assert!(e.contains("kind") && e.contains("spline"), "{e}");
-    let e = message(learned::fit("poly", &q[..q.len() - 1], N_JOINTS, &r, 0).unwrap_err());
+    let e = message(calib::extensions::ModelSpec::parse("kinematic+learned:spline").unwrap_err());
+    assert!(e.contains("learned") && e.contains("spline"), "{e}");
+    assert_eq!(learned::LearnedKind::from_name("spline"), None);
+    let e = message(fit("poly", &q[..q.len() - 1], N_JOINTS, &r, 0).unwrap_err());
     assert!(e.contains("q") && e.contains("139"), "{e}");
-    let e = message(learned::fit("kernel", &q[..9 * N_JOINTS], N_JOINTS, &r[..9], 0).unwrap_err());
+    let e = message(fit("kernel", &q[..9 * N_JOINTS], N_JOINTS, &r[..9], 0).unwrap_err());
     assert!(e.contains("rows") && e.contains("9"), "{e}");
     let mut q_nan = q.clone();
     q_nan[3 * N_JOINTS + 2] = f64::NAN;
-    let e = message(learned::fit("poly", &q_nan, N_JOINTS, &r, 0).unwrap_err());
+    let e = message(fit("poly", &q_nan, N_JOINTS, &r, 0).unwrap_err());
     assert!(e.contains("row 3, joint 2") && e.contains("NaN"), "{e}");
     let mut r_inf = r.clone();
     r_inf[4].z = f64::INFINITY;
-    let e = message(learned::fit("kernel", &q, N_JOINTS, &r_inf, 0).unwrap_err());
+    let e = message(fit("kernel", &q, N_JOINTS, &r_inf, 0).unwrap_err());
     assert!(e.contains("row 4, z"), "{e}");
-    assert!(learned::fit("poly", &q, 0, &r, 0).is_err());
+    assert!(fit("poly", &q, 0, &r, 0).is_err());
     // Wrong length at prediction: NaN, no panic.
-    let model = learned::fit("poly1", &q, N_JOINTS, &r, 0).unwrap();
+    let model = fit("poly1", &q, N_JOINTS, &r, 0).unwrap();
     assert!(model.predict(&[0.0; 3]).x.is_nan());
 }
 
@@ -270,7 +283,7 @@ fn interacting_effect_is_reduced() {
     let floor = 3f64.sqrt() * sigma;
     let before = rms(&r_fresh);
     for (kind, max_ratio) in [("kernel", 0.45), ("poly", 0.7)] {
-        let model = learned::fit(kind, &q, N_JOINTS, &r, 7).unwrap();
+        let model = fit(kind, &q, N_JOINTS, &r, 7).unwrap();
         let after = rms_error(&model, &q_fresh, &r_fresh);
         eprintln!(
             "{kind}: {} | held-out RMS {:.1} µm -> {:.1} µm (noise floor {:.1} µm)",
@@ -309,7 +322,7 @@ fn a_joint_that_never_moves_is_harmless() {
     }
     let r: Vec<Vector3<f64>> = rows(&q).map(quadratic_without_joint_6).collect();
     for kind in learned::KINDS {
-        let model = learned::fit(kind, &q, N_JOINTS, &r, 1).unwrap();
+        let model = fit(kind, &q, N_JOINTS, &r, 1).unwrap();
         let p = model.predict(&q[..N_JOINTS]);
         assert!(p.iter().all(|v| v.is_finite()), "{kind}: {p}");
         assert!(
@@ -336,7 +349,7 @@ fn kernel_subsamples_large_data_sets() {
     let mut rng = StdRng::seed_from_u64(4);
     let q = draw_q(&mut rng, 1200, 1.5);
     let r: Vec<Vector3<f64>> = rows(&q).map(quadratic).collect();
-    let model = learned::fit("kernel", &q, N_JOINTS, &r, 2).unwrap();
+    let model = fit("kernel", &q, N_JOINTS, &r, 2).unwrap();
     assert!(
         model.describe().contains("subsample of 1000 of 1200 poses"),
         "{}",

@@ -101,7 +101,7 @@ fn diagnose_on_real_data_gains_on_held_out_poses() {
             last.test_rms_m * 1e6,
             d.findings
                 .iter()
-                .map(|f| (f.cause.as_str(), f.joints.clone(), f.gain))
+                .map(|f| (f.cause.name(), f.joints.clone(), f.gain))
                 .collect::<Vec<_>>(),
             d.unexplained.note
         );

@@ -101,7 +101,7 @@ fn noisy_recovery(name: &str, orientation: bool, reps: usize, seed: u64) {
         let mut j = nalgebra::DMatrix::zeros(dim * configs.len(), np);
         let mut d = nalgebra::DVector::zeros(dim * configs.len());
         for (k, q) in configs.iter().enumerate() {
-            let (p, rot, jq) = calib::calibrate::prediction_and_jacobian(&model, &cal.params, q);
+            let (p, rot, jq) = calib::calibrate::prediction_and_jacobian(&model, &cal.params, q).unwrap();
             j.view_mut((dim * k, 0), (dim, np)).copy_from(&jq);
             let (pt, rt) = truth.target(&model, q);
             d.fixed_rows_mut::<3>(dim * k).copy_from(&(p - pt));
@@ -130,7 +130,7 @@ fn noisy_recovery(name: &str, orientation: bool, reps: usize, seed: u64) {
         }
         // Held-out poses: error against the noise-free truth vs trace(J C Jᵀ).
         for q in random_configs(&model, 100, &mut g) {
-            let (p, _, jq) = calib::calibrate::prediction_and_jacobian(&model, &cal.params, &q);
+            let (p, _, jq) = calib::calibrate::prediction_and_jacobian(&model, &cal.params, &q).unwrap();
             let (pt, _) = truth.target(&model, &q);
             held_err2 += (p - pt).norm_squared();
             let jp = jq.rows(0, 3);

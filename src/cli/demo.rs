@@ -208,7 +208,7 @@ pub fn run(args: Args) -> CliResult {
     let found: Vec<(String, Vec<usize>)> = d
         .findings
         .iter()
-        .map(|f| (f.cause.clone(), f.joints.clone()))
+        .map(|f| (f.cause.name().to_string(), f.joints.clone()))
         .collect();
     let mut truth: Vec<(String, Vec<usize>)> = hidden
         .iter()

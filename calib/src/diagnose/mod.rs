@@ -28,18 +28,19 @@ pub mod report;
 pub mod significance;
 pub mod unexplained;
 
-use crate::calibrate::{
-    Calibration, CalibrationOptions, Dataset, calibrate_model, observations,
-    prediction_and_jacobian,
-};
+use crate::calibrate::{Calibration, CalibrationOptions, Dataset, calibrate_model, observations};
 use crate::error::{CalibError, Result};
-use crate::extensions::{Cause, ModelSpec, Regressors, Term};
-use crate::stats::{position_errors, split_by_pose};
+use crate::extensions::{Cause, ModelSpec, Regressors, Term, joint_words};
+use crate::learned::LearnedKind;
+use crate::predict::Prediction;
+use crate::stats::split_by_pose;
+use crate::units::Unit;
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 use sim::Model;
 use sim::measurement_table::MeasurementTable;
 use std::collections::BTreeMap;
+use std::sync::OnceLock;
 
 /// Settings of [`diagnose`].
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -63,7 +64,7 @@ pub struct DiagnoseOptions {
     /// Causes to try (default: all).
     pub candidates: Vec<Cause>,
     /// Learned models tried on what is left (default `kernel`, `poly`).
-    pub learned_kinds: Vec<String>,
+    pub learned_kinds: Vec<LearnedKind>,
     /// The noise floor (RMS position error norm, m) when the user knows it better than the data tell,
     /// e.g. a robot's repeatability; `None` estimates it ([`noise_floor::estimate`]).
     pub noise_floor_m: Option<f64>,
@@ -80,7 +81,7 @@ impl Default for DiagnoseOptions {
             min_gain: 0.02,
             joint_z: 5.0,
             candidates: Cause::ALL.to_vec(),
-            learned_kinds: vec!["kernel".into(), "poly".into()],
+            learned_kinds: vec![LearnedKind::Kernel, LearnedKind::Poly],
             noise_floor_m: None,
         }
     }
@@ -105,18 +106,21 @@ pub struct FoundParameter {
     /// Its name (e.g. `joint 2 compliance`).
     pub name: String,
     /// Its unit.
-    pub unit: String,
+    pub unit: Unit,
     /// The estimate.
     pub value: f64,
     /// Its standard deviation (NaN when not determined on its own).
     pub sigma: f64,
+    /// How it enters the chain (which joint), for the code; not part of the JSON.
+    #[serde(skip)]
+    pub term: Option<Term>,
 }
 
 /// A cause the data show.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Finding {
-    /// `joint_compliance`, `gear_backlash` or `thermal_drift`.
-    pub cause: String,
+    /// The cause (`joint_compliance`, `gear_backlash`, `thermal_drift`, …).
+    pub cause: Cause,
     /// 1-based joints it acts on (empty where it is not tied to joints).
     pub joints: Vec<usize>,
     /// One sentence of evidence.
@@ -154,7 +158,7 @@ pub struct Trial {
     /// Round (1-based).
     pub round: usize,
     /// The cause.
-    pub cause: String,
+    pub cause: Cause,
     /// Test RMS with it (m).
     pub test_rms_m: f64,
     /// Paired test `z`.
@@ -215,6 +219,39 @@ pub(crate) struct Evaluated {
     /// Extension regressors of the test rows.
     pub test_regs: Regressors,
     pub step: Step,
+    /// `∂p/∂qⱼ` of the kinematic chain per training row and joint, made when first asked for.
+    train_dirs: OnceLock<Vec<Vector3<f64>>>,
+    /// The same per test row.
+    test_dirs: OnceLock<Vec<Vector3<f64>>>,
+}
+
+impl Evaluated {
+    /// `∂p/∂qⱼ` (tracker frame, m/rad) of the fitted kinematic chain at each training row's `q`, for
+    /// every joint `j`: entry `k · nq + j` for the `k`-th training row.
+    pub(crate) fn train_directions(&self, model: &Model, split: &Split<'_>) -> &[Vector3<f64>] {
+        self.train_dirs
+            .get_or_init(|| directions(model, &self.cal, &split.train))
+    }
+
+    /// The same at each test row.
+    pub(crate) fn test_directions(&self, model: &Model, split: &Split<'_>) -> &[Vector3<f64>] {
+        self.test_dirs
+            .get_or_init(|| directions(model, &self.cal, &split.test))
+    }
+}
+
+/// `∂p/∂qⱼ` of `cal`'s kinematic chain at the rows of `data` (see [`Evaluated::train_directions`]).
+fn directions(model: &Model, cal: &Calibration, data: &Dataset<'_>) -> Vec<Vector3<f64>> {
+    let n = model.nq();
+    let q: Vec<f64> = data
+        .rows
+        .iter()
+        .flat_map(|&r| data.table.q_row(r).iter().copied())
+        .collect();
+    let mut out = vec![Vector3::zeros(); q.len()];
+    Prediction::new(model, &cal.params).joint_directions(&q, &mut out);
+    debug_assert_eq!(out.len(), data.rows.len() * n);
+    out
 }
 
 fn rms(e: &[Vector3<f64>]) -> f64 {
@@ -257,8 +294,9 @@ pub(crate) fn evaluate(
     let at = &cal.params.extension;
     let train_obs = observations(model, &split.train, &options.calibration, ext, at)?;
     let test_obs = observations(model, &split.test, &options.calibration, ext, at)?;
-    let train_err = position_errors(model, &cal.params, &train_obs);
-    let test_err = position_errors(model, &cal.params, &test_obs);
+    let prediction = Prediction::new(model, &cal.params);
+    let train_err = prediction.errors(&train_obs);
+    let test_err = prediction.errors(&test_obs);
     let pose_sq = per_pose(&split.test_pose, test_err.iter().map(|e| e.norm_squared()));
     let step = Step {
         model: spec.name(),
@@ -274,41 +312,30 @@ pub(crate) fn evaluate(
         pose_sq,
         test_regs: test_obs.ext,
         step,
+        train_dirs: OnceLock::new(),
+        test_dirs: OnceLock::new(),
     })
-}
-
-/// `∂p/∂qⱼ` (tracker frame, m/rad) of `cal` at `q`.
-pub(crate) fn joint_direction(
-    model: &Model,
-    cal: &Calibration,
-    q: &[f64],
-    j: usize,
-) -> Vector3<f64> {
-    let (_, _, jac) = prediction_and_jacobian(model, &cal.params, q);
-    let k = cal.layout.zero_offset(j);
-    Vector3::new(jac[(0, k)], jac[(1, k)], jac[(2, k)])
 }
 
 /// Smallest lever `|∂p/∂qⱼ|` (m/rad) of a row to be drawn in a joint-angle residual plot: below it the
 /// projection amplifies the noise more than it shows.
 const MIN_PLOT_LEVER_M: f64 = 0.15;
 
-/// The residual `−err` of each test row as the angle of joint `j` (µrad) that would explain it (NaN,
-/// not drawn, where the joint's lever is below [`MIN_PLOT_LEVER_M`]).
+/// The residual `−err` of each test row of `current` as the angle of joint `j` (µrad) that would
+/// explain it (NaN, not drawn, where the joint's lever is below [`MIN_PLOT_LEVER_M`]).
 fn as_joint_angle_urad(
     model: &Model,
     split: &Split<'_>,
-    cal: &Calibration,
+    current: &Evaluated,
     err: &[Vector3<f64>],
     j: usize,
 ) -> Vec<f64> {
-    split
-        .test
-        .rows
-        .iter()
-        .zip(err)
-        .map(|(&r, e)| {
-            let d = joint_direction(model, cal, split.test.table.q_row(r), j);
+    let n = model.nq();
+    let dirs = current.test_directions(model, split);
+    err.iter()
+        .enumerate()
+        .map(|(k, e)| {
+            let d = dirs[k * n + j];
             let n2 = d.norm_squared();
             if n2 >= MIN_PLOT_LEVER_M * MIN_PLOT_LEVER_M {
                 -e.dot(&d) / n2 * 1e6
@@ -342,17 +369,9 @@ fn finding_plots(
             .collect();
         match p.term {
             Term::JointAngle { joint } if joints.contains(&(joint + 1)) => {
-                let (sign, x_label) = match cause {
-                    Cause::JointCompliance => {
-                        (-1.0, format!("holding torque of joint {} (N m)", joint + 1))
-                    }
-                    Cause::GearBacklash => (
-                        -1.0,
-                        format!("approach direction of joint {} (−1, +1)", joint + 1),
-                    ),
-                    Cause::ThermalDrift => (1.0, "temperature change (K or warm-up)".to_string()),
-                };
-                let resid = as_joint_angle_urad(model, split, &after.cal, &after.test_err, joint);
+                let axis = cause.model().plot_axis(p.term);
+                let (sign, x_label) = (axis.sign, axis.label);
+                let resid = as_joint_angle_urad(model, split, after, &after.test_err, joint);
                 out.push(report::RegressorPlot {
                     file: format!("{}_joint{}", cause.name(), joint + 1),
                     title: format!("{}: joint {}", cause.name(), joint + 1),
@@ -384,8 +403,8 @@ fn finding_plots(
                 };
                 out.push(report::RegressorPlot {
                     file: format!("{}_growth", cause.name()),
-                    title: "thermal_drift: link growth".into(),
-                    x_label: "temperature change (K or warm-up)".into(),
+                    title: format!("{}: link growth", cause.name()),
+                    x_label: cause.model().plot_axis(p.term).label,
                     y_label: "residual as growth (ppm)".into(),
                     before: rel(&after.test_err)
                         .iter()
@@ -465,10 +484,11 @@ fn cause_parameters(cal: &Calibration, cause: Cause) -> Vec<(FoundParameter, Ter
             };
             (
                 FoundParameter {
-                    name: p.name.clone(),
-                    unit: p.unit.clone(),
+                    name: p.name(),
+                    unit: p.unit,
                     value: cal.params.extension[e],
                     sigma,
+                    term: Some(p.term),
                 },
                 p.term,
                 alone,
@@ -477,19 +497,8 @@ fn cause_parameters(cal: &Calibration, cause: Cause) -> Vec<(FoundParameter, Ter
         .collect()
 }
 
-fn join_joints(j: &[usize]) -> String {
-    let s: Vec<String> = j.iter().map(|x| x.to_string()).collect();
-    match s.len() {
-        0 => String::new(),
-        1 => format!("joint {}", s[0]),
-        _ => format!(
-            "joints {} and {}",
-            s[..s.len() - 1].join(", "),
-            s[s.len() - 1]
-        ),
-    }
-}
-
+/// The evidence sentence of a finding of `cause` at `joints` (1-based; with `growth` when the link
+/// growth is named too): what the residual correlates with, and the named parameters' values.
 fn evidence(
     cause: Cause,
     joints: &[usize],
@@ -497,40 +506,28 @@ fn evidence(
     r: f64,
     growth: bool,
 ) -> String {
-    let named: Vec<&FoundParameter> = params
+    let model = cause.model();
+    let values: Vec<String> = params
         .iter()
-        .filter(|p| {
-            joints
-                .iter()
-                .any(|j| p.name.starts_with(&format!("joint {j} ")))
-                || (growth && p.name == "link growth")
+        .filter(|p| match p.term {
+            Some(Term::JointAngle { joint }) => joints.contains(&(joint + 1)),
+            Some(Term::Growth) => growth,
+            None => false,
         })
-        .collect();
-    let values: Vec<String> = named
-        .iter()
         .map(|p| {
-            let extra = match cause {
-                Cause::JointCompliance if p.value > 0.0 => {
-                    format!(" (stiffness {:.0} N m/rad)", 1.0 / p.value)
-                }
-                Cause::JointCompliance => {
-                    " (negative: no spring; it stands in for another error)".to_string()
-                }
-                _ => String::new(),
-            };
             format!(
-                "{} {:.3e} ± {:.1e} {}{extra}",
-                p.name, p.value, p.sigma, p.unit
+                "{} {:.3e} ± {:.1e} {}{}",
+                p.name,
+                p.value,
+                p.sigma,
+                p.unit,
+                model.remark(p.value)
             )
         })
         .collect();
-    let what = match cause {
-        Cause::JointCompliance => format!("the gravity torque of {}", join_joints(joints)),
-        Cause::GearBacklash => format!("the approach direction of {}", join_joints(joints)),
-        Cause::ThermalDrift => "the temperature change".to_string(),
-    };
     format!(
-        "residual correlates with {what} (r = {r:.2}); identified {}",
+        "residual correlates with {} (r = {r:.2}); identified {}",
+        model.evidence_subject(&joint_words(joints)),
         values.join("; ")
     )
 }
@@ -583,11 +580,7 @@ pub fn diagnose_with_progress(
         .candidates
         .iter()
         .copied()
-        .filter(|c| match c {
-            Cause::ThermalDrift => table.temp.is_some() || table.t.is_some(),
-            Cause::JointCompliance => model.require_inertials().is_ok(),
-            Cause::GearBacklash => table.dir.is_some() || model.require_inertials().is_ok(),
-        })
+        .filter(|c| c.model().usable(model, table))
         .collect();
     progress("kinematic");
     let mut current = evaluate(model, &split, &ModelSpec::kinematic(), options)?;
@@ -637,7 +630,7 @@ pub fn diagnose_with_progress(
                 tz > z_held && trz > z_crit && gain >= options.min_gain && beaten_by.is_none();
             trials.push(Trial {
                 round,
-                cause: cause.name().into(),
+                cause,
                 test_rms_m: cand.step.test_rms_m,
                 test_z: tz,
                 train_z: trz,
@@ -658,7 +651,7 @@ pub fn diagnose_with_progress(
             .expect("one new cause");
         let r = explained_correlation(&current.test_err, &next.test_err);
         findings.push(Finding {
-            cause: cause.name().into(),
+            cause,
             evidence: String::new(),
             joints: Vec::new(),
             test_rms_m_before: current.step.test_rms_m,
@@ -675,7 +668,7 @@ pub fn diagnose_with_progress(
     // Joints, values and evidence from the final model, where every adopted cause is fitted jointly
     // (a cause adopted early may have taken up part of a later one before that was in the model).
     for f in &mut findings {
-        let cause = Cause::from_name(&f.cause).expect("a known cause");
+        let cause = f.cause;
         let params = cause_parameters(&current.cal, cause);
         let z_of = |p: &FoundParameter| {
             if p.sigma > 0.0 {
@@ -721,7 +714,7 @@ pub fn diagnose_with_progress(
                 .iter()
                 .map(|&r| table.q_row(r)[j - 1])
                 .collect(),
-            before: as_joint_angle_urad(model, &split, &current.cal, &current.test_err, j - 1),
+            before: as_joint_angle_urad(model, &split, &current, &current.test_err, j - 1),
             after: Vec::new(),
             slope: 0.0,
         });

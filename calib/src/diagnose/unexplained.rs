@@ -15,7 +15,8 @@
 //! a known cause.
 
 use super::significance::{normal_upper_quantile, paired};
-use super::{DiagnoseOptions, Evaluated, Split, joint_direction, per_pose, rms};
+use super::{DiagnoseOptions, Evaluated, Split, per_pose, rms};
+use crate::learned::LearnedKind;
 use crate::error::Result;
 use nalgebra::{DMatrix, DVector, Vector3};
 use serde::{Deserialize, Serialize};
@@ -129,7 +130,7 @@ pub(crate) fn probes(
     model: &Model,
     split: &Split<'_>,
     current: &Evaluated,
-    learned_kinds: &[String],
+    learned_kinds: &[LearnedKind],
     seed: u64,
 ) -> Vec<Probe> {
     let n = model.nq();
@@ -164,23 +165,25 @@ pub(crate) fn probes(
             z: paired(&current.pose_sq, &sq).z,
         });
     };
-    let directions = |rows: &[usize], j: usize| -> Vec<Vector3<f64>> {
-        rows.iter()
-            .map(|&r| joint_direction(model, &current.cal, split.train.table.q_row(r), j))
-            .collect()
+    let (train_dirs, test_dirs) = (
+        current.train_directions(model, split),
+        current.test_directions(model, split),
+    );
+    let directions = |dirs: &[Vector3<f64>], j: usize| -> Vec<Vector3<f64>> {
+        dirs.iter().skip(j).step_by(n).copied().collect()
     };
     for j in 0..n {
         let qj = |q: &[f64]| q.iter().skip(j).step_by(n).copied().collect::<Vec<f64>>();
         let c = harmonic_probe(
-            &directions(&split.train.rows, j),
+            &directions(train_dirs, j),
             &qj(&q_train),
             &residual,
-            &directions(&split.test.rows, j),
+            &directions(test_dirs, j),
             &qj(&q_test),
         );
         judge(format!("harmonics of joint {}", j + 1), Some(j + 1), &c);
     }
-    for kind in learned_kinds {
+    for &kind in learned_kinds {
         let Ok(l) = crate::learned::fit(kind, &q_train, n, &residual, seed) else {
             continue;
         };

@@ -6,27 +6,82 @@
 //! holding torque, onto the loaded flank). A joint always approached from the same side cannot be told
 //! from a zero offset; the solver reports that and leaves `hᵢ` at zero.
 
-use super::{BacklashSign, Cause, ExtensionParam, per_joint_params};
+use super::settings::missing_column;
+use super::{BacklashSign, Cause, CauseModel, ExtensionParam, ExtensionSettings, PlotAxis};
+use super::{RowInputs, Term, per_joint_params};
+use crate::error::Result;
+use crate::units::Unit;
 use sim::Model;
+use sim::measurement_table::MeasurementTable;
 
 /// Expected half lost motion (rad): harmonic drives have about 1 arc-min (2.9e-4 rad) of lost motion.
 pub const SCALE_RAD: f64 = 1e-4;
 
-/// One half-lost-motion per joint.
-pub fn params(model: &Model) -> Vec<ExtensionParam> {
-    per_joint_params(
-        model,
-        Cause::GearBacklash,
-        "half lost motion",
-        "rad",
-        "m",
-        SCALE_RAD,
-    )
+/// Gear backlash: one half-lost-motion per joint, regressor `−sᵢ`.
+pub struct GearBacklash;
+
+impl CauseModel for GearBacklash {
+    fn cause(&self) -> Cause {
+        Cause::GearBacklash
+    }
+
+    fn usable(&self, model: &Model, table: &MeasurementTable) -> bool {
+        table.dir.is_some() || model.require_inertials().is_ok()
+    }
+
+    fn needs_gravity_torque(&self, settings: &ExtensionSettings) -> bool {
+        settings.backlash_sign == BacklashSign::GravityTorque
+    }
+
+    fn params(&self, model: &Model, _settings: &ExtensionSettings) -> Vec<ExtensionParam> {
+        per_joint_params(
+            model,
+            Cause::GearBacklash,
+            "half lost motion",
+            Unit::Radian,
+            Unit::Metre,
+            SCALE_RAD,
+        )
+    }
+
+    fn check_table(
+        &self,
+        settings: &ExtensionSettings,
+        table: &MeasurementTable,
+        file: &str,
+    ) -> Result<()> {
+        if settings.backlash_sign == BacklashSign::Direction && table.dir.is_none() {
+            return Err(missing_column(
+                file,
+                "dir1..dirN",
+                "gear_backlash (signed by approach direction)",
+            ));
+        }
+        Ok(())
+    }
+
+    fn regressors(&self, settings: &ExtensionSettings, row: &RowInputs<'_>, out: &mut [f64]) {
+        regressors(settings.backlash_sign, row.dir, row.tau, out);
+    }
+
+    fn evidence_subject(&self, joints: &str) -> String {
+        format!("the approach direction of {joints}")
+    }
+
+    fn plot_axis(&self, term: Term) -> PlotAxis {
+        PlotAxis {
+            sign: -1.0,
+            label: format!(
+                "approach direction of joint {} (−1, +1)",
+                term.joint().map_or(0, |j| j + 1)
+            ),
+        }
+    }
 }
 
 /// Regressors `−sᵢ` (−1, 0 or +1) of one row, from its approach signs `dir` or its holding torques
 /// `tau` (N m), as `sign` says.
-pub fn regressors(sign: BacklashSign, dir: Option<&[i8]>, tau: &[f64], out: &mut [f64]) {
+fn regressors(sign: BacklashSign, dir: Option<&[i8]>, tau: &[f64], out: &mut [f64]) {
     match (sign, dir) {
         (BacklashSign::Direction, Some(d)) => {
             for (o, &s) in out.iter_mut().zip(d) {

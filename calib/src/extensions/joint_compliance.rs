@@ -8,27 +8,72 @@
 //! A joint whose torque does not change over the data (joint 1 of an upright arm) cannot be identified;
 //! the solver says so and leaves its compliance at zero.
 
-use super::{Cause, ExtensionParam, per_joint_params};
+use super::{Cause, CauseModel, ExtensionParam, ExtensionSettings, PlotAxis, RowInputs, Term};
+use super::per_joint_params;
+use crate::units::Unit;
 use sim::Model;
+use sim::measurement_table::MeasurementTable;
 
 /// Expected compliance (rad/(N m)): harmonic-drive joints of lightweight arms are 5e3–2e4 N m/rad.
 pub const SCALE_RAD_PER_NM: f64 = 1e-4;
 
-/// One compliance per joint.
-pub fn params(model: &Model) -> Vec<ExtensionParam> {
-    per_joint_params(
-        model,
-        Cause::JointCompliance,
-        "compliance",
-        "rad/(N m)",
-        "m/N",
-        SCALE_RAD_PER_NM,
-    )
-}
+/// Joint compliance: one compliance per joint, regressor `−τᵢ`.
+pub struct JointCompliance;
 
-/// Regressors `−τᵢ` (N m) of one row from its gravity torques `tau` (N m, one per joint).
-pub fn regressors(tau: &[f64], out: &mut [f64]) {
-    for (o, t) in out.iter_mut().zip(tau) {
-        *o = -t;
+impl CauseModel for JointCompliance {
+    fn cause(&self) -> Cause {
+        Cause::JointCompliance
+    }
+
+    fn usable(&self, model: &Model, _table: &MeasurementTable) -> bool {
+        model.require_inertials().is_ok()
+    }
+
+    fn needs_gravity_torque(&self, _settings: &ExtensionSettings) -> bool {
+        true
+    }
+
+    fn needs_equilibrium(&self) -> bool {
+        true
+    }
+
+    fn params(&self, model: &Model, _settings: &ExtensionSettings) -> Vec<ExtensionParam> {
+        per_joint_params(
+            model,
+            Cause::JointCompliance,
+            "compliance",
+            Unit::RadianPerNewtonMetre,
+            Unit::MetrePerNewton,
+            SCALE_RAD_PER_NM,
+        )
+    }
+
+    /// Regressors `−τᵢ` (N m) from the row's gravity torques.
+    fn regressors(&self, _settings: &ExtensionSettings, row: &RowInputs<'_>, out: &mut [f64]) {
+        for (o, t) in out.iter_mut().zip(row.tau) {
+            *o = -t;
+        }
+    }
+
+    fn evidence_subject(&self, joints: &str) -> String {
+        format!("the gravity torque of {joints}")
+    }
+
+    fn remark(&self, value: f64) -> String {
+        if value > 0.0 {
+            format!(" (stiffness {:.0} N m/rad)", 1.0 / value)
+        } else {
+            " (negative: no spring; it stands in for another error)".to_string()
+        }
+    }
+
+    fn plot_axis(&self, term: Term) -> PlotAxis {
+        PlotAxis {
+            sign: -1.0,
+            label: format!(
+                "holding torque of joint {} (N m)",
+                term.joint().map_or(0, |j| j + 1)
+            ),
+        }
     }
 }

@@ -14,49 +14,168 @@
 //! temperature or time) and on the nominal robot, so they are computed once per data set
 //! ([`Regressors::build`]). The estimator's equations are its own: they share nothing with the
 //! simulator's effect code (see CONTRIBUTING.md).
+//!
+//! # One cause, one file
+//! Each cause is a unit struct in its own module implementing [`CauseModel`]: its parameters (with
+//! typed [`Unit`]s), the columns it reads, its table checks, its regressors, the words of its evidence
+//! and the axis of its diagnose plot. The registry [`causes!`] below turns one line per cause into the
+//! typed identity [`Cause`] and its dispatch ([`Cause::model`]); nothing else in the estimator matches on
+//! a cause. The Jacobian columns follow from the [`Term`] of each parameter ([`crate::problem`]).
 
 pub mod gear_backlash;
 pub mod joint_compliance;
+mod regressors;
+mod settings;
+mod spec;
 pub mod thermal_drift;
 
-use crate::error::{CalibError, Result};
-use nalgebra::Vector3;
+pub use regressors::{EQUILIBRIUM_ITERATIONS, Regressors, RowInputs, apply};
+pub use settings::{BacklashSign, ExtensionSettings, ThermalInput};
+pub use spec::ModelSpec;
+
+use crate::error::Result;
+use crate::units::Unit;
 use serde::{Deserialize, Serialize};
 use sim::Model;
 use sim::measurement_table::MeasurementTable;
 
-/// A physical cause the kinematic model can be extended with.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum Cause {
+/// What a physical cause of the estimator is: one implementation per file of this folder.
+///
+/// Implementations are stateless unit structs; everything that depends on the data lives in
+/// [`ExtensionSettings`] (stored in the model file, so `predict` rebuilds the same regressors).
+pub trait CauseModel: Sync {
+    /// The cause's typed identity.
+    fn cause(&self) -> Cause;
+
+    /// Whether `model` and `table` can feed this cause at all (diagnose tries only those): e.g.
+    /// thermal drift needs a `temp` or `t` column, compliance needs the robot's inertials.
+    fn usable(&self, model: &Model, table: &MeasurementTable) -> bool;
+
+    /// Fills this cause's part of `settings` from the training rows `rows` of `table` (`source` names
+    /// the table in errors). Default: nothing to set.
+    fn configure(
+        &self,
+        _settings: &mut ExtensionSettings,
+        _table: &MeasurementTable,
+        _rows: &[usize],
+        _source: &str,
+    ) -> Result<()> {
+        Ok(())
+    }
+
+    /// Other settings to try, a search over a hyperparameter the regressors cannot be linear in (the
+    /// warm-up time constant of thermal drift without temperatures); the calibration keeps the one
+    /// with the smallest training `χ²`. Default: none.
+    fn alternatives(
+        &self,
+        _settings: &ExtensionSettings,
+        _table: &MeasurementTable,
+        _rows: &[usize],
+    ) -> Vec<ExtensionSettings> {
+        Vec::new()
+    }
+
+    /// Whether the regressors read the gravity torques (N m) under `settings`.
+    fn needs_gravity_torque(&self, settings: &ExtensionSettings) -> bool;
+
+    /// Whether the regressors depend on where the link really is, so that the calibration refits with
+    /// the torques at the estimated equilibrium (joint compliance). Default: no.
+    fn needs_equilibrium(&self) -> bool {
+        false
+    }
+
+    /// The parameters, in order, for `model` under `settings`.
+    fn params(&self, model: &Model, settings: &ExtensionSettings) -> Vec<ExtensionParam>;
+
+    /// Checks that `table` has the columns these settings read; `file` names it in the error.
+    /// Default: nothing beyond the joint values.
+    fn check_table(
+        &self,
+        _settings: &ExtensionSettings,
+        _table: &MeasurementTable,
+        _file: &str,
+    ) -> Result<()> {
+        Ok(())
+    }
+
+    /// The regressors `gₑ` of one row into `out` (one per parameter, [`CauseModel::params`] order).
+    fn regressors(&self, settings: &ExtensionSettings, row: &RowInputs<'_>, out: &mut [f64]);
+
+    /// What the residual correlates with, for the evidence sentence of a finding, given the named
+    /// joints as text (e.g. `joints 2 and 4`): "the gravity torque of joints 2 and 4".
+    fn evidence_subject(&self, joints: &str) -> String;
+
+    /// A remark on an identified value `value` (parameter unit) for the evidence, e.g. the stiffness a
+    /// compliance implies, with a leading space; default none.
+    fn remark(&self, _value: f64) -> String {
+        String::new()
+    }
+
+    /// The x axis of a diagnose plot of a parameter acting through `term`.
+    fn plot_axis(&self, term: Term) -> PlotAxis;
+}
+
+/// The x axis of a finding's plot: the regressor times `sign`, labelled `label`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PlotAxis {
+    /// Sign applied to the regressor so that the axis shows the physical quantity (e.g. the holding
+    /// torque where the regressor is its negative).
+    pub sign: f64,
+    /// Axis label with its unit.
+    pub label: String,
+}
+
+/// The registry: one line per cause, `Variant => "word", module::Type;`. It defines [`Cause`] (the
+/// typed identity, serialised as its word) and its dispatch to the cause's [`CauseModel`].
+macro_rules! causes {
+    ($( $(#[$doc:meta])* $variant:ident => $word:literal, $module:ident :: $ty:ident; )*) => {
+        /// A physical cause the kinematic model can be extended with.
+        #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
+        #[serde(rename_all = "snake_case")]
+        pub enum Cause {
+            $( $(#[$doc])* $variant, )*
+        }
+
+        impl Cause {
+            /// Every cause, in the order diagnose tries them.
+            pub const ALL: &'static [Cause] = &[$( Cause::$variant, )*];
+
+            /// The model-name word (`joint_compliance`, `gear_backlash`, `thermal_drift`).
+            pub fn name(self) -> &'static str {
+                match self {
+                    $( Cause::$variant => $word, )*
+                }
+            }
+
+            /// What the cause is and does.
+            pub fn model(self) -> &'static dyn CauseModel {
+                match self {
+                    $( Cause::$variant => &$module::$ty, )*
+                }
+            }
+        }
+    };
+}
+
+causes! {
     /// Elastic joints sagging under gravity and payload.
-    JointCompliance,
+    JointCompliance => "joint_compliance", joint_compliance::JointCompliance;
     /// Lost motion in the gears, signed by the approach direction or the gravity load.
-    GearBacklash,
+    GearBacklash => "gear_backlash", gear_backlash::GearBacklash;
     /// Link growth and joint-zero drift with temperature.
-    ThermalDrift,
+    ThermalDrift => "thermal_drift", thermal_drift::ThermalDrift;
 }
 
 impl Cause {
-    /// Every cause, in the order diagnose tries them.
-    pub const ALL: [Cause; 3] = [
-        Cause::JointCompliance,
-        Cause::GearBacklash,
-        Cause::ThermalDrift,
-    ];
-
-    /// The model-name word (`joint_compliance`, `gear_backlash`, `thermal_drift`).
-    pub fn name(self) -> &'static str {
-        match self {
-            Cause::JointCompliance => "joint_compliance",
-            Cause::GearBacklash => "gear_backlash",
-            Cause::ThermalDrift => "thermal_drift",
-        }
-    }
-
     /// The cause named `word`, if any.
     pub fn from_name(word: &str) -> Option<Cause> {
-        Cause::ALL.into_iter().find(|c| c.name() == word)
+        Cause::ALL.iter().copied().find(|c| c.name() == word)
+    }
+}
+
+impl std::fmt::Display for Cause {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
     }
 }
 
@@ -73,29 +192,49 @@ pub enum Term {
     Growth,
 }
 
-/// One parameter of an extension.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+impl Term {
+    /// The 0-based joint a joint-angle term acts on.
+    pub fn joint(self) -> Option<usize> {
+        match self {
+            Term::JointAngle { joint } => Some(joint),
+            Term::Growth => None,
+        }
+    }
+}
+
+/// One parameter of an extension: its typed identity (cause, term, quantity), unit and scale.
+#[derive(Clone, Debug, PartialEq)]
 pub struct ExtensionParam {
     /// The cause it belongs to.
     pub cause: Cause,
     /// Where it enters the chain.
     pub term: Term,
-    /// Human name, joints numbered from 1 (e.g. `joint 2 compliance`).
-    pub name: String,
-    /// Unit of the parameter (e.g. `rad/(N m)`).
-    pub unit: String,
+    /// What it is, e.g. `compliance`, `half lost motion`, `link growth`.
+    pub quantity: &'static str,
+    /// Unit of the parameter.
+    pub unit: Unit,
     /// Expected magnitude (parameter unit), the column scaling of the solver.
     pub scale: f64,
 }
 
-/// One parameter per joint of `model` for `cause`: named `joint i {what}`, in `rotational_unit` (or
+impl ExtensionParam {
+    /// Human name, joints numbered from 1 (e.g. `joint 2 compliance`, `link growth`).
+    pub fn name(&self) -> String {
+        match self.term {
+            Term::JointAngle { joint } => format!("joint {} {}", joint + 1, self.quantity),
+            Term::Growth => self.quantity.to_string(),
+        }
+    }
+}
+
+/// One parameter per joint of `model` for `cause`: `quantity` of each joint, in `rotational_unit` (or
 /// `prismatic_unit` for a prismatic joint), with expected magnitude `scale`.
 pub(crate) fn per_joint_params(
     model: &Model,
     cause: Cause,
-    what: &str,
-    rotational_unit: &str,
-    prismatic_unit: &str,
+    quantity: &'static str,
+    rotational_unit: Unit,
+    prismatic_unit: Unit,
     scale: f64,
 ) -> Vec<ExtensionParam> {
     model
@@ -105,406 +244,27 @@ pub(crate) fn per_joint_params(
         .map(|(i, j)| ExtensionParam {
             cause,
             term: Term::JointAngle { joint: i },
-            name: format!("joint {} {what}", i + 1),
+            quantity,
             unit: if j.kind.is_rotational() {
                 rotational_unit
             } else {
                 prismatic_unit
-            }
-            .into(),
+            },
             scale,
         })
         .collect()
 }
 
-/// Parsed `--model` value: `kinematic`, optionally `+cause` words and one `+learned:KIND`.
-#[derive(Clone, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
-pub struct ModelSpec {
-    /// Physical extensions, sorted, without repeats.
-    pub causes: Vec<Cause>,
-    /// Learned residual model kind ([`crate::learned::KINDS`]), if any.
-    pub learned: Option<String>,
-}
-
-impl ModelSpec {
-    /// The kinematic model alone.
-    pub fn kinematic() -> Self {
-        ModelSpec::default()
+/// The joints as words: `joint 2`, `joints 2 and 4`, `joints 1, 2 and 4` (1-based numbers given).
+pub fn joint_words(joints: &[usize]) -> String {
+    let s: Vec<String> = joints.iter().map(|x| x.to_string()).collect();
+    match s.len() {
+        0 => String::new(),
+        1 => format!("joint {}", s[0]),
+        _ => format!(
+            "joints {} and {}",
+            s[..s.len() - 1].join(", "),
+            s[s.len() - 1]
+        ),
     }
-
-    /// Parses a `+`-joined model name such as `kinematic+joint_compliance+learned:poly`. The word
-    /// `kinematic` may be left out; `auto` is not a model (diagnose decides it) and is refused here.
-    pub fn parse(text: &str) -> Result<Self> {
-        let mut spec = ModelSpec::default();
-        let bad = |problem: String| CalibError::BadValue {
-            context: "--model".into(),
-            field: "model".into(),
-            value: text.to_string(),
-            problem,
-        };
-        if text.trim().is_empty() {
-            return Err(bad("empty model name".into()));
-        }
-        for word in text.split('+').map(str::trim) {
-            if word == "kinematic" {
-                continue;
-            }
-            if let Some(kind) = word.strip_prefix("learned:") {
-                if !crate::learned::KINDS.contains(&kind) {
-                    return Err(bad(format!(
-                        "unknown learned model '{kind}' (known: {})",
-                        crate::learned::KINDS.join(", ")
-                    )));
-                }
-                if spec.learned.replace(kind.to_string()).is_some() {
-                    return Err(bad("at most one learned:KIND part".into()));
-                }
-                continue;
-            }
-            match Cause::from_name(word) {
-                Some(c) => spec.causes.push(c),
-                None => {
-                    return Err(bad(format!(
-                        "unknown model part '{word}' (known: kinematic, joint_compliance, \
-                         gear_backlash, thermal_drift, learned:{})",
-                        crate::learned::KINDS.join("|learned:")
-                    )));
-                }
-            }
-        }
-        spec.causes.sort();
-        spec.causes.dedup();
-        Ok(spec)
-    }
-
-    /// The canonical name: `kinematic`, then the causes, then `learned:KIND`.
-    pub fn name(&self) -> String {
-        let mut s = String::from("kinematic");
-        for c in &self.causes {
-            s.push('+');
-            s.push_str(c.name());
-        }
-        if let Some(k) = &self.learned {
-            s.push_str("+learned:");
-            s.push_str(k);
-        }
-        s
-    }
-
-    /// The same model with `cause` added.
-    pub fn with(&self, cause: Cause) -> Self {
-        let mut s = self.clone();
-        s.causes.push(cause);
-        s.causes.sort();
-        s.causes.dedup();
-        s
-    }
-}
-
-/// Which sign the gear backlash regressor uses.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum BacklashSign {
-    /// The approach direction (`dir` columns).
-    Direction,
-    /// The sign of the gravity torque (no `dir` columns).
-    GravityTorque,
-}
-
-/// What the temperature regressor `ΔT` is made from.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case", tag = "source")]
-pub enum ThermalInput {
-    /// `ΔT = temp − t_ref_c` (K) from the `temp` column.
-    Temperature {
-        /// Reference temperature (°C): the training mean, where the kinematic parameters hold.
-        t_ref_c: f64,
-    },
-    /// No temperature: a first-order warm-up `w(t) = 1 − exp(−t/τ) − w_ref` (dimensionless) from the
-    /// `t` column; the parameters are then per unit of warm-up, not per kelvin.
-    WarmUp {
-        /// Time constant τ (s), identified by a search over candidates.
-        tau_s: f64,
-        /// Training mean of `1 − exp(−t/τ)`, subtracted for conditioning.
-        w_ref: f64,
-    },
-}
-
-/// Everything besides the parameter values that the regressors need; stored in the model file so that
-/// `predict` builds the same regressors on new data.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct ExtensionSettings {
-    /// The causes, sorted.
-    pub causes: Vec<Cause>,
-    /// Gravity in the robot base frame (m/s²).
-    pub gravity_base: [f64; 3],
-    /// Payload centre of mass in the flange frame (m); the table gives only its mass.
-    pub payload_com_m: [f64; 3],
-    /// Sign source of the backlash regressor.
-    pub backlash_sign: BacklashSign,
-    /// Source of `ΔT`, with thermal drift.
-    pub thermal: Option<ThermalInput>,
-}
-
-impl ExtensionSettings {
-    /// Settings for `causes` on training rows `rows` of `table`: backlash signed by `dir` when the table
-    /// has it, temperature from `temp` (else a warm-up with time constant `tau_s` from `t`).
-    ///
-    /// Errors: thermal drift asked for on a table with neither `temp` nor `t`, or compliance on a robot
-    /// without inertials.
-    pub fn for_data(
-        model: &Model,
-        causes: &[Cause],
-        table: &MeasurementTable,
-        rows: &[usize],
-        tau_s: Option<f64>,
-        source: &str,
-    ) -> Result<Self> {
-        let mut causes = causes.to_vec();
-        causes.sort();
-        causes.dedup();
-        let needs_statics = causes.contains(&Cause::JointCompliance)
-            || (causes.contains(&Cause::GearBacklash) && table.dir.is_none());
-        if needs_statics && let Err(e) = model.require_inertials() {
-            return Err(CalibError::BadValue {
-                context: source.to_string(),
-                field: "robot".into(),
-                value: model.name.clone(),
-                problem: format!("the extension needs gravity torques: {e}"),
-            });
-        }
-        let thermal = if causes.contains(&Cause::ThermalDrift) {
-            Some(thermal_drift::input_for(table, rows, tau_s, source)?)
-        } else {
-            None
-        };
-        Ok(ExtensionSettings {
-            causes,
-            gravity_base: sim::statics::DEFAULT_GRAVITY,
-            payload_com_m: [0.0; 3],
-            backlash_sign: if table.dir.is_some() {
-                BacklashSign::Direction
-            } else {
-                BacklashSign::GravityTorque
-            },
-            thermal,
-        })
-    }
-
-    /// Checks that `table` has the columns these settings read (`temp` or `t` for thermal drift, `dir`
-    /// for direction-signed backlash); `file` names it in the error.
-    pub fn check_table(&self, table: &MeasurementTable, file: &str) -> Result<()> {
-        let missing = |col: &str, why: &str| CalibError::BadValue {
-            context: file.to_string(),
-            field: col.to_string(),
-            value: "absent".into(),
-            problem: format!("the model's {why} reads this column"),
-        };
-        if self.causes.contains(&Cause::GearBacklash)
-            && self.backlash_sign == BacklashSign::Direction
-            && table.dir.is_none()
-        {
-            return Err(missing(
-                "dir1..dirN",
-                "gear_backlash (signed by approach direction)",
-            ));
-        }
-        match self.thermal {
-            Some(ThermalInput::Temperature { .. }) if table.temp.is_none() => {
-                Err(missing("temp", "thermal_drift"))
-            }
-            Some(ThermalInput::WarmUp { .. }) if table.t.is_none() => {
-                Err(missing("t", "thermal_drift (warm-up from time)"))
-            }
-            _ => Ok(()),
-        }
-    }
-
-    /// The parameters of every cause, in order.
-    pub fn params(&self, model: &Model) -> Vec<ExtensionParam> {
-        let mut out = Vec::new();
-        for c in &self.causes {
-            match c {
-                Cause::JointCompliance => out.extend(joint_compliance::params(model)),
-                Cause::GearBacklash => out.extend(gear_backlash::params(model)),
-                Cause::ThermalDrift => out.extend(thermal_drift::params(model, self)),
-            }
-        }
-        out
-    }
-}
-
-/// Regressors of every extension parameter for a set of rows.
-#[derive(Clone, Debug, PartialEq)]
-pub struct Regressors {
-    /// The parameters (columns).
-    pub params: Vec<ExtensionParam>,
-    /// `gₑ(row)`, row-major (rows × params).
-    pub coef: Vec<f64>,
-}
-
-impl Regressors {
-    /// No extension.
-    pub fn none() -> Self {
-        Regressors {
-            params: Vec::new(),
-            coef: Vec::new(),
-        }
-    }
-
-    /// Number of parameters.
-    pub fn len(&self) -> usize {
-        self.params.len()
-    }
-
-    /// True without parameters.
-    pub fn is_empty(&self) -> bool {
-        self.params.is_empty()
-    }
-
-    /// Regressors of row `r` (one per parameter).
-    #[inline]
-    pub fn row(&self, r: usize) -> &[f64] {
-        let n = self.params.len();
-        &self.coef[r * n..(r + 1) * n]
-    }
-
-    /// The regressors of `rows` (0-based) of `table` under `settings`; `source` names the table in
-    /// errors.
-    ///
-    /// Gravity torques are evaluated where the link really is: at the joint angles `θ` that the
-    /// extension values `at` (in [`ExtensionSettings::params`] order) give, `θ = q + Σₑ xₑ gₑ(θ)`,
-    /// solved by fixed-point iteration (each step shrinks the error by the compliance times the
-    /// torque's derivative, about 10⁻²). With `at` empty, at `q`. Once `at` holds the estimate, this
-    /// turns the first-order compliance model into the exact spring balance.
-    pub fn build(
-        model: &Model,
-        settings: &ExtensionSettings,
-        table: &MeasurementTable,
-        rows: &[usize],
-        source: &str,
-        at: &[f64],
-    ) -> Result<Self> {
-        let params = settings.params(model);
-        let n = params.len();
-        let mut coef = vec![0.0; rows.len() * n];
-        let mut data = sim::Data::new(model);
-        let mut tau = vec![0.0; model.nq()];
-        let needs_tau = settings.causes.contains(&Cause::JointCompliance)
-            || (settings.causes.contains(&Cause::GearBacklash)
-                && settings.backlash_sign == BacklashSign::GravityTorque);
-        let g = Vector3::from(settings.gravity_base);
-        let widths: Vec<usize> = settings
-            .causes
-            .iter()
-            .map(|c| params.iter().filter(|p| p.cause == *c).count())
-            .collect();
-        let iterations = if needs_tau && at.len() == n && at.iter().any(|x| *x != 0.0) {
-            EQUILIBRIUM_ITERATIONS
-        } else {
-            1
-        };
-        // One row's regressors, to evaluate θ with [`apply`] between the fixed-point steps.
-        let mut one = Regressors {
-            params,
-            coef: vec![0.0; n],
-        };
-        let mut theta = vec![0.0; model.nq()];
-        for (k, &r) in rows.iter().enumerate() {
-            let q = table.q_row(r);
-            theta.copy_from_slice(q);
-            for it in 0..iterations {
-                if needs_tau {
-                    let mass = table.payload.as_ref().map_or(0.0, |p| p[r]);
-                    let payload = (mass > 0.0).then_some(sim::statics::Payload {
-                        mass,
-                        com: settings.payload_com_m,
-                    });
-                    sim::statics::gravity_torques(model, &mut data, &theta, &g, payload.as_ref())
-                        .map_err(|e| CalibError::BadValue {
-                        context: format!("{source}: row {}", r + 1),
-                        field: "q1..qN".into(),
-                        value: String::new(),
-                        problem: format!("gravity torques: {e}"),
-                    })?;
-                    tau.copy_from_slice(data.gravity_torque.as_slice());
-                }
-                fill_row(settings, &widths, table, r, &tau, &mut one.coef);
-                if it + 1 < iterations {
-                    apply(&one, at, 0, q, &mut theta);
-                }
-            }
-            coef[k * n..(k + 1) * n].copy_from_slice(&one.coef);
-        }
-        Ok(Regressors {
-            params: one.params,
-            coef,
-        })
-    }
-}
-
-/// Fixed-point steps of the spring balance in [`Regressors::build`]: the error shrinks by about 10⁻²
-/// per step, so four reach 10⁻⁸ of the sag.
-pub const EQUILIBRIUM_ITERATIONS: usize = 4;
-
-/// The regressors of row `r` of `table` into `out`, from its holding torques `tau` (N m); `widths` is
-/// the parameter count of each cause of `settings`.
-fn fill_row(
-    settings: &ExtensionSettings,
-    widths: &[usize],
-    table: &MeasurementTable,
-    r: usize,
-    tau: &[f64],
-    out: &mut [f64],
-) {
-    let mut col = 0;
-    for (c, &width) in settings.causes.iter().zip(widths) {
-        let dst = &mut out[col..col + width];
-        match c {
-            Cause::JointCompliance => joint_compliance::regressors(tau, dst),
-            Cause::GearBacklash => {
-                gear_backlash::regressors(settings.backlash_sign, table.dir_row(r), tau, dst)
-            }
-            Cause::ThermalDrift => thermal_drift::regressors(settings, table, r, dst),
-        }
-        col += width;
-    }
-}
-
-/// Effective joint values of row `r`: `q` plus every joint-angle term, into `q_out`; returns the growth
-/// factor `x · g` (0 without growth).
-#[inline]
-pub fn apply(regs: &Regressors, values: &[f64], r: usize, q: &[f64], q_out: &mut [f64]) -> f64 {
-    q_out.copy_from_slice(q);
-    let mut growth = 0.0;
-    if regs.is_empty() {
-        return growth;
-    }
-    for ((p, &x), &g) in regs.params.iter().zip(values).zip(regs.row(r)) {
-        match p.term {
-            Term::JointAngle { joint } => q_out[joint] += x * g,
-            Term::Growth => growth += x * g,
-        }
-    }
-    growth
-}
-
-/// Evaluates `chain` (prepared at `params`) for row `r` of data with joint values `q` and extension
-/// regressors `regs`, into `scratch`; returns the predicted target position (tracker frame, m) with the
-/// growth applied, and the growth lever `p − t_tracker_base` (m) the growth multiplies. `q_buf` is
-/// scratch for the effective joint values.
-#[inline]
-pub fn predict_row(
-    chain: &crate::chain::Chain,
-    scratch: &mut crate::chain::ChainScratch,
-    params: &crate::params::KinematicParams,
-    regs: &Regressors,
-    r: usize,
-    q: &[f64],
-    q_buf: &mut [f64],
-) -> (Vector3<f64>, Vector3<f64>, f64) {
-    let growth = apply(regs, &params.extension, r, q, q_buf);
-    chain.forward(scratch, q_buf);
-    let lever = scratch.p_tracker - params.t_tracker_base.translation.vector;
-    (scratch.p_tracker + growth * lever, lever, growth)
 }

@@ -12,8 +12,11 @@
 //! training mean) from the `t` column, and the parameters are per unit of warm-up (rad, 1); the time
 //! constant τ (s) is found by the calibration's search over candidates ([`WARM_UP_TAUS_S`]).
 
-use super::{Cause, ExtensionParam, ExtensionSettings, Term, ThermalInput, per_joint_params};
+use super::settings::missing_column;
+use super::{Cause, CauseModel, ExtensionParam, ExtensionSettings, PlotAxis, RowInputs, Term};
+use super::{ThermalInput, per_joint_params};
 use crate::error::{CalibError, Result};
+use crate::units::Unit;
 use sim::Model;
 use sim::measurement_table::MeasurementTable;
 
@@ -63,48 +66,125 @@ pub fn warm_up(t_s: f64, tau_s: f64) -> f64 {
     1.0 - (-t_s.max(0.0) / tau_s).exp()
 }
 
-/// Joint-zero drift per joint, then the common link growth.
-pub fn params(model: &Model, settings: &ExtensionSettings) -> Vec<ExtensionParam> {
-    let per_kelvin = matches!(settings.thermal, Some(ThermalInput::Temperature { .. }));
-    let (per, gain) = if per_kelvin {
-        ("/K", 1.0)
-    } else {
-        (" per warm-up", 10.0)
-    };
-    let mut out = per_joint_params(
-        model,
-        Cause::ThermalDrift,
-        "zero drift",
-        &format!("rad{per}"),
-        &format!("m{per}"),
-        BETA_SCALE_RAD_PER_K * gain,
-    );
-    out.push(ExtensionParam {
-        cause: Cause::ThermalDrift,
-        term: Term::Growth,
-        name: "link growth".into(),
-        unit: if per_kelvin { "1/K" } else { "1 per warm-up" }.into(),
-        scale: ALPHA_SCALE_PER_K * gain,
-    });
-    out
-}
+/// Thermal drift: joint-zero drift per joint, then the common link growth, all with regressor `ΔT`.
+pub struct ThermalDrift;
 
-/// Regressors of row `r`: `ΔT` (K, or warm-up units) for every parameter.
-pub fn regressors(
-    settings: &ExtensionSettings,
-    table: &MeasurementTable,
-    r: usize,
-    out: &mut [f64],
-) {
-    let dt = match settings.thermal {
-        Some(ThermalInput::Temperature { t_ref_c }) => {
-            table.temp.as_ref().map_or(0.0, |t| t[r] - t_ref_c)
+impl CauseModel for ThermalDrift {
+    fn cause(&self) -> Cause {
+        Cause::ThermalDrift
+    }
+
+    fn usable(&self, _model: &Model, table: &MeasurementTable) -> bool {
+        table.temp.is_some() || table.t.is_some()
+    }
+
+    /// `ΔT` from the temperature column, else a warm-up with the default time constant from `t`.
+    fn configure(
+        &self,
+        settings: &mut ExtensionSettings,
+        table: &MeasurementTable,
+        rows: &[usize],
+        source: &str,
+    ) -> Result<()> {
+        settings.thermal = Some(input_for(table, rows, None, source)?);
+        Ok(())
+    }
+
+    /// Without temperatures, the warm-up time constants [`WARM_UP_TAUS_S`].
+    fn alternatives(
+        &self,
+        settings: &ExtensionSettings,
+        table: &MeasurementTable,
+        rows: &[usize],
+    ) -> Vec<ExtensionSettings> {
+        if !matches!(settings.thermal, Some(ThermalInput::WarmUp { .. })) {
+            return Vec::new();
         }
-        Some(ThermalInput::WarmUp { tau_s, w_ref }) => table
-            .t
-            .as_ref()
-            .map_or(0.0, |t| warm_up(t[r], tau_s) - w_ref),
-        None => 0.0,
-    };
-    out.fill(dt);
+        WARM_UP_TAUS_S
+            .iter()
+            .filter_map(|&tau| {
+                let input = input_for(table, rows, Some(tau), "").ok()?;
+                Some(ExtensionSettings {
+                    thermal: Some(input),
+                    ..settings.clone()
+                })
+            })
+            .collect()
+    }
+
+    fn needs_gravity_torque(&self, _settings: &ExtensionSettings) -> bool {
+        false
+    }
+
+    fn params(&self, model: &Model, settings: &ExtensionSettings) -> Vec<ExtensionParam> {
+        let per_kelvin = matches!(settings.thermal, Some(ThermalInput::Temperature { .. }));
+        let (rad, m, growth, gain) = if per_kelvin {
+            (Unit::RadianPerKelvin, Unit::MetrePerKelvin, Unit::PerKelvin, 1.0)
+        } else {
+            (
+                Unit::RadianPerWarmUp,
+                Unit::MetrePerWarmUp,
+                Unit::PerWarmUp,
+                10.0,
+            )
+        };
+        let mut out = per_joint_params(
+            model,
+            Cause::ThermalDrift,
+            "zero drift",
+            rad,
+            m,
+            BETA_SCALE_RAD_PER_K * gain,
+        );
+        out.push(ExtensionParam {
+            cause: Cause::ThermalDrift,
+            term: Term::Growth,
+            quantity: "link growth",
+            unit: growth,
+            scale: ALPHA_SCALE_PER_K * gain,
+        });
+        out
+    }
+
+    fn check_table(
+        &self,
+        settings: &ExtensionSettings,
+        table: &MeasurementTable,
+        file: &str,
+    ) -> Result<()> {
+        match settings.thermal {
+            Some(ThermalInput::Temperature { .. }) if table.temp.is_none() => {
+                Err(missing_column(file, "temp", "thermal_drift"))
+            }
+            Some(ThermalInput::WarmUp { .. }) if table.t.is_none() => Err(missing_column(
+                file,
+                "t",
+                "thermal_drift (warm-up from time)",
+            )),
+            _ => Ok(()),
+        }
+    }
+
+    /// `ΔT` (K, or warm-up units) for every parameter.
+    fn regressors(&self, settings: &ExtensionSettings, row: &RowInputs<'_>, out: &mut [f64]) {
+        let dt = match settings.thermal {
+            Some(ThermalInput::Temperature { t_ref_c }) => row.temp_c.map_or(0.0, |t| t - t_ref_c),
+            Some(ThermalInput::WarmUp { tau_s, w_ref }) => {
+                row.t_s.map_or(0.0, |t| warm_up(t, tau_s) - w_ref)
+            }
+            None => 0.0,
+        };
+        out.fill(dt);
+    }
+
+    fn evidence_subject(&self, _joints: &str) -> String {
+        "the temperature change".to_string()
+    }
+
+    fn plot_axis(&self, _term: Term) -> PlotAxis {
+        PlotAxis {
+            sign: 1.0,
+            label: "temperature change (K or warm-up)".to_string(),
+        }
+    }
 }

@@ -30,8 +30,68 @@ use cross_validation::{K_FOLDS, fold_assignment, rms_norm, select_simplest};
 use kernel::KernelModel;
 use polynomial::PolynomialModel;
 
-/// Valid kinds: `"poly"` (polynomial, degree chosen by CV from 1..=3), `"poly1"`, `"poly2"`, `"poly3"`,
-/// `"kernel"`.
+/// A kind of learned residual model, as written after `learned:` in a model name.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum LearnedKind {
+    /// Polynomial ridge regression, degree chosen by cross-validation from 1 to 3 (`poly`).
+    Poly,
+    /// Polynomial ridge regression of total degree 1 (`poly1`).
+    Poly1,
+    /// Polynomial ridge regression of total degree 2 (`poly2`).
+    Poly2,
+    /// Polynomial ridge regression of total degree 3 (`poly3`).
+    Poly3,
+    /// Kernel ridge regression (`kernel`).
+    Kernel,
+}
+
+impl LearnedKind {
+    /// Every kind, in the order of [`KINDS`].
+    pub const ALL: [LearnedKind; 5] = [
+        LearnedKind::Poly,
+        LearnedKind::Poly1,
+        LearnedKind::Poly2,
+        LearnedKind::Poly3,
+        LearnedKind::Kernel,
+    ];
+
+    /// The kind's word (`poly`, `poly1`, `poly2`, `poly3`, `kernel`).
+    pub fn name(self) -> &'static str {
+        match self {
+            LearnedKind::Poly => "poly",
+            LearnedKind::Poly1 => "poly1",
+            LearnedKind::Poly2 => "poly2",
+            LearnedKind::Poly3 => "poly3",
+            LearnedKind::Kernel => "kernel",
+        }
+    }
+
+    /// The kind named `word`, if any.
+    pub fn from_name(word: &str) -> Option<LearnedKind> {
+        LearnedKind::ALL.into_iter().find(|k| k.name() == word)
+    }
+
+    /// Polynomial degrees it tries (empty for the kernel model).
+    fn degrees(self) -> &'static [usize] {
+        match self {
+            LearnedKind::Poly => &[1, 2, 3],
+            LearnedKind::Poly1 => &[1],
+            LearnedKind::Poly2 => &[2],
+            LearnedKind::Poly3 => &[3],
+            LearnedKind::Kernel => &[],
+        }
+    }
+}
+
+impl std::fmt::Display for LearnedKind {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// Valid kind words: `"poly"` (polynomial, degree chosen by CV from 1..=3), `"poly1"`, `"poly2"`,
+/// `"poly3"`, `"kernel"` ([`LearnedKind::name`]).
 pub const KINDS: &[&str] = &["poly", "poly1", "poly2", "poly3", "kernel"];
 
 /// Fewest pose rows [`fit`] accepts: two per cross-validation fold.
@@ -52,7 +112,7 @@ enum Correction {
 /// cross-validation statistics.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct LearnedResidual {
-    kind: String,
+    kind: LearnedKind,
     n_joints: usize,
     n_rows: usize,
     n_fit_rows: usize,
@@ -76,22 +136,15 @@ fn bad(field: String, value: String, problem: &str) -> CalibError {
 /// angles q (rad). `q` is row-major (rows × n_joints). Hyperparameters (degree, ridge λ, kernel length
 /// scale) by k-fold CV (k = 5, folds drawn from `seed`, by pose rows).
 ///
-/// Errors: an unknown `kind`, `n_joints == 0`, lengths that do not fit together, fewer than [`MIN_ROWS`]
+/// Errors: `n_joints == 0`, lengths that do not fit together, fewer than [`MIN_ROWS`]
 /// rows, or a non-finite value (named by row and joint or component).
 pub fn fit(
-    kind: &str,
+    kind: LearnedKind,
     q: &[f64],
     n_joints: usize,
     residual_m: &[Vector3<f64>],
     seed: u64,
 ) -> Result<LearnedResidual, CalibError> {
-    if !KINDS.contains(&kind) {
-        return Err(bad(
-            "kind".into(),
-            kind.into(),
-            &format!("unknown learned model; valid kinds: {}", KINDS.join(", ")),
-        ));
-    }
     if n_joints == 0 {
         return Err(bad(
             "n_joints".into(),
@@ -141,7 +194,7 @@ pub fn fit(
             }
         }
     }
-    if kind == "kernel" {
+    if kind == LearnedKind::Kernel {
         fit_kernel(q, n_joints, residual_m, seed)
     } else {
         Ok(fit_polynomial(kind, q, n_joints, residual_m, seed))
@@ -149,24 +202,19 @@ pub fn fit(
 }
 
 fn fit_polynomial(
-    kind: &str,
+    kind: LearnedKind,
     q: &[f64],
     n_joints: usize,
     residual_m: &[Vector3<f64>],
     seed: u64,
 ) -> LearnedResidual {
     let n = residual_m.len();
-    let degrees: Vec<usize> = match kind {
-        "poly1" => vec![1],
-        "poly2" => vec![2],
-        "poly3" => vec![3],
-        _ => vec![1, 2, 3],
-    };
+    let degrees = kind.degrees();
     let fold_of = fold_assignment(n, K_FOLDS, seed);
     // Candidates from the simplest: low degree first, strong ridge first.
     let mut candidates = Vec::new();
     let mut sse = Vec::new();
-    for &degree in &degrees {
+    for &degree in degrees {
         let per_lambda = polynomial::cross_validate(q, n_joints, residual_m, &fold_of, degree);
         for l in (0..polynomial::LAMBDAS.len()).rev() {
             candidates.push((degree, polynomial::LAMBDAS[l]));
@@ -186,7 +234,7 @@ fn fit_polynomial(
         (Correction::Zero, 0)
     };
     LearnedResidual {
-        kind: kind.into(),
+        kind,
         n_joints,
         n_rows: n,
         n_fit_rows: n,
@@ -247,7 +295,7 @@ fn fit_kernel(
         (Correction::Zero, 0)
     };
     Ok(LearnedResidual {
-        kind: "kernel".into(),
+        kind: LearnedKind::Kernel,
         n_joints,
         n_rows: n,
         n_fit_rows: m,
@@ -273,9 +321,9 @@ impl LearnedResidual {
         }
     }
 
-    /// The kind it was fitted as (one of [`KINDS`]).
-    pub fn kind(&self) -> &str {
-        &self.kind
+    /// The kind it was fitted as.
+    pub fn kind(&self) -> LearnedKind {
+        self.kind
     }
 
     /// Number of joints the model expects in `q`.

@@ -1,0 +1,48 @@
+//! The learned residual correction fitted after the physical model.
+
+use super::report::LearnedStage;
+use super::{Calibration, CalibrationOptions, Dataset, observations};
+use crate::error::Result;
+use crate::learned::LearnedKind;
+use crate::predict::Prediction;
+use crate::problem::Observations;
+use crate::stats::stats_of_errors;
+use nalgebra::Vector3;
+use sim::Model;
+
+/// Fits the learned correction `kind` to the training residuals of `cal` and records its statistics.
+pub(super) fn add_learned(
+    model: &Model,
+    cal: &mut Calibration,
+    kind: LearnedKind,
+    train: &Dataset<'_>,
+    test: Option<&Dataset<'_>>,
+    options: &CalibrationOptions,
+) -> Result<()> {
+    let at = cal.params.extension.clone();
+    let obs = observations(model, train, options, cal.extensions.as_ref(), &at)?;
+    let physical = Prediction::new(model, &cal.params);
+    let residual: Vec<Vector3<f64>> = physical.errors(&obs).iter().map(|e| -e).collect();
+    let learned = crate::learned::fit(kind, &obs.q, model.nq(), &residual, options.learned_seed)?;
+    let corrected = physical.clone().with_learned(Some(&learned));
+    let stats_with = |o: &Observations| stats_of_errors(&corrected.errors(o), o);
+    let test_stats = match test {
+        Some(t) if !t.rows.is_empty() => Some(stats_with(&observations(
+            model,
+            t,
+            options,
+            cal.extensions.as_ref(),
+            &at,
+        )?)),
+        _ => None,
+    };
+    let stage = LearnedStage {
+        description: learned.describe(),
+        active: learned.is_active(),
+        train: stats_with(&obs),
+        test: test_stats,
+    };
+    cal.report.learned = Some(stage);
+    cal.learned = Some(learned);
+    Ok(())
+}

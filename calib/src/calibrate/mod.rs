@@ -1,0 +1,397 @@
+//! The calibration procedure: start, base-and-target fit, full kinematic fit, covariance, identifiability,
+//! validation, outliers. See the crate documentation for the model.
+//!
+//! 1. Start: the nominal robot with the target at the flange origin; `T_tracker_base` from the
+//!    closed-form rigid fit (Kabsch) of the nominal flange positions to the measured points; with
+//!    orientation, `R_flange_target` from the chordal mean of `(R_tracker_base R_base_flange)ᵀ R_measured`.
+//! 2. "Before": only the tracker-to-base transform and the target are fitted (nominal joints), the
+//!    reference for what calibration gains.
+//! 3. "After": every parameter, in the identifiable subspace ([`crate::lm`]). With a robust loss, the
+//!    fit is repeated with iteratively reweighted rows (IRLS) until the weights settle.
+//! 4. Covariance `σ̂² D V_r Σ_r⁻² V_rᵀ D` with the variance factor `σ̂² = χ²/(m − rank)` estimated from the
+//!    residuals (so a wrong absolute noise level does not distort the standard deviations; `χ²/dof`
+//!    reports it).
+//!
+//! One module per job: [`start`] (the closed-form start and the generic rank), [`robust`] (losses and
+//! IRLS), [`outliers`], [`extended`] (refits of extended models), [`learned_stage`], [`estimates`]
+//! (parameters in reporting form) and [`report`] (what it all says).
+
+mod estimates;
+mod extended;
+mod learned_stage;
+mod outliers;
+pub mod report;
+pub mod robust;
+pub mod start;
+
+pub use extended::EQUILIBRIUM_REFITS;
+pub use report::{
+    CalibrationReport, Correlation, FitStage, LearnedStage, Outlier, ParameterEstimate,
+    RobustSummary,
+};
+pub use robust::RobustLoss;
+pub use crate::predict::prediction_and_jacobian;
+pub use start::{generic_rank, initial_params};
+
+use crate::error::{CalibError, Result};
+use estimates::{correlations, estimates};
+use crate::extensions::{ExtensionSettings, ModelSpec, Regressors};
+use crate::identifiability::{Observability, describe_null_space};
+use crate::learned::LearnedResidual;
+use crate::lm::{LmOptions, LmWorkspace, Subspace, minimize};
+use crate::params::{KinematicParams, ParamLayout, ParameterScales};
+use crate::problem::{KinematicProblem, NoiseModel, Observations};
+use crate::stats::residual_stats;
+use nalgebra::DMatrix;
+use sim::Model;
+use sim::measurement_table::MeasurementTable;
+
+/// Settings of [`calibrate`].
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct CalibrationOptions {
+    /// Expected parameter magnitudes (column scaling).
+    pub scales: ParameterScales,
+    /// Measurement noise when the table has no `sigma` column.
+    pub noise: NoiseModel,
+    /// Solver settings.
+    pub lm: LmOptions,
+    /// Robust loss (IRLS), or `None` for plain least squares (default).
+    pub robust: Option<RobustLoss>,
+    /// Rows whose normalised residual norm exceeds this are reported as outliers. The normalised norm
+    /// `t` is the row's weighted residual norm divided by a robust scale (the median norm over that of
+    /// a Gaussian row), so `t²` follows χ² with 3 (6) degrees of freedom for Gaussian rows; `t > 5` then
+    /// happens with probability 1.5e-5 (3.4e-4). A row must also exceed a tenth of the threshold in units
+    /// of its own σ from the noise model, so that rounding-level residuals of noise-free data are never
+    /// outliers. Default 5.
+    pub outlier_threshold: f64,
+    /// Seed of the learned models' cross-validation folds.
+    pub learned_seed: u64,
+}
+
+impl Default for CalibrationOptions {
+    fn default() -> Self {
+        CalibrationOptions {
+            scales: ParameterScales::default(),
+            noise: NoiseModel::default(),
+            lm: LmOptions::default(),
+            robust: None,
+            outlier_threshold: 5.0,
+            learned_seed: 0,
+        }
+    }
+}
+
+/// Some rows of a measurement table.
+#[derive(Clone, Debug)]
+pub struct Dataset<'a> {
+    /// The table.
+    pub table: &'a MeasurementTable,
+    /// 0-based rows to use.
+    pub rows: Vec<usize>,
+    /// Name for messages, e.g. the file and `training set`.
+    pub name: String,
+}
+
+impl<'a> Dataset<'a> {
+    /// Every row of `table`.
+    pub fn all(table: &'a MeasurementTable, name: &str) -> Self {
+        Dataset {
+            table,
+            rows: (0..table.len()).collect(),
+            name: name.to_string(),
+        }
+    }
+}
+
+/// A calibration: the estimate, its covariance and the report.
+#[derive(Clone, Debug)]
+pub struct Calibration {
+    /// The calibrated parameters.
+    pub params: KinematicParams,
+    /// The nominal robot with only base and target fitted (the "before" model).
+    pub before: KinematicParams,
+    /// Their layout.
+    pub layout: ParamLayout,
+    /// Covariance of a step at the solution ([`ParamLayout`] order, physical units).
+    pub covariance: DMatrix<f64>,
+    /// The SVD split of the final scaled Jacobian.
+    pub subspace: Subspace,
+    /// The report.
+    pub report: CalibrationReport,
+    /// Settings of the model extensions (what their regressors are made from), if any.
+    pub extensions: Option<ExtensionSettings>,
+    /// The learned residual correction fitted after the physical model, if asked for.
+    pub learned: Option<LearnedResidual>,
+}
+
+/// Calibrates the kinematic model of `model` on `train`, validating on `test` when given.
+///
+/// Errors only for unusable input: a joint count that does not fit the robot, a `sigma` ≤ 0, or too few
+/// distinct poses for the identifiable parameters ([`CalibError::TooFewPoses`]). A degenerate pose set is
+/// not an error: the report names what it cannot identify.
+pub fn calibrate(
+    model: &Model,
+    train: &Dataset<'_>,
+    test: Option<&Dataset<'_>>,
+    options: &CalibrationOptions,
+) -> Result<Calibration> {
+    calibrate_with(model, train, test, options, None, &[])
+}
+
+/// Calibrates the model `spec` (kinematic, extensions identified jointly with it, then an optional
+/// learned residual correction fitted on the training residuals) on `train`, validating on `test`.
+///
+/// Extensions take their regressor settings from the training rows ([`ExtensionSettings::for_data`]);
+/// a cause that offers alternative settings is searched over them, keeping the one with the smallest
+/// training `χ²` (thermal drift from time stamps alone: the warm-up time constants
+/// [`crate::extensions::thermal_drift::WARM_UP_TAUS_S`]). Errors as [`calibrate`], and
+/// for an extension the data cannot feed (thermal drift without `temp` or `t`, compliance on a robot
+/// without inertials).
+pub fn calibrate_model(
+    model: &Model,
+    train: &Dataset<'_>,
+    test: Option<&Dataset<'_>>,
+    spec: &ModelSpec,
+    options: &CalibrationOptions,
+) -> Result<Calibration> {
+    let mut cal = if spec.causes.is_empty() {
+        calibrate_with(model, train, test, options, None, &[])?
+    } else {
+        let settings = ExtensionSettings::for_data(
+            model,
+            &spec.causes,
+            train.table,
+            &train.rows,
+            &train.name,
+        )?;
+        extended::calibrate_best(model, train, test, options, &settings)?
+    };
+    cal.report.model = spec.name();
+    if let Some(kind) = spec.learned {
+        learned_stage::add_learned(model, &mut cal, kind, train, test, options)?;
+    }
+    Ok(cal)
+}
+
+/// The rows of `data` prepared for the solver, with the extensions' regressors under `extensions`,
+/// torques evaluated at the extension values `at` ([`Regressors::build`]).
+pub fn observations(
+    model: &Model,
+    data: &Dataset<'_>,
+    options: &CalibrationOptions,
+    extensions: Option<&ExtensionSettings>,
+    at: &[f64],
+) -> Result<Observations> {
+    let mut obs = Observations::from_table(data.table, &data.rows, &options.noise, &data.name)?;
+    if let Some(s) = extensions {
+        obs.ext = Regressors::build(model, s, data.table, &data.rows, &data.name, at)?;
+    }
+    Ok(obs)
+}
+
+fn calibrate_with(
+    model: &Model,
+    train: &Dataset<'_>,
+    test: Option<&Dataset<'_>>,
+    options: &CalibrationOptions,
+    extensions: Option<&ExtensionSettings>,
+    at: &[f64],
+) -> Result<Calibration> {
+    for d in std::iter::once(train).chain(test) {
+        if d.table.n_joints != model.nq() {
+            return Err(CalibError::BadValue {
+                context: d.name.clone(),
+                field: "q1..qN".into(),
+                value: format!("{} joint columns", d.table.n_joints),
+                problem: format!("robot '{}' has {} joints", model.name, model.nq()),
+            });
+        }
+    }
+    if train.rows.is_empty() {
+        return Err(CalibError::BadValue {
+            context: train.name.clone(),
+            field: "rows".into(),
+            value: "0".into(),
+            problem: "no rows to calibrate on".into(),
+        });
+    }
+    let mut obs = observations(model, train, options, extensions, at)?;
+    let test_obs = match test {
+        Some(t) if !t.rows.is_empty() => Some(observations(model, t, options, extensions, at)?),
+        _ => None,
+    };
+    let orientation = obs.orientation.is_some();
+    if let Some(t) = &test_obs
+        && t.orientation.is_some() != orientation
+    {
+        return Err(CalibError::BadValue {
+            context: test.map(|t| t.name.clone()).unwrap_or_default(),
+            field: "qw, qx, qy, qz".into(),
+            value: if orientation { "absent" } else { "present" }.into(),
+            problem:
+                "the test data must have orientation columns exactly when the training data do"
+                    .into(),
+        });
+    }
+    let layout = ParamLayout::new(model, orientation).with_extensions(obs.ext.params.clone());
+    let p = layout.len();
+    let dim = obs.dim();
+    let n_poses = obs.n_poses();
+    let equations = n_poses * dim;
+    if equations <= p {
+        let r = generic_rank(model, orientation, options);
+        if equations < r + 1 {
+            return Err(CalibError::TooFewPoses {
+                context: train.name.clone(),
+                robot: model.name.clone(),
+                joints: model.nq(),
+                poses: n_poses,
+                equations,
+                identifiable: r,
+                needed: (r + 1).div_ceil(dim),
+            });
+        }
+    }
+    let scales = options.scales.vector(&layout);
+    let mut warnings = Vec::new();
+
+    // Before: base and target only.
+    let mut start = initial_params(model, &obs);
+    start.extension = vec![0.0; obs.ext.len()];
+    let bt = layout.base_and_target();
+    let bt_scales: Vec<f64> = bt.iter().map(|&k| scales[k]).collect();
+    let mut ws = LmWorkspace::new(obs.len() * dim, bt.len());
+    let mut prob = KinematicProblem::new(model, &obs, start, bt);
+    let (before_report, _) = minimize(&mut prob, &bt_scales, &options.lm, &mut ws);
+    let before_params = prob.into_params();
+    if !before_report.was_successful() {
+        warnings.push(format!(
+            "the base-and-target fit did not converge ({})",
+            before_report.termination
+        ));
+    }
+    let before = FitStage {
+        parameters: "tracker-to-base transform and target (nominal joints)".into(),
+        train: residual_stats(model, &before_params, &obs),
+        test: test_obs
+            .as_ref()
+            .map(|t| residual_stats(model, &before_params, t)),
+        solver: before_report,
+    };
+
+    // After: everything, optionally with IRLS.
+    let all: Vec<usize> = (0..p).collect();
+    let mut ws = LmWorkspace::new(obs.len() * dim, p);
+    let mut params = before_params.clone();
+    let mut robust_summary = None;
+    let (report, sub) = match options.robust {
+        None => {
+            let mut prob = KinematicProblem::new(model, &obs, params.clone(), all.clone());
+            let out = minimize(&mut prob, scales.as_slice(), &options.lm, &mut ws);
+            params = prob.into_params();
+            out
+        }
+        Some(loss) => {
+            let fit = robust::solve(
+                model,
+                &mut obs,
+                &mut params,
+                &all,
+                scales.as_slice(),
+                &options.lm,
+                loss,
+                &mut ws,
+            );
+            if let Some(w) = fit.warning {
+                warnings.push(w);
+            }
+            robust_summary = Some(fit.summary);
+            (fit.report, fit.subspace)
+        }
+    };
+    if !report.was_successful() {
+        warnings.push(format!(
+            "the kinematic fit did not converge: {}",
+            report.termination
+        ));
+    }
+    let m = obs.len() * dim;
+    let dof = m.saturating_sub(sub.rank);
+    let chi2 = report.cost_final;
+    let (variance_factor, source) = if dof > 0 {
+        (chi2 / dof as f64, "residuals (χ²/dof)")
+    } else {
+        warnings.push(
+            "no redundancy left (as many equations as identifiable parameters): standard deviations \
+             assume the noise model is exact"
+                .into(),
+        );
+        (1.0, "noise model (no degrees of freedom left)")
+    };
+    let covariance = sub.covariance(variance_factor);
+    let observability = Observability::from_subspace(&sub);
+    let null = describe_null_space(model, &params, ws.gram(), &sub, &obs);
+    for line in &null.data_specific {
+        warnings.push(format!("not identifiable from this pose set: {line}"));
+    }
+    if observability.weak_combinations > 0 {
+        warnings.push(format!(
+            "{} identifiable combinations are weakly determined (σ_k < 1: the data know them less well \
+             than their expected magnitude); the worst has σ {:.2e} in units of its expected magnitude",
+            observability.weak_combinations,
+            observability.worst_combination_sigma * variance_factor.sqrt()
+        ));
+    }
+    if train.table.sigma.is_some() && dof > 0 && !(0.25..=4.0).contains(&(chi2 / dof as f64)) {
+        warnings.push(format!(
+            "χ²/dof = {:.3}: the sigma column does not match the residuals (a model error, or sigma in \
+             the wrong unit)",
+            chi2 / dof as f64
+        ));
+    }
+
+    let outliers = outliers::find(model, &obs, &params, &all, options.outlier_threshold);
+
+    let sigma_rms = (obs.sigma.iter().map(|s| s * s).sum::<f64>() / obs.len() as f64).sqrt();
+    let parameters = estimates(&layout, &params, &covariance, &sub);
+    let strong_correlations = correlations(&layout, &covariance, &null);
+    let after = FitStage {
+        parameters: "kinematic error model (joint error twists and zero offsets, base, target)"
+            .into(),
+        train: residual_stats(model, &params, &obs),
+        test: test_obs.as_ref().map(|t| residual_stats(model, &params, t)),
+        solver: report,
+    };
+    let report = CalibrationReport {
+        robot: model.name.clone(),
+        model: "kinematic".into(),
+        n_train_rows: obs.len(),
+        n_train_poses: n_poses,
+        n_test_rows: test_obs.as_ref().map_or(0, |t| t.len()),
+        n_test_poses: test_obs.as_ref().map_or(0, |t| t.n_poses()),
+        before,
+        after,
+        dof,
+        chi2_per_dof: if dof > 0 { chi2 / dof as f64 } else { f64::NAN },
+        variance_factor_source: source.into(),
+        sigma_hat_m: sigma_rms * variance_factor.sqrt(),
+        parameters,
+        strong_correlations,
+        observability,
+        unidentifiable: null,
+        outliers,
+        robust: robust_summary,
+        learned: None,
+        warnings,
+    };
+    Ok(Calibration {
+        params,
+        before: before_params,
+        layout,
+        covariance,
+        subspace: sub,
+        report,
+        extensions: extensions.cloned(),
+        learned: None,
+    })
+}

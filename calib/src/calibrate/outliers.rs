@@ -1,0 +1,70 @@
+//! Rows whose residual is far beyond the noise, by a robust scale of the residual norms.
+
+use super::report::Outlier;
+use crate::params::KinematicParams;
+use crate::predict::Prediction;
+use crate::problem::{KinematicProblem, Observations};
+use sim::Model;
+
+/// Median of χ² with `d` degrees of freedom, for the robust scale (d = 3 or 6).
+fn chi2_median(d: usize) -> f64 {
+    if d == 6 { 5.348_120 } else { 2.365_974 }
+}
+
+fn median(mut v: Vec<f64>) -> f64 {
+    if v.is_empty() {
+        return 0.0;
+    }
+    v.sort_by(f64::total_cmp);
+    let m = v.len() / 2;
+    if v.len() % 2 == 1 {
+        v[m]
+    } else {
+        0.5 * (v[m - 1] + v[m])
+    }
+}
+
+/// Normalised residual norms `t` per row (robust scale), from weighted norms and robust weights.
+pub(super) fn normalised_norms(norms: &[f64], weights: &[f64], d: usize) -> Vec<f64> {
+    let raw: Vec<f64> = norms
+        .iter()
+        .zip(weights)
+        .map(|(n, w)| if *w > 0.0 { n / w.sqrt() } else { *n })
+        .collect();
+    let scale = median(raw.clone()) / chi2_median(d).sqrt();
+    let scale = if scale > 0.0 { scale } else { 1.0 };
+    raw.iter().map(|v| v / scale).collect()
+}
+
+/// Rows of `obs` whose normalised residual norm at `params` exceeds `threshold` (see
+/// [`super::CalibrationOptions::outlier_threshold`]), worst first. A row must also exceed a tenth of
+/// the threshold in units of its own σ: residuals at rounding level (noise-free data) are no outliers
+/// however they compare with each other.
+pub(super) fn find(
+    model: &Model,
+    obs: &Observations,
+    params: &KinematicParams,
+    active: &[usize],
+    threshold: f64,
+) -> Vec<Outlier> {
+    let mut prob = KinematicProblem::new(model, obs, params.clone(), active.to_vec());
+    let norms = prob.row_norms();
+    let t = normalised_norms(&norms, &obs.weight, obs.dim());
+    let prediction = Prediction::new(model, params);
+    let mut s = prediction.scratch();
+    let mut outliers = Vec::new();
+    for (r, &tv) in t.iter().enumerate() {
+        let raw = norms[r] / obs.weight[r].max(f64::MIN_POSITIVE).sqrt();
+        if tv > threshold && raw > threshold / 10.0 {
+            let p = prediction.row(&obs.ext, r, obs.q_row(r), &mut s);
+            outliers.push(Outlier {
+                row: obs.source_row[r] + 1,
+                pose: obs.pose[r],
+                normalised_residual: tv,
+                error_m: (p - obs.position[r]).norm(),
+            });
+        }
+    }
+    outliers.sort_by(|a, b| b.normalised_residual.total_cmp(&a.normalised_residual));
+    outliers
+}

@@ -1,0 +1,112 @@
+//! The model specification: which causes extend the kinematic model, and which learned residual model
+//! (if any) corrects what is left. Parsed from and printed as the `--model` name.
+
+use super::Cause;
+use crate::error::{CalibError, Result};
+use crate::learned::LearnedKind;
+use serde::{Deserialize, Serialize};
+
+/// Parsed `--model` value: `kinematic`, optionally `+cause` words and one `+learned:KIND`.
+#[derive(Clone, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct ModelSpec {
+    /// Physical extensions, sorted, without repeats.
+    pub causes: Vec<Cause>,
+    /// Learned residual model kind, if any.
+    pub learned: Option<LearnedKind>,
+}
+
+impl ModelSpec {
+    /// The kinematic model alone.
+    pub fn kinematic() -> Self {
+        ModelSpec::default()
+    }
+
+    /// Parses a `+`-joined model name such as `kinematic+joint_compliance+learned:poly`. The word
+    /// `kinematic` may be left out; `auto` is not a model (diagnose decides it) and is refused here.
+    pub fn parse(text: &str) -> Result<Self> {
+        let mut spec = ModelSpec::default();
+        let bad = |problem: String| CalibError::BadValue {
+            context: "--model".into(),
+            field: "model".into(),
+            value: text.to_string(),
+            problem,
+        };
+        let learned_words = || {
+            LearnedKind::ALL
+                .iter()
+                .map(|k| k.name())
+                .collect::<Vec<_>>()
+        };
+        if text.trim().is_empty() {
+            return Err(bad("empty model name".into()));
+        }
+        for word in text.split('+').map(str::trim) {
+            if word == "kinematic" {
+                continue;
+            }
+            if let Some(kind) = word.strip_prefix("learned:") {
+                let Some(kind) = LearnedKind::from_name(kind) else {
+                    return Err(bad(format!(
+                        "unknown learned model '{kind}' (known: {})",
+                        learned_words().join(", ")
+                    )));
+                };
+                if spec.learned.replace(kind).is_some() {
+                    return Err(bad("at most one learned:KIND part".into()));
+                }
+                continue;
+            }
+            match Cause::from_name(word) {
+                Some(c) => spec.causes.push(c),
+                None => {
+                    let causes: Vec<&str> = Cause::ALL.iter().map(|c| c.name()).collect();
+                    return Err(bad(format!(
+                        "unknown model part '{word}' (known: kinematic, {}, learned:{})",
+                        causes.join(", "),
+                        learned_words().join("|learned:")
+                    )));
+                }
+            }
+        }
+        spec.causes.sort();
+        spec.causes.dedup();
+        Ok(spec)
+    }
+
+    /// The canonical name: `kinematic`, then the causes, then `learned:KIND`.
+    pub fn name(&self) -> String {
+        let mut s = String::from("kinematic");
+        for c in &self.causes {
+            s.push('+');
+            s.push_str(c.name());
+        }
+        if let Some(k) = self.learned {
+            s.push_str("+learned:");
+            s.push_str(k.name());
+        }
+        s
+    }
+
+    /// The same model with `cause` added.
+    pub fn with(&self, cause: Cause) -> Self {
+        let mut s = self.clone();
+        s.causes.push(cause);
+        s.causes.sort();
+        s.causes.dedup();
+        s
+    }
+}
+
+impl std::str::FromStr for ModelSpec {
+    type Err = CalibError;
+
+    fn from_str(s: &str) -> Result<Self> {
+        ModelSpec::parse(s)
+    }
+}
+
+impl std::fmt::Display for ModelSpec {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.name())
+    }
+}
