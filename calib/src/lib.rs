@@ -90,6 +90,7 @@ pub mod chain;
 pub mod diagnose;
 pub mod error;
 pub mod extensions;
+pub mod health;
 pub mod identifiability;
 pub mod io;
 pub mod learned;
