@@ -441,9 +441,15 @@ fn nan_at_trial_points_is_counted_and_the_solve_recovers() {
             out[(1, 1)] = 0.0;
         }),
     );
-    let (report, _, _) = solve(&mut prob, &[1.0, 1.0], &LmOptions::default());
+    // Expected magnitude 10 for x: its scaled column is 1, well above the singular-value floor.
+    let (report, _, _) = solve(&mut prob, &[10.0, 1.0], &LmOptions::default());
     assert_eq!(report.termination, TerminationReason::Converged);
-    assert!((prob.x[0] - 2.0).abs() < 1e-5 && (prob.x[1] - 1.0).abs() < 1e-5);
+    assert_eq!(report.rank, 2);
+    assert!(
+        (prob.x[0] - 2.0).abs() < 1e-5 && (prob.x[1] - 1.0).abs() < 1e-5,
+        "{:?} {report:?}",
+        prob.x
+    );
     let h = report.health;
     assert_eq!(h.count(Warning::NonFiniteResidual), 6, "{h}");
     assert_eq!(h.last(Warning::NonFiniteResidual), Some(1));
