@@ -130,7 +130,8 @@ pub enum TerminationReason {
     MaxIterations,
     /// No damping gave a decreasing step.
     DampingLimit,
-    /// A residual or Jacobian entry was NaN or infinite at the start.
+    /// A residual or Jacobian entry was NaN or infinite at the start (or `χ²` overflowed); the
+    /// report's [`MinimizationReport::health`] names the rows.
     NonFinite,
 }
 
@@ -555,7 +556,9 @@ fn iterate<P: LeastSquaresProblem>(
                 nu *= 2.0;
                 if mu > 1e16 {
                     report.termination = TerminationReason::DampingLimit;
-                    report.health.record(Warning::DampingLimit, report.iterations);
+                    report
+                        .health
+                        .record(Warning::DampingLimit, report.iterations);
                     problem.set_params(&vec![0.0; p]);
                     return;
                 }
@@ -573,7 +576,8 @@ fn iterate<P: LeastSquaresProblem>(
             problem.residuals(&mut ws.residuals);
             report.evaluations += 1;
             let trial = chi2(&ws.residuals);
-            if !trial.is_finite() && record_non_finite_residuals(&ws.residuals, &mut report.health) == 0
+            if !trial.is_finite()
+                && record_non_finite_residuals(&ws.residuals, &mut report.health) == 0
             {
                 report.health.record(Warning::Overflow, report.iterations);
             }
@@ -597,7 +601,9 @@ fn iterate<P: LeastSquaresProblem>(
             if mu > 1e16 {
                 problem.set_params(&vec![0.0; p]);
                 report.termination = TerminationReason::DampingLimit;
-                report.health.record(Warning::DampingLimit, report.iterations);
+                report
+                    .health
+                    .record(Warning::DampingLimit, report.iterations);
                 return;
             }
         }

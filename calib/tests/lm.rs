@@ -169,7 +169,10 @@ fn linear_undamped_is_one_gauss_newton_step_to_the_closed_form() {
     assert!(report.was_successful());
     assert_eq!(report.iterations, 1);
     assert_eq!(report.evaluations, 2);
-    assert_eq!((report.n_residuals, report.n_params, report.rank), (6, 3, 3));
+    assert_eq!(
+        (report.n_residuals, report.n_params, report.rank),
+        (6, 3, 3)
+    );
     assert_eq!(sub.rank, 3);
     for k in 0..3 {
         assert!(
@@ -300,7 +303,11 @@ fn rank_deficient_problem_takes_the_scaled_minimum_norm_step() {
             ..LmOptions::default()
         };
         let (report, sub, _) = solve(&mut prob, &scales, &options);
-        assert_eq!(report.termination, TerminationReason::Converged, "{scales:?}");
+        assert_eq!(
+            report.termination,
+            TerminationReason::Converged,
+            "{scales:?}"
+        );
         assert_eq!(report.rank, 1);
         assert_eq!(sub.rank, 1);
         let d2 = [scales[0] * scales[0], scales[1] * scales[1]];
@@ -322,9 +329,15 @@ fn nothing_to_solve_when_every_parameter_is_frozen_or_has_no_effect() {
     let lin = Linear::example();
     let mut prob = lin.problem(&[0.5, -0.5, 1.0]);
     let (report, sub, _) = solve(&mut prob, &[0.0; 3], &LmOptions::default());
-    assert_eq!(report.termination, TerminationReason::NoIdentifiableParameters);
+    assert_eq!(
+        report.termination,
+        TerminationReason::NoIdentifiableParameters
+    );
     assert!(!report.was_successful());
-    assert_eq!((report.iterations, report.evaluations, report.rank), (0, 1, 0));
+    assert_eq!(
+        (report.iterations, report.evaluations, report.rank),
+        (0, 1, 0)
+    );
     assert_eq!(sub.rank, 0);
     assert_eq!(prob.x, vec![0.5, -0.5, 1.0]);
     assert_eq!(report.cost_final, report.cost_initial);
@@ -338,7 +351,10 @@ fn nothing_to_solve_when_every_parameter_is_frozen_or_has_no_effect() {
         Box::new(|_, out| out.fill(0.0)),
     );
     let (report, _, _) = solve(&mut prob, &[1.0, 1.0], &LmOptions::default());
-    assert_eq!(report.termination, TerminationReason::NoIdentifiableParameters);
+    assert_eq!(
+        report.termination,
+        TerminationReason::NoIdentifiableParameters
+    );
     assert_eq!(report.cost_final, 6.0);
     assert_eq!(prob.x, vec![1.0, 2.0]);
     assert_clean(&report.health);
@@ -372,7 +388,10 @@ fn non_finite_values_at_the_start_end_the_solve_and_name_the_row() {
     let (report, sub, ws) = solve(&mut prob, &[1.0, 1.0], &LmOptions::default());
     assert_eq!(report.termination, TerminationReason::NonFinite);
     assert!(!report.was_successful());
-    assert_eq!((report.iterations, report.evaluations, report.rank), (0, 1, 0));
+    assert_eq!(
+        (report.iterations, report.evaluations, report.rank),
+        (0, 1, 0)
+    );
     assert_eq!(sub.rank, 0);
     assert!(report.cost_initial.is_nan());
     assert_eq!(prob.x, vec![0.0, 0.0]);
@@ -516,7 +535,11 @@ fn a_near_singular_normal_matrix_is_counted() {
         let lin = Linear::new(a, b, &[w; 3]);
         let mut prob = lin.problem(&[0.0, 0.0]);
         let (report, sub, _) = solve(&mut prob, &[1.0, 1.0], &LmOptions::default());
-        assert_eq!(report.termination, TerminationReason::Converged, "ε {eps:e}");
+        assert_eq!(
+            report.termination,
+            TerminationReason::Converged,
+            "ε {eps:e}"
+        );
         (report, sub)
     };
     let (report, sub) = run(1e-6);
