@@ -43,8 +43,8 @@ impl LeastSquaresProblem for Euclid {
         self.m
     }
     fn set_params(&mut self, step: &[f64]) {
-        for k in 0..self.x.len() {
-            self.trial[k] = self.x[k] + step[k];
+        for ((t, x), s) in self.trial.iter_mut().zip(&self.x).zip(step) {
+            *t = x + s;
         }
     }
     fn accept(&mut self) {
