@@ -55,7 +55,9 @@
 //! converged to the noise, not to an iteration count. Optional robust losses (Huber, Cauchy) work by
 //! iterative reweighting. The covariance is `σ̂² D V_r Σ_r⁻² V_rᵀ D` with `σ̂² = χ²/(m − rank)` from the
 //! residuals ([`calibrate`]). Only combinations in the identifiable subspace have meaningful standard
-//! deviations; predictions always do (`J C Jᵀ`).
+//! deviations; predictions always do (`J C Jᵀ`). Numerical trouble is counted, not hidden: every solver
+//! report carries a [`health::Health`] record (non-finite residuals or Jacobian entries by row, overflow,
+//! a near-singular normal matrix, the iteration and damping limits; [`health::Health::is_clean`]).
 //!
 //! ## End to end
 //! ```
@@ -90,6 +92,7 @@ pub mod chain;
 pub mod diagnose;
 pub mod error;
 pub mod extensions;
+pub mod health;
 pub mod identifiability;
 pub mod io;
 pub mod learned;

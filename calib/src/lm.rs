@@ -24,8 +24,19 @@
 //! model errors keep `χ²` far above its degrees of freedom. It also stops when a step no longer changes `χ²` beyond rounding
 //! (`NoFurtherDecrease`, also a success). Only a cap on iterations (`MaxIterations`), a failure to find a
 //! decreasing step (`DampingLimit`) or non-finite values end a solve unsuccessfully.
+//!
+//! # Numerical health
+//! Every report carries a [`Health`] record ([`crate::health`]): non-finite residuals and Jacobian
+//! entries (at the start, at trial points and at accepted points; counted per row), overflow of `χ²`
+//! or the normal matrix, a near-singular normal matrix (failed Cholesky factorisations with finite
+//! entries, and identifiable singular values below [`NEAR_SINGULAR_MARGIN`]` · rank_rtol · σ_max` at
+//! the solution), and the iteration and damping limits. Recording only reads what the solver computes
+//! anyway (on the failure paths it also evaluates the residuals and the Jacobian once to find the
+//! rows): the steps are the same with or without it.
 
 use nalgebra::{DMatrix, DVector};
+
+use crate::health::{Health, Warning};
 
 /// A weighted nonlinear least-squares problem on a manifold, linearised at a current point.
 ///
@@ -119,7 +130,8 @@ pub enum TerminationReason {
     MaxIterations,
     /// No damping gave a decreasing step.
     DampingLimit,
-    /// A residual or Jacobian entry was NaN or infinite at the start.
+    /// A residual or Jacobian entry was NaN or infinite at the start (or `χ²` overflowed); the
+    /// report's [`MinimizationReport::health`] names the rows.
     NonFinite,
 }
 
@@ -158,6 +170,10 @@ pub struct MinimizationReport {
     pub n_params: usize,
     /// Identifiable combinations at the end (rank of the scaled Jacobian).
     pub rank: usize,
+    /// Numerical warnings of the solve, counted (empty in JSON when clean; absent in older reports,
+    /// read as clean).
+    #[serde(default)]
+    pub health: Health,
 }
 
 impl MinimizationReport {
@@ -169,6 +185,12 @@ impl MinimizationReport {
         )
     }
 }
+
+/// A kept singular value `σₖ < NEAR_SINGULAR_MARGIN · rank_rtol · σ_max` of the scaled Jacobian is
+/// near-singular ([`Warning::NearSingularNormalMatrix`]): with the default `rank_rtol = 1e-8`, the
+/// scaled normal matrix has a condition number above 1e12 in the identifiable subspace and resolves
+/// that combination to about four digits only.
+pub const NEAR_SINGULAR_MARGIN: f64 = 100.0;
 
 /// The SVD of the scaled, weighted Jacobian `J D = U Σ Vᵀ`: identifiable and unidentifiable subspaces.
 #[derive(Clone, Debug, PartialEq)]
@@ -242,6 +264,17 @@ impl Subspace {
         &self.singular_values[..self.rank]
     }
 
+    /// Number of identifiable singular values below [`NEAR_SINGULAR_MARGIN`]` · rtol · σ_max`: kept,
+    /// but near-singular in the normal matrix.
+    pub fn near_singular_count(&self) -> usize {
+        let smax = self.singular_values.first().copied().unwrap_or(0.0);
+        let t = NEAR_SINGULAR_MARGIN * self.rtol * smax;
+        self.identifiable_singular_values()
+            .iter()
+            .filter(|s| **s < t)
+            .count()
+    }
+
     /// Covariance of the step parameters in physical units, `s² D V_r Σ_r⁻² V_rᵀ D` (the pseudo-inverse of
     /// the weighted normal matrix in the identifiable subspace), for a variance factor `s²`.
     pub fn covariance(&self, variance_factor: f64) -> DMatrix<f64> {
@@ -298,6 +331,46 @@ fn chi2(r: &[f64]) -> f64 {
     r.iter().map(|v| v * v).sum()
 }
 
+/// Records every non-finite entry of `r` as [`Warning::NonFiniteResidual`] at its row; returns how many.
+fn record_non_finite_residuals(r: &[f64], health: &mut Health) -> usize {
+    let mut n = 0;
+    for (row, v) in r.iter().enumerate() {
+        if !v.is_finite() {
+            health.record(Warning::NonFiniteResidual, row);
+            n += 1;
+        }
+    }
+    n
+}
+
+/// After non-finite normal equations at the trial point: evaluates the residuals and the Jacobian there
+/// (into `ws`) and records each row with a non-finite value; if every entry is finite, records
+/// [`Warning::Overflow`] at `iteration`.
+fn locate_non_finite<P: LeastSquaresProblem>(
+    problem: &mut P,
+    ws: &mut LmWorkspace,
+    iteration: usize,
+    health: &mut Health,
+) {
+    problem.residuals(&mut ws.residuals);
+    problem.jacobian(&mut ws.jacobian);
+    let mut n = record_non_finite_residuals(&ws.residuals, health);
+    for row in 0..ws.jacobian.nrows() {
+        if ws.jacobian.row(row).iter().any(|v| !v.is_finite()) {
+            health.record(Warning::NonFiniteJacobian, row);
+            n += 1;
+        }
+    }
+    if n == 0 {
+        health.record(Warning::Overflow, iteration);
+    }
+}
+
+/// True when `χ²` and every entry of the normal matrix are finite.
+fn normal_equations_finite(cost: f64, gram: &DMatrix<f64>) -> bool {
+    cost.is_finite() && gram.iter().all(|v| v.is_finite())
+}
+
 /// Minimises `χ² = ‖r‖²` of `problem` from its current point with column scales `scales` (physical units
 /// per scaled unit, 0 = frozen). On return the problem's linearisation point is the solution and its
 /// trial point equals it; the workspace holds the final residuals and Jacobian, and the returned
@@ -326,9 +399,11 @@ pub fn minimize<P: LeastSquaresProblem>(
         n_residuals: m,
         n_params: p,
         rank: 0,
+        health: Health::new(),
     };
     if !cost_initial.is_finite() || ws.gram.iter().any(|v| !v.is_finite()) {
         report.termination = TerminationReason::NonFinite;
+        locate_non_finite(problem, ws, 0, &mut report.health);
         let sub = Subspace {
             scales: scales.to_vec(),
             singular_values: vec![0.0; p],
@@ -368,6 +443,11 @@ pub fn minimize<P: LeastSquaresProblem>(
             break;
         }
         basis = sub.v.columns(0, sub.rank).into_owned();
+    }
+    if sub.near_singular_count() > 0 {
+        report
+            .health
+            .record(Warning::NearSingularNormalMatrix, report.iterations);
     }
     (report, sub)
 }
@@ -420,6 +500,10 @@ fn iterate<P: LeastSquaresProblem>(
         } else {
             problem.normal_equations(scales, &mut ws.gram, &mut ws.gradient)
         };
+        let finite = normal_equations_finite(cost, &ws.gram);
+        if !finite {
+            locate_non_finite(problem, ws, report.iterations, &mut report.health);
+        }
         report.cost_final = cost;
         gb.gemm(1.0, &ws.gram, b, 0.0);
         gr.gemm_tr(1.0, b, &gb, 0.0);
@@ -434,7 +518,14 @@ fn iterate<P: LeastSquaresProblem>(
             }
             match a.cholesky() {
                 Some(ch) => grad_r.dot(&ch.solve(&grad_r)),
-                None => f64::INFINITY,
+                None => {
+                    if finite {
+                        report
+                            .health
+                            .record(Warning::NearSingularNormalMatrix, report.iterations);
+                    }
+                    f64::INFINITY
+                }
             }
         };
         report.predicted_decrease = pred_gn;
@@ -444,6 +535,9 @@ fn iterate<P: LeastSquaresProblem>(
         }
         if report.iterations - start_iterations >= options.max_iterations {
             report.termination = TerminationReason::MaxIterations;
+            report
+                .health
+                .record(Warning::IterationLimit, report.iterations);
             return;
         }
         report.iterations += 1;
@@ -453,10 +547,18 @@ fn iterate<P: LeastSquaresProblem>(
                 a[(k, k)] += mu * diag[k];
             }
             let Some(ch) = a.cholesky() else {
+                if finite {
+                    report
+                        .health
+                        .record(Warning::NearSingularNormalMatrix, report.iterations);
+                }
                 mu *= nu;
                 nu *= 2.0;
                 if mu > 1e16 {
                     report.termination = TerminationReason::DampingLimit;
+                    report
+                        .health
+                        .record(Warning::DampingLimit, report.iterations);
                     problem.set_params(&vec![0.0; p]);
                     return;
                 }
@@ -474,6 +576,11 @@ fn iterate<P: LeastSquaresProblem>(
             problem.residuals(&mut ws.residuals);
             report.evaluations += 1;
             let trial = chi2(&ws.residuals);
+            if !trial.is_finite()
+                && record_non_finite_residuals(&ws.residuals, &mut report.health) == 0
+            {
+                report.health.record(Warning::Overflow, report.iterations);
+            }
             let actual = cost - trial;
             if trial.is_finite() && actual.abs() <= 1e-15 * cost && pred <= 1e-12 * cost.max(1e-300)
             {
@@ -494,6 +601,9 @@ fn iterate<P: LeastSquaresProblem>(
             if mu > 1e16 {
                 problem.set_params(&vec![0.0; p]);
                 report.termination = TerminationReason::DampingLimit;
+                report
+                    .health
+                    .record(Warning::DampingLimit, report.iterations);
                 return;
             }
         }
