@@ -98,7 +98,6 @@ pub mod lm;
 pub mod model_file;
 pub mod params;
 pub mod plan;
-pub mod plot;
 pub mod problem;
 pub mod robot;
 pub mod stats;

@@ -1,4 +1,5 @@
-//! Subcommands, one module each, and the error type that decides the exit code.
+//! Subcommands, one module each; [`shared`] holds what several of them use. The error type that
+//! decides the exit code is [`crate::error::CliError`].
 
 mod calibrate;
 mod dataset;
@@ -10,6 +11,7 @@ mod info;
 mod plan_poses;
 mod predict;
 mod robot_arg;
+mod shared;
 mod sweep;
 
 use clap::{Parser, Subcommand};
@@ -48,41 +50,7 @@ enum Command {
     Dataset(dataset::Args),
 }
 
-/// A failed command: bad input (exit 2) or a runtime failure (exit 1).
-#[derive(Debug)]
-pub enum CliError {
-    /// The user's input is wrong: a file, a flag value, a table cell.
-    Input(String),
-    /// The input was fine but the work failed.
-    Runtime(String),
-}
-
-impl CliError {
-    /// Exit code per `shared/spec/cli.md`.
-    pub fn exit_code(&self) -> u8 {
-        match self {
-            CliError::Input(_) => 2,
-            CliError::Runtime(_) => 1,
-        }
-    }
-}
-
-impl std::fmt::Display for CliError {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        match self {
-            CliError::Input(m) | CliError::Runtime(m) => f.write_str(m),
-        }
-    }
-}
-
-impl From<sim::SimError> for CliError {
-    fn from(e: sim::SimError) -> Self {
-        CliError::Input(e.to_string())
-    }
-}
-
-/// Result of a subcommand.
-pub type CliResult = Result<(), CliError>;
+pub use crate::error::{CliError, CliResult};
 
 /// Runs the parsed command line.
 pub fn run(cli: Cli) -> CliResult {
