@@ -130,7 +130,8 @@ pub fn write_suite(suite: &Suite, out: &Path) -> Result<Vec<FileEntry>, CliError
     for d in suite.datasets {
         let dir = out.join(d.name);
         let label = d.scenario_file;
-        let in_suite = |e: sim::SimError| CliError::from(e).prefixed(&format!("suite {}", suite.name));
+        let in_suite =
+            |e: sim::SimError| CliError::from(e).prefixed(&format!("suite {}", suite.name));
         let scenario = Scenario::parse(d.scenario_text, label, Path::new(".")).map_err(in_suite)?;
         let res = scenario
             .resolve(&Overrides {

@@ -133,7 +133,9 @@ mod tests {
 
     #[test]
     fn prefixes_and_hints_keep_the_kind() {
-        let e = CliError::Input("bad".into()).prefixed("run 3").with_hint(" (try this)");
+        let e = CliError::Input("bad".into())
+            .prefixed("run 3")
+            .with_hint(" (try this)");
         assert_eq!(e, CliError::Input("run 3: bad (try this)".into()));
         let e = CliError::Runtime("failed".into()).prefixed("run 3");
         assert_eq!(e.exit_code(), 1);

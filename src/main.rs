@@ -43,13 +43,14 @@ fn invalid_value_line(e: &clap::Error) -> String {
     let flag = text(ContextKind::InvalidArg);
     // `--robust <LOSS>`: the flag without its value name.
     let flag = flag.split_whitespace().next().unwrap_or_default();
+    let value = match text(ContextKind::InvalidValue) {
+        v if v.is_empty() => "''".to_string(),
+        v => v,
+    };
     let valid = text(ContextKind::ValidValue);
     if valid.is_empty() {
-        format!("{flag} {}: invalid value", text(ContextKind::InvalidValue))
+        format!("{flag} {value}: invalid value")
     } else {
-        format!(
-            "{flag} {}: not one of {valid}",
-            text(ContextKind::InvalidValue)
-        )
+        format!("{flag} {value}: not one of {valid}")
     }
 }

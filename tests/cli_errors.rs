@@ -86,7 +86,11 @@ fn outputs_that_cannot_be_written_exit_1() {
         1,
         &[&gen_out],
     );
-    check(&["calibrate", "--data", data, "--out", &model], 1, &[&model]);
+    check(
+        &["calibrate", "--data", data, "--out", &model],
+        1,
+        &[&model],
+    );
     let good_model = d.join("m.json");
     let good = good_model.to_str().unwrap();
     let (c, e) = robocal(&["calibrate", "--data", data, "--out", good]);
@@ -152,7 +156,15 @@ fn bad_input_and_unknown_flag_values_exit_2() {
     );
     // A flag value that is not one of its values: a usage error on one line, listing the values.
     check(
-        &["calibrate", "--data", data, "--out", out, "--robust", "tukey"],
+        &[
+            "calibrate",
+            "--data",
+            data,
+            "--out",
+            out,
+            "--robust",
+            "tukey",
+        ],
         2,
         &["--robust", "tukey", "huber, cauchy"],
     );

@@ -199,12 +199,7 @@ mod tests {
         let col: ArrayRef = Arc::new(Float64Array::from_iter_values((0..10).map(f64::from)));
         let batch = RecordBatch::try_new(schema, vec![col]).unwrap();
         let bytes = |rows| {
-            parquet_bytes(
-                &batch,
-                deterministic_writer_properties(rows).build(),
-                rows,
-            )
-            .unwrap()
+            parquet_bytes(&batch, deterministic_writer_properties(rows).build(), rows).unwrap()
         };
         assert_eq!(bytes(4), bytes(4));
         assert_ne!(bytes(4), bytes(5));

@@ -2,8 +2,8 @@
 //! simulated with it, and `diagnose` (which sees only the measurement file) has to find it; the findings
 //! are printed beside the truth and a report is written.
 
-use super::shared::read_table;
 use super::diagnose::{options, run_diagnosis, text};
+use super::shared::read_table;
 use super::{CliError, CliResult, print_json};
 use crate::report;
 use rand::{RngExt, SeedableRng};

@@ -156,7 +156,8 @@ pub(crate) fn run_diagnosis(
             b.set_message(format!("fitting {m}"));
         }
     };
-    let d = diagnose_with_progress(model, table, name, options, &mut progress).map_err(CliError::from);
+    let d =
+        diagnose_with_progress(model, table, name, options, &mut progress).map_err(CliError::from);
     if let Some(b) = &bar {
         b.finish_and_clear();
     }

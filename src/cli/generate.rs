@@ -66,8 +66,7 @@ pub fn run(args: Args) -> CliResult {
             b.inc(k);
         }
     };
-    let summary =
-        sim::generate::write_dataset(&resolved, &args.out, &plan, Some(&tick));
+    let summary = sim::generate::write_dataset(&resolved, &args.out, &plan, Some(&tick));
     if let Some(b) = &bar {
         b.finish_and_clear();
     }

@@ -62,8 +62,7 @@ pub fn run(args: Args) -> CliResult {
     let file = CalibratedModel::load(&args.model)?;
     let mut predictor = Predictor::from_file(&file)?;
     let table = read_configs(&args.data, &predictor.model)?;
-    let preds = predictor
-        .predict_table(&table, &args.data.display().to_string())?;
+    let preds = predictor.predict_table(&table, &args.data.display().to_string())?;
     sim::io::write_atomic(&args.out, preds.to_csv().as_bytes())?;
     if let Some(path) = &args.urdf_out {
         let urdf = calibrated_urdf(&predictor.model, &predictor.params);

@@ -232,8 +232,7 @@ fn planned_plan(
     po.target_offset = res.tracker.p_flange;
     po.calibration = *options;
     po.random_sets = 0;
-    let chosen = calib::plan::select_from(&res.model, &configs, &po)
-        .map_err(CliError::from)?;
+    let chosen = calib::plan::select_from(&res.model, &configs, &po).map_err(CliError::from)?;
     let mut list: Vec<Vec<f64>> = chosen.iter().map(|&c| configs[c].clone()).collect();
     list.extend(
         (0..configs.len())
@@ -244,8 +243,7 @@ fn planned_plan(
     let mut spec = res.campaign.clone();
     spec.poses = Some(train + test);
     spec.sampling = sim::campaign::Sampling::List { q: list };
-    sim::campaign::plan(&res.model, &spec, res.seed, &res.scenario.label)
-        .map_err(CliError::from)
+    sim::campaign::plan(&res.model, &spec, res.seed, &res.scenario.label).map_err(CliError::from)
 }
 
 /// One run: generate, split, calibrate, score (see the module docs).
@@ -264,9 +262,7 @@ fn run_inner(ctx: &Context<'_>, id: &RunId) -> Result<SweepRow, CliError> {
         })
         .map_err(CliError::from)?;
     let plan = match spec.selection {
-        Selection::Random => {
-            sim::generate::plan_of(&res).map_err(CliError::from)?
-        }
+        Selection::Random => sim::generate::plan_of(&res).map_err(CliError::from)?,
         Selection::Planned => planned_plan(
             &res,
             split_counts(id.poses, spec.test_fraction),
@@ -274,8 +270,7 @@ fn run_inner(ctx: &Context<'_>, id: &RunId) -> Result<SweepRow, CliError> {
             &ctx.options,
         )?,
     };
-    let truth = sim::effects::Truth::new(&res.model, &res.effects)
-        .map_err(CliError::from)?;
+    let truth = sim::effects::Truth::new(&res.model, &res.effects).map_err(CliError::from)?;
     let simulation =
         sim::generate::simulate(&truth, &res.tracker, &res.gravity, &plan, id.seed, None)
             .map_err(CliError::from)?;
