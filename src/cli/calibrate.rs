@@ -1,7 +1,7 @@
 //! `robocal calibrate`: identify the kinematic error model from a measurement table.
 
-use super::shared::read_table;
-use super::{CliError, CliResult, print_json, robot_arg::RobotArgs};
+use super::robot_arg::RobotArgs;
+use super::shared::{CliError, CliResult, print_json, read_table};
 use calib::CalibError;
 use calib::calibrate::{CalibrationOptions, Dataset, RobustLoss, calibrate_model};
 use calib::extensions::ModelSpec;

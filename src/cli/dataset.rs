@@ -1,6 +1,6 @@
 //! `robocal dataset`: write a versioned benchmark suite with its SHA-256 manifest (see `crate::dataset`).
 
-use super::{CliError, CliResult, print_json};
+use super::shared::{CliError, CliResult, print_json};
 use crate::dataset::{self, SUITES};
 use std::path::PathBuf;
 

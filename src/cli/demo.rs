@@ -4,7 +4,7 @@
 
 use super::diagnose::{options, run_diagnosis, text};
 use super::shared::read_table;
-use super::{CliError, CliResult, print_json};
+use super::shared::{CliError, CliResult, print_json};
 use crate::report;
 use rand::{RngExt, SeedableRng};
 use serde_json::json;

@@ -1,7 +1,7 @@
 //! `robocal diagnose`: what the kinematic model misses, its cause, and the gain on held-out poses.
 
-use super::shared::read_table;
-use super::{CliError, CliResult, print_json, robot_arg::RobotArgs};
+use super::robot_arg::RobotArgs;
+use super::shared::{CliError, CliResult, print_json, read_table};
 use crate::report;
 use calib::diagnose::{DiagnoseOptions, Diagnosis, diagnose_with_progress};
 use calib::robot::Robot;

@@ -3,7 +3,7 @@
 //! Writes `DIR/measurements.parquet` (the measurement contract), `DIR/truth.json` and
 //! `DIR/truth.parquet` (the ground truth); see `sim::generate` and `docs/generate.md`.
 
-use super::{CliError, CliResult, print_json};
+use super::shared::{CliError, CliResult, print_json};
 use sim::scenario::{Overrides, Scenario};
 use std::io::IsTerminal;
 use std::path::PathBuf;

@@ -14,6 +14,7 @@ mod robot_arg;
 mod shared;
 mod sweep;
 
+use crate::error::CliResult;
 use clap::{Parser, Subcommand};
 
 /// Simulate robot calibration campaigns with known errors, identify them, and diagnose what is left.
@@ -50,8 +51,6 @@ enum Command {
     Dataset(dataset::Args),
 }
 
-pub use crate::error::{CliError, CliResult};
-
 /// Runs the parsed command line.
 pub fn run(cli: Cli) -> CliResult {
     match cli.command {
@@ -67,12 +66,4 @@ pub fn run(cli: Cli) -> CliResult {
         Command::SweepMerge(a) => sweep::run_merge(a),
         Command::Dataset(a) => dataset::run(a),
     }
-}
-
-/// Prints one JSON document to stdout.
-pub fn print_json(value: &serde_json::Value) -> CliResult {
-    let s = serde_json::to_string_pretty(value)
-        .map_err(|e| CliError::Runtime(format!("cannot write JSON: {e}")))?;
-    println!("{s}");
-    Ok(())
 }

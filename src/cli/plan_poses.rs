@@ -1,6 +1,7 @@
 //! `robocal plan-poses`: choose the measurement poses that determine the kinematic parameters best.
 
-use super::{CliError, CliResult, print_json, robot_arg::RobotArgs};
+use super::robot_arg::RobotArgs;
+use super::shared::{CliError, CliResult, print_json};
 use calib::plan::{PlanOptions, plan_poses};
 use serde_json::json;
 use std::path::PathBuf;

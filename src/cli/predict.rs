@@ -1,6 +1,6 @@
 //! `robocal predict`: where a calibrated model says the target is, for every row of a table.
 
-use super::{CliError, CliResult, print_json};
+use super::shared::{CliError, CliResult, print_json};
 use calib::model_file::{CalibratedModel, Predictor, calibrated_urdf, urdf_deviation};
 use serde_json::json;
 use sim::SimError;

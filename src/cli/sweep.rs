@@ -1,7 +1,7 @@
 //! `robocal sweep`: a sensitivity study over noise levels and pose counts (see `crate::sweep` and
 //! `docs/sweep.md`), and `robocal sweep-merge`, which joins the shards of one sweep.
 
-use super::{CliError, CliResult, print_json};
+use super::shared::{CliError, CliResult, print_json};
 use crate::sweep::table::{self, META_SUBSET, META_SWEEP, SweepRow};
 use crate::sweep::{self as sw, Context, Selection, Subset, SweepSpec};
 use calib::calibrate::CalibrationOptions;
