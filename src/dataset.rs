@@ -18,7 +18,9 @@
 //! and `DIR/manifest.json` (suite, version, software version, datasets, every file with its size and
 //! SHA-256) and `DIR/MANIFEST.sha256` (every other file, in `sha256sum -c` format).
 
+use crate::error::CliError;
 use sha2::{Digest, Sha256};
+use sim::io::write_atomic;
 use sim::scenario::{Overrides, Scenario};
 use std::path::{Path, PathBuf};
 
@@ -100,21 +102,9 @@ pub fn sha256_hex(bytes: &[u8]) -> String {
     d.iter().map(|b| format!("{b:02x}")).collect()
 }
 
-/// A failure: bad input (exit 2) or runtime (exit 1).
-#[derive(Debug)]
-pub enum DatasetError {
-    /// The suite cannot be generated as asked (a scenario refused).
-    Input(String),
-    /// A file could not be written.
-    Runtime(String),
-}
-
-fn io(path: &Path, e: impl std::fmt::Display) -> DatasetError {
-    DatasetError::Runtime(format!("{}: {e}", path.display()))
-}
-
-fn write(path: &Path, bytes: &[u8]) -> Result<(), DatasetError> {
-    calib::io::write_atomic(path, bytes).map_err(|e| DatasetError::Runtime(e.to_string()))
+/// A file operation of the suite's own output that failed: a runtime failure naming the path.
+fn io(path: &Path, e: impl std::fmt::Display) -> CliError {
+    CliError::Runtime(format!("{}: {e}", path.display()))
 }
 
 /// One file of the written suite.
@@ -130,32 +120,35 @@ pub struct FileEntry {
 
 /// Writes `suite` into `out` (created if missing; files of the same names replaced). Returns the files
 /// written (manifest files excluded), in sorted order.
-pub fn write_suite(suite: &Suite, out: &Path) -> Result<Vec<FileEntry>, DatasetError> {
+///
+/// # Errors
+/// Bad input when a frozen scenario is refused; a runtime failure when a file cannot be written.
+pub fn write_suite(suite: &Suite, out: &Path) -> Result<Vec<FileEntry>, CliError> {
     std::fs::create_dir_all(out).map_err(|e| io(out, e))?;
     let mut rel: Vec<String> = Vec::new();
     let mut datasets = Vec::new();
     for d in suite.datasets {
         let dir = out.join(d.name);
         let label = d.scenario_file;
-        let scenario = Scenario::parse(d.scenario_text, label, Path::new("."))
-            .map_err(|e| DatasetError::Input(format!("suite {}: {e}", suite.name)))?;
+        let in_suite =
+            |e: sim::SimError| CliError::from(e).prefixed(&format!("suite {}", suite.name));
+        let scenario = Scenario::parse(d.scenario_text, label, Path::new(".")).map_err(in_suite)?;
         let res = scenario
             .resolve(&Overrides {
                 seed: Some(d.seed),
                 ..Overrides::default()
             })
-            .map_err(|e| DatasetError::Input(format!("suite {}: {e}", suite.name)))?;
-        let summary = sim::generate::generate(&res, &dir, None).map_err(|e| match e {
-            sim::SimError::Io { .. } => DatasetError::Runtime(e.to_string()),
-            other => DatasetError::Input(format!("suite {}: {other}", suite.name)),
-        })?;
-        write(&dir.join("scenario.toml"), d.scenario_text.as_bytes())?;
+            .map_err(in_suite)?;
+        let summary = sim::generate::generate(&res, &dir, None).map_err(in_suite)?;
+        write_atomic(&dir.join("scenario.toml"), d.scenario_text.as_bytes())?;
         let all_path = dir.join(sim::generate::MEASUREMENTS_FILE);
-        let table = sim::measurement_table::read(&all_path).map_err(|e| io(&all_path, e))?;
+        // The file was written a moment ago: failing to read it back is a runtime failure.
+        let table = sim::measurement_table::read(&all_path)
+            .map_err(|e| CliError::Runtime(e.to_string()))?;
         let (train, test) = calib::stats::split_by_pose(&table, d.test_fraction, d.split_seed);
         for (name, rows) in [("train.parquet", &train), ("test.parquet", &test)] {
             let p = dir.join(name);
-            sim::measurement_table::write(&p, &table.select_rows(rows)).map_err(|e| io(&p, e))?;
+            sim::measurement_table::write(&p, &table.select_rows(rows))?;
         }
         for f in [
             "scenario.toml",
@@ -213,10 +206,10 @@ pub fn write_suite(suite: &Suite, out: &Path) -> Result<Vec<FileEntry>, DatasetE
         "checksums": "MANIFEST.sha256 (sha256sum -c MANIFEST.sha256 in this folder)",
     });
     let mut text = serde_json::to_string_pretty(&manifest)
-        .map_err(|e| DatasetError::Runtime(format!("manifest: {e}")))?;
+        .map_err(|e| CliError::Runtime(format!("manifest: {e}")))?;
     text.push('\n');
     let manifest_path = out.join("manifest.json");
-    write(&manifest_path, text.as_bytes())?;
+    write_atomic(&manifest_path, text.as_bytes())?;
     let mut sums = String::new();
     let mut all = files.clone();
     all.push(FileEntry {
@@ -228,7 +221,7 @@ pub fn write_suite(suite: &Suite, out: &Path) -> Result<Vec<FileEntry>, DatasetE
     for f in &all {
         sums.push_str(&format!("{}  {}\n", f.sha256, f.path));
     }
-    write(&out.join("MANIFEST.sha256"), sums.as_bytes())?;
+    write_atomic(&out.join("MANIFEST.sha256"), sums.as_bytes())?;
     Ok(files)
 }
 

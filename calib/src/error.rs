@@ -54,7 +54,15 @@ pub enum CalibError {
         /// What is wrong, naming the key.
         message: String,
     },
-    /// A file could not be read or written.
+    /// An input file (a model file, a URDF) could not be opened or read: bad input.
+    #[error("{path}: cannot read: {message}")]
+    Read {
+        /// The file.
+        path: String,
+        /// What the operating system said.
+        message: String,
+    },
+    /// A file could not be written: a runtime failure, the input was fine.
     #[error("{path}: {message}")]
     Io {
         /// The file.

@@ -1,46 +1,8 @@
-//! Writing files atomically, and the small CSV outputs of `predict` and `plan-poses`.
+//! The small CSV outputs of `predict` and `plan-poses`, and the joint-only CSV input of `predict`.
+//! Files are written with [`sim::io::write_atomic`], the project's one atomic writer.
 
 use crate::error::{CalibError, Result};
 use std::path::Path;
-
-/// Writes `bytes` to a temporary file in `path`'s folder, syncs it and renames it over `path`.
-pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
-    use std::io::Write;
-    use std::sync::atomic::{AtomicU64, Ordering};
-    static COUNTER: AtomicU64 = AtomicU64::new(0);
-    let err = |e: std::io::Error| CalibError::Io {
-        path: path.display().to_string(),
-        message: e.to_string(),
-    };
-    let dir = match path.parent() {
-        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
-        _ => std::path::PathBuf::from("."),
-    };
-    let name = path
-        .file_name()
-        .ok_or_else(|| CalibError::Io {
-            path: path.display().to_string(),
-            message: "not a file name".into(),
-        })?
-        .to_string_lossy()
-        .into_owned();
-    let tmp = dir.join(format!(
-        ".{name}.tmp-{}-{}",
-        std::process::id(),
-        COUNTER.fetch_add(1, Ordering::Relaxed)
-    ));
-    let result = (|| {
-        let mut f = std::fs::File::create(&tmp)?;
-        f.write_all(bytes)?;
-        f.sync_all()?;
-        drop(f);
-        std::fs::rename(&tmp, path)
-    })();
-    result.map_err(|e| {
-        let _ = std::fs::remove_file(&tmp);
-        err(e)
-    })
-}
 
 /// CSV text: a header and rows of an integer id followed by floats, each float written as the shortest
 /// decimal that reads back to the same `f64`.
@@ -65,7 +27,7 @@ pub fn csv_text(header: &[String], rows: &[(i64, Vec<f64>)]) -> String {
 /// errors name the file, the row and the column as for any measurement table.
 pub fn read_joint_csv(path: &Path) -> Result<sim::measurement_table::MeasurementTable> {
     let file = path.display().to_string();
-    let text = std::fs::read_to_string(path).map_err(|e| CalibError::Io {
+    let text = std::fs::read_to_string(path).map_err(|e| CalibError::Read {
         path: file.clone(),
         message: e.to_string(),
     })?;

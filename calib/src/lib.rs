@@ -101,7 +101,6 @@ pub mod lm;
 pub mod model_file;
 pub mod params;
 pub mod plan;
-pub mod plot;
 pub mod predict;
 pub mod problem;
 pub mod robot;

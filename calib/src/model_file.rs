@@ -216,7 +216,7 @@ impl CalibratedModel {
     /// Reads and checks a model file; errors name the file and the key.
     pub fn load(path: &std::path::Path) -> Result<Self> {
         let file = path.display().to_string();
-        let text = std::fs::read_to_string(path).map_err(|e| CalibError::Io {
+        let text = std::fs::read_to_string(path).map_err(|e| CalibError::Read {
             path: file.clone(),
             message: e.to_string(),
         })?;

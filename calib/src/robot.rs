@@ -21,7 +21,7 @@ impl Robot {
     pub fn load(robot: &str, spec: &ChainSpec) -> Result<Self> {
         let path = Path::new(robot);
         if path.is_file() {
-            let text = std::fs::read_to_string(path).map_err(|e| CalibError::Io {
+            let text = std::fs::read_to_string(path).map_err(|e| CalibError::Read {
                 path: robot.to_string(),
                 message: e.to_string(),
             })?;

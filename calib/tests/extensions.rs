@@ -163,6 +163,7 @@ fn extensions_are_recovered_within_their_predicted_standard_deviations() {
             &CalibrationOptions::default(),
         )
         .unwrap();
+        assert!(cal.report.health.is_clean(), "seed {seed}: {}", cal.report.health);
         // The truth in the estimator's parameters: compliance 1/k, half the dead band, α, no drift.
         let truth = |name: &str| -> f64 {
             match name {
@@ -352,6 +353,7 @@ fn compliance_is_recovered_from_the_physics_engine_truth() {
         &CalibrationOptions::default(),
     )
     .unwrap();
+    assert!(cal.report.health.is_clean(), "{}", cal.report.health);
     let com = cal.extensions.as_ref().unwrap().payload_com_m;
     assert!(
         (com[1] - 0.01).abs() < 2e-3 && (com[2] - 0.06).abs() < 2e-3,

@@ -49,6 +49,7 @@ fn noise_free_generated_kinematic_errors_are_recovered_to_1e9_m() {
     )
     .unwrap();
     assert!(cal.report.was_successful());
+    assert!(cal.report.health.is_clean(), "{}", cal.report.health);
     let mut worst = 0.0f64;
     for &r in &test {
         let (p, _, _) = prediction_and_jacobian(&model, &cal.params, table.q_row(r)).unwrap();
@@ -79,6 +80,7 @@ fn noisy_generated_data_held_out_error_matches_the_covariance() {
         )
         .unwrap();
         assert!(cal.report.was_successful());
+        assert!(cal.report.health.is_clean(), "{}", cal.report.health);
         for &r in &test {
             let (p, _, j) = prediction_and_jacobian(&model, &cal.params, table.q_row(r)).unwrap();
             err2 += (p - Vector3::from(p_true[r])).norm_squared();

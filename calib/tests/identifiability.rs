@@ -77,6 +77,7 @@ fn joint_1_that_never_moves_is_named_and_the_rest_is_still_recovered() {
     )
     .unwrap();
     assert!(cal.report.was_successful());
+    assert!(cal.report.health.is_clean(), "{}", cal.report.health);
     let text = cal.report.text();
     eprintln!("{text}");
     let specific = &cal.report.unidentifiable.data_specific;
@@ -227,6 +228,7 @@ fn gross_errors_are_reported_as_outliers_and_a_robust_loss_ignores_them() {
     };
     let robust = calibrate(&model, &Dataset::all(&t, "t"), None, &options).unwrap();
     assert!(robust.report.was_successful());
+    assert!(robust.report.health.is_clean(), "{}", robust.report.health);
     assert_eq!(robust.report.robust.as_ref().unwrap().downweighted_rows, 3);
     let (e_plain, e_robust) = (held_out(&plain.params), held_out(&robust.params));
     eprintln!("held-out RMS: plain {e_plain:e} m, robust {e_robust:e} m");

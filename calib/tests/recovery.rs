@@ -40,6 +40,7 @@ fn noise_free_errors_are_recovered_to_1e9_m_on_held_out_poses() {
             "{name}: {:?}",
             cal.report.after.solver
         );
+        assert!(cal.report.health.is_clean(), "{name}: {}", cal.report.health);
         let chain = calib::chain::Chain::new(&model, &cal.params);
         let mut s = calib::chain::ChainScratch::new(model.nq());
         let mut worst = 0.0f64;
@@ -94,6 +95,7 @@ fn noisy_recovery(name: &str, orientation: bool, reps: usize, seed: u64) {
             "rep {rep}: {:?}",
             cal.report.after.solver
         );
+        assert!(cal.report.health.is_clean(), "rep {rep}: {}", cal.report.health);
         let c = &cal.covariance;
         // Identifiable combinations at the training poses.
         let np = c.nrows();

@@ -8,10 +8,20 @@ use std::path::PathBuf;
 #[derive(Debug, thiserror::Error)]
 #[non_exhaustive]
 pub enum SimError {
-    /// The file could not be read.
+    /// An input file could not be opened or read (missing, unreadable, a folder): bad input, the user
+    /// named a file that is not there.
     #[error("{path}: cannot read: {source}")]
-    Io {
+    Read {
         /// File that was asked for.
+        path: PathBuf,
+        /// Underlying I/O error.
+        source: std::io::Error,
+    },
+    /// An output file could not be written (or its bytes could not be produced): a runtime failure, the
+    /// input was fine. Every write of [`crate::io`] fails with this.
+    #[error("{path}: cannot write: {source}")]
+    Io {
+        /// File (or folder) that was being written.
         path: PathBuf,
         /// Underlying I/O error.
         source: std::io::Error,

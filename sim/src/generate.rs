@@ -62,6 +62,7 @@
 use crate::campaign::{Plan, STREAM_TRACKER, derive_seed, plan, rng_for};
 use crate::effects::{ComplianceSolver, Conditions, Contributions, Truth};
 use crate::error::{Result, SimError};
+use crate::io::write_atomic;
 use crate::measurement_table::{self, MeasurementTable, OptionalColumns};
 use crate::scenario::{Resolved, TruthModel};
 use crate::statics::Payload;
@@ -375,68 +376,14 @@ fn truth_batch(plan: &Plan, sim: &Simulation, six_dof: bool) -> Result<RecordBat
     })
 }
 
-/// Deterministic Parquet bytes of `batch` (writer properties set explicitly, no timestamps).
+/// Deterministic Parquet bytes of `batch` ([`crate::io::deterministic_writer_properties`], the row
+/// groups of the measurement table).
 fn parquet_bytes(batch: &RecordBatch, path: &Path) -> Result<Vec<u8>> {
-    use parquet::arrow::ArrowWriter;
-    use parquet::basic::Compression;
-    use parquet::file::properties::{
-        DEFAULT_CREATED_BY, EnabledStatistics, WriterProperties, WriterVersion,
-    };
-    let props = WriterProperties::builder()
-        .set_writer_version(WriterVersion::PARQUET_1_0)
-        .set_created_by(DEFAULT_CREATED_BY.to_string())
-        .set_compression(Compression::SNAPPY)
-        .set_max_row_group_row_count(Some(measurement_table::PARQUET_MAX_ROW_GROUP_ROWS))
-        .set_max_row_group_bytes(None)
-        .set_write_batch_size(1024)
-        .set_data_page_size_limit(1024 * 1024)
-        .set_data_page_row_count_limit(20_000)
-        .set_statistics_enabled(EnabledStatistics::Chunk)
-        .set_bloom_filter_enabled(false)
-        .set_key_value_metadata(None)
-        .set_sorting_columns(None)
-        .set_dictionary_enabled(false)
-        .build();
-    let io = |e: &dyn std::fmt::Display| SimError::Io {
+    let rows = measurement_table::PARQUET_MAX_ROW_GROUP_ROWS;
+    let props = crate::io::deterministic_writer_properties(rows).build();
+    crate::io::parquet_bytes(batch, props, rows).map_err(|e| SimError::Io {
         path: path.to_path_buf(),
-        source: std::io::Error::other(format!("cannot write Parquet: {e}")),
-    };
-    let mut w =
-        ArrowWriter::try_new(Vec::new(), batch.schema(), Some(props)).map_err(|e| io(&e))?;
-    let n = batch.num_rows();
-    let mut start = 0;
-    while start < n {
-        let len = (n - start).min(measurement_table::PARQUET_MAX_ROW_GROUP_ROWS);
-        w.write(&batch.slice(start, len)).map_err(|e| io(&e))?;
-        start += len;
-    }
-    w.into_inner().map_err(|e| io(&e))
-}
-
-/// Writes `bytes` to `path` atomically: a temporary file in the same folder, synced, then renamed.
-pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
-    use std::io::Write;
-    let dir = match path.parent() {
-        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
-        _ => PathBuf::from("."),
-    };
-    let name = path
-        .file_name()
-        .map_or_else(|| "out".into(), |n| n.to_string_lossy().into_owned());
-    let tmp = dir.join(format!(".{name}.tmp-{}", std::process::id()));
-    let result = (|| {
-        let mut f = std::fs::File::create(&tmp)?;
-        f.write_all(bytes)?;
-        f.sync_all()?;
-        drop(f);
-        std::fs::rename(&tmp, path)
-    })();
-    result.map_err(|source| {
-        let _ = std::fs::remove_file(&tmp);
-        SimError::Io {
-            path: path.to_path_buf(),
-            source,
-        }
+        source: std::io::Error::other(format!("Parquet encoding failed: {e}")),
     })
 }
 
@@ -786,11 +733,11 @@ pub fn generate(res: &Resolved, out_dir: &Path, progress: Option<Progress<'_>>) 
 
 /// Column names of a Parquet file, in file order (to check what a file holds without interpreting it).
 pub fn parquet_column_names(path: &Path) -> Result<Vec<String>> {
-    let io = |e: &dyn std::fmt::Display| SimError::Io {
+    let io = |e: &dyn std::fmt::Display| SimError::Read {
         path: path.to_path_buf(),
         source: std::io::Error::other(e.to_string()),
     };
-    let f = std::fs::File::open(path).map_err(|source| SimError::Io {
+    let f = std::fs::File::open(path).map_err(|source| SimError::Read {
         path: path.to_path_buf(),
         source,
     })?;

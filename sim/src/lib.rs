@@ -28,6 +28,7 @@ pub mod campaign;
 pub mod effects;
 pub mod error;
 pub mod generate;
+pub mod io;
 pub mod kinematics;
 pub mod lie;
 pub mod measurement_table;

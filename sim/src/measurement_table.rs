@@ -59,9 +59,7 @@ mod parquet;
 
 pub use check::{LIMIT_TOLERANCE, check_against_model, reach_bound};
 pub use csv::{read_csv_str, write_csv_string};
-pub use parquet::{
-    PARQUET_MAX_ROW_GROUP_ROWS, deterministic_writer_properties, write_parquet_bytes,
-};
+pub use parquet::{PARQUET_MAX_ROW_GROUP_ROWS, write_parquet_bytes};
 
 use crate::error::{Result, SimError};
 use std::collections::HashMap;
@@ -200,7 +198,7 @@ pub fn read(path: &Path) -> Result<MeasurementTable> {
     let name = path.display().to_string();
     match format {
         Format::Csv => {
-            let bytes = std::fs::read(path).map_err(|e| io_err(path, e))?;
+            let bytes = std::fs::read(path).map_err(|e| read_err(path, e))?;
             csv::read_csv_bytes(&bytes, &name)
         }
         Format::Parquet => parquet::read_parquet_file(path, &name),
@@ -217,52 +215,12 @@ pub fn write(path: &Path, table: &MeasurementTable) -> Result<()> {
         Format::Csv => csv::write_csv_bytes(table),
         Format::Parquet => parquet::write_parquet_unchecked(table, &path.display().to_string())?,
     };
-    write_atomic(path, &bytes)
+    crate::io::write_atomic(path, &bytes)
 }
 
-/// Writes `bytes` to a temporary file beside `path`, syncs it and renames it over `path`.
-fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
-    use std::io::Write;
-    use std::sync::atomic::{AtomicU64, Ordering};
-    static COUNTER: AtomicU64 = AtomicU64::new(0);
-    let dir = match path.parent() {
-        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
-        _ => std::path::PathBuf::from("."),
-    };
-    let file_name = path
-        .file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .ok_or_else(|| {
-            table_err(
-                &path.display().to_string(),
-                None,
-                None,
-                "not a file name".into(),
-            )
-        })?;
-    let tmp = dir.join(format!(
-        ".{file_name}.tmp-{}-{}",
-        std::process::id(),
-        COUNTER.fetch_add(1, Ordering::Relaxed)
-    ));
-    let result = (|| {
-        let mut f = std::fs::File::create(&tmp)?;
-        f.write_all(bytes)?;
-        f.sync_all()?;
-        drop(f);
-        std::fs::rename(&tmp, path)
-    })();
-    result.map_err(|e| {
-        let _ = std::fs::remove_file(&tmp);
-        SimError::Io {
-            path: path.to_path_buf(),
-            source: e,
-        }
-    })
-}
-
-fn io_err(path: &Path, source: std::io::Error) -> SimError {
-    SimError::Io {
+/// An input file that cannot be read.
+fn read_err(path: &Path, source: std::io::Error) -> SimError {
+    SimError::Read {
         path: path.to_path_buf(),
         source,
     }

@@ -44,7 +44,7 @@ pub fn load_robot(robot: &str, spec: &ChainSpec) -> Result<Model> {
     match builtin_urdf(robot) {
         Some(text) => load_str(text, &format!("built-in robot '{robot}'"), spec),
         None if robot.ends_with(".urdf") || robot.ends_with(".xacro") || robot.contains('/') => {
-            Err(SimError::Io {
+            Err(SimError::Read {
                 path: path.to_path_buf(),
                 source: std::io::Error::new(std::io::ErrorKind::NotFound, "no such file"),
             })

@@ -690,7 +690,7 @@ impl Scenario {
 
     /// Reads and parses the scenario file at `path`.
     pub fn load(path: &Path) -> Result<Scenario> {
-        let text = std::fs::read_to_string(path).map_err(|source| SimError::Io {
+        let text = std::fs::read_to_string(path).map_err(|source| SimError::Read {
             path: path.to_path_buf(),
             source,
         })?;

@@ -24,7 +24,7 @@ pub struct ChainSpec {
 
 /// Reads a URDF file and builds the model of the chain `spec` selects.
 pub fn load_file(path: &Path, spec: &ChainSpec) -> Result<Model> {
-    let text = std::fs::read_to_string(path).map_err(|source| SimError::Io {
+    let text = std::fs::read_to_string(path).map_err(|source| SimError::Read {
         path: path.to_path_buf(),
         source,
     })?;

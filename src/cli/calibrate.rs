@@ -1,6 +1,7 @@
 //! `robocal calibrate`: identify the kinematic error model from a measurement table.
 
-use super::{CliError, CliResult, print_json, robot_arg::RobotArgs};
+use super::robot_arg::RobotArgs;
+use super::shared::{CliError, CliResult, print_json, read_table};
 use calib::CalibError;
 use calib::calibrate::{CalibrationOptions, Dataset, RobustLoss, calibrate_model};
 use calib::extensions::ModelSpec;
@@ -9,8 +10,7 @@ use calib::robot::Robot;
 use calib::stats::split_by_pose;
 use serde_json::json;
 use sim::ChainSpec;
-use sim::measurement_table::{self, MeasurementTable};
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 /// Arguments of `robocal calibrate`.
 #[derive(clap::Args, Debug)]
@@ -38,9 +38,9 @@ pub struct Args {
     /// Seed of the train/test split.
     #[arg(long, value_name = "N", default_value_t = 0)]
     seed: u64,
-    /// Robust loss against outliers (iteratively reweighted): `huber` or `cauchy`.
-    #[arg(long, value_name = "LOSS")]
-    robust: Option<String>,
+    /// Robust loss against outliers (iteratively reweighted).
+    #[arg(long, value_name = "LOSS", value_enum)]
+    robust: Option<Robust>,
     /// Also write a URDF of the calibrated robot (joint origins adjusted).
     #[arg(long, value_name = "FILE.urdf")]
     urdf_out: Option<PathBuf>,
@@ -49,19 +49,22 @@ pub struct Args {
     json: bool,
 }
 
-/// Reads a measurement table and checks it against the robot; warnings go to stderr.
-pub(crate) fn read_table(path: &Path, robot: &sim::Model) -> Result<MeasurementTable, CliError> {
-    let table = measurement_table::read(path)?;
-    for w in measurement_table::check_against_model(&table, robot, path)? {
-        eprintln!("warning: {w}");
-    }
-    Ok(table)
+/// `--robust`: the robust loss against outliers.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+enum Robust {
+    /// Huber loss (quadratic near zero, linear beyond its threshold).
+    Huber,
+    /// Cauchy loss (logarithmic: far outliers hardly count).
+    Cauchy,
 }
 
-pub(crate) fn input(e: CalibError) -> CliError {
-    match e {
-        CalibError::Io { .. } => CliError::Runtime(e.to_string()),
-        _ => CliError::Input(e.to_string()),
+impl Robust {
+    /// The loss with calib's default threshold.
+    fn loss(self) -> RobustLoss {
+        match self {
+            Robust::Huber => RobustLoss::HUBER,
+            Robust::Cauchy => RobustLoss::CAUCHY,
+        }
     }
 }
 
@@ -70,18 +73,9 @@ pub fn run(args: Args) -> CliResult {
     let model_spec = if args.model == "auto" {
         None
     } else {
-        Some(ModelSpec::parse(&args.model).map_err(input)?)
+        Some(ModelSpec::parse(&args.model)?)
     };
-    let robust = match args.robust.as_deref() {
-        None => None,
-        Some("huber") => Some(RobustLoss::HUBER),
-        Some("cauchy") => Some(RobustLoss::CAUCHY),
-        Some(other) => {
-            return Err(CliError::Input(format!(
-                "--robust {other}: unknown loss (huber or cauchy)"
-            )));
-        }
-    };
+    let robust = args.robust.map(Robust::loss);
     if !(0.0..1.0).contains(&args.test_fraction) {
         return Err(CliError::Input(format!(
             "--test-fraction {}: must be in [0, 1)",
@@ -92,7 +86,7 @@ pub fn run(args: Args) -> CliResult {
         base_link: args.robot.base_link.clone(),
         tip_link: args.robot.tip_link.clone(),
     };
-    let robot = Robot::load(&args.robot.robot, &spec).map_err(input)?;
+    let robot = Robot::load(&args.robot.robot, &spec)?;
     let model = &robot.model;
     let table = read_table(&args.data, model)?;
     let data_name = args.data.display().to_string();
@@ -143,23 +137,23 @@ pub fn run(args: Args) -> CliResult {
             if !args.json {
                 eprintln!("--model auto: diagnose chose {}", d.model);
             }
-            ModelSpec::parse(&d.model).map_err(input)?
+            ModelSpec::parse(&d.model)?
         }
     };
     let cal =
         calibrate_model(model, &train, test.as_ref(), &model_spec, &options).map_err(|e| {
-            let mut m = input(e);
-            if let CliError::Input(s) = &mut m
+            let split_hint = matches!(e, CalibError::TooFewPoses { .. })
                 && args.test_data.is_none()
-                && args.test_fraction > 0.0
-                && s.contains("distinct poses give")
-            {
-                s.push_str(&format!(
+                && args.test_fraction > 0.0;
+            let e = CliError::from(e);
+            if split_hint {
+                e.with_hint(&format!(
                     " (--test-fraction {} held out part of the poses; --test-fraction 0 uses all)",
                     args.test_fraction
-                ));
+                ))
+            } else {
+                e
             }
-            m
         })?;
     let report = &cal.report;
     if !report.was_successful() {
@@ -175,7 +169,7 @@ pub fn run(args: Args) -> CliResult {
         return Err(CliError::Runtime(msg));
     }
     let file = CalibratedModel::new(&robot, &cal);
-    calib::io::write_atomic(&args.out, file.to_json().as_bytes()).map_err(input)?;
+    sim::io::write_atomic(&args.out, file.to_json().as_bytes())?;
     if let Some(path) = &args.urdf_out {
         let urdf = calibrated_urdf(model, &cal.params);
         let configs: Vec<Vec<f64>> = train
@@ -184,14 +178,14 @@ pub fn run(args: Args) -> CliResult {
             .take(200)
             .map(|&r| table.q_row(r).to_vec())
             .collect();
-        let dev = urdf_deviation(model, &cal.params, &urdf, &configs).map_err(input)?;
+        let dev = urdf_deviation(model, &cal.params, &urdf, &configs)?;
         if dev > 1e-9 {
             return Err(CliError::Runtime(format!(
                 "{}: the calibrated URDF deviates from the model by {dev:.1e} (m or rotation entry); not written",
                 path.display()
             )));
         }
-        calib::io::write_atomic(path, urdf.as_bytes()).map_err(input)?;
+        sim::io::write_atomic(path, urdf.as_bytes())?;
     }
     if args.json {
         print_json(&json!({

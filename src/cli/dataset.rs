@@ -1,7 +1,7 @@
 //! `robocal dataset`: write a versioned benchmark suite with its SHA-256 manifest (see `crate::dataset`).
 
-use super::{CliError, CliResult, print_json};
-use crate::dataset::{self, DatasetError, SUITES};
+use super::shared::{CliError, CliResult, print_json};
+use crate::dataset::{self, SUITES};
 use std::path::PathBuf;
 
 /// Arguments of `robocal dataset`.
@@ -52,10 +52,7 @@ pub fn run(args: Args) -> CliResult {
             SUITES.iter().map(|s| s.name).collect::<Vec<_>>().join(", ")
         ))
     })?;
-    let files = dataset::write_suite(suite, out).map_err(|e| match e {
-        DatasetError::Input(m) => CliError::Input(m),
-        DatasetError::Runtime(m) => CliError::Runtime(m),
-    })?;
+    let files = dataset::write_suite(suite, out)?;
     let bytes: u64 = files.iter().map(|f| f.bytes).sum();
     eprintln!(
         "wrote suite {} ({} datasets, {} files, {:.1} MB) to {}; verify with: cd {} && sha256sum -c MANIFEST.sha256",

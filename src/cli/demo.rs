@@ -2,10 +2,10 @@
 //! simulated with it, and `diagnose` (which sees only the measurement file) has to find it; the findings
 //! are printed beside the truth and a report is written.
 
-use super::calibrate::{input, read_table};
 use super::diagnose::{options, run_diagnosis, text};
-use super::{CliError, CliResult, print_json};
-use calib::diagnose::report;
+use super::shared::read_table;
+use super::shared::{CliError, CliResult, print_json};
+use crate::report;
 use rand::{RngExt, SeedableRng};
 use serde_json::json;
 use sim::scenario::{Overrides, Scenario};
@@ -204,7 +204,7 @@ pub fn run(args: Args) -> CliResult {
     let name = data.display().to_string();
     let d = run_diagnosis(&model, &table, &name, &options(1.0 / 3.0, 0, 1e-3)?)?;
     let report_dir = args.out.join("report");
-    report::write(&report_dir, &d, &d.plots, &name).map_err(input)?;
+    report::write(&report_dir, &d, &d.plots, &name)?;
     let found: Vec<(String, Vec<usize>)> = d
         .findings
         .iter()

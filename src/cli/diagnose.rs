@@ -1,8 +1,9 @@
 //! `robocal diagnose`: what the kinematic model misses, its cause, and the gain on held-out poses.
 
-use super::calibrate::{input, read_table};
-use super::{CliError, CliResult, print_json, robot_arg::RobotArgs};
-use calib::diagnose::{DiagnoseOptions, Diagnosis, diagnose_with_progress, report};
+use super::robot_arg::RobotArgs;
+use super::shared::{CliError, CliResult, print_json, read_table};
+use crate::report;
+use calib::diagnose::{DiagnoseOptions, Diagnosis, diagnose_with_progress};
 use calib::robot::Robot;
 use sim::ChainSpec;
 use std::io::IsTerminal;
@@ -155,7 +156,8 @@ pub(crate) fn run_diagnosis(
             b.set_message(format!("fitting {m}"));
         }
     };
-    let d = diagnose_with_progress(model, table, name, options, &mut progress).map_err(input);
+    let d =
+        diagnose_with_progress(model, table, name, options, &mut progress).map_err(CliError::from);
     if let Some(b) = &bar {
         b.finish_and_clear();
     }
@@ -177,12 +179,12 @@ pub fn run(args: Args) -> CliResult {
         base_link: args.robot.base_link.clone(),
         tip_link: args.robot.tip_link.clone(),
     };
-    let robot = Robot::load(&args.robot.robot, &spec).map_err(input)?;
+    let robot = Robot::load(&args.robot.robot, &spec)?;
     let table = read_table(&args.data, &robot.model)?;
     let name = args.data.display().to_string();
     let d = run_diagnosis(&robot.model, &table, &name, &options)?;
     if let Some(dir) = &args.report {
-        let files = report::write(dir, &d, &d.plots, &name).map_err(input)?;
+        let files = report::write(dir, &d, &d.plots, &name)?;
         if !args.json {
             eprintln!(
                 "wrote {} ({} files, open index.html)",

@@ -1,6 +1,7 @@
 //! `robocal fk`: the flange pose at a joint configuration.
 
-use super::{CliError, CliResult, print_json, robot_arg::RobotArgs};
+use super::robot_arg::RobotArgs;
+use super::shared::{CliError, CliResult, print_json};
 use serde_json::json;
 
 /// Arguments of `robocal fk`.

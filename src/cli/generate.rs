@@ -3,8 +3,7 @@
 //! Writes `DIR/measurements.parquet` (the measurement contract), `DIR/truth.json` and
 //! `DIR/truth.parquet` (the ground truth); see `sim::generate` and `docs/generate.md`.
 
-use super::{CliError, CliResult, print_json};
-use sim::SimError;
+use super::shared::{CliError, CliResult, print_json};
 use sim::scenario::{Overrides, Scenario};
 use std::io::IsTerminal;
 use std::path::PathBuf;
@@ -31,14 +30,6 @@ pub struct Args {
     /// Print the summary as one JSON document on stdout.
     #[arg(long)]
     json: bool,
-}
-
-/// A write failure is a runtime failure (exit 1); everything else the scenario decides is bad input.
-fn classify(e: SimError) -> CliError {
-    match e {
-        SimError::Io { .. } => CliError::Runtime(e.to_string()),
-        other => CliError::Input(other.to_string()),
-    }
 }
 
 /// Runs `robocal generate`.
@@ -75,8 +66,7 @@ pub fn run(args: Args) -> CliResult {
             b.inc(k);
         }
     };
-    let summary =
-        sim::generate::write_dataset(&resolved, &args.out, &plan, Some(&tick)).map_err(classify);
+    let summary = sim::generate::write_dataset(&resolved, &args.out, &plan, Some(&tick));
     if let Some(b) = &bar {
         b.finish_and_clear();
     }

@@ -1,6 +1,7 @@
 //! `robocal info`: the chain, axes, limits and masses of a robot.
 
-use super::{CliResult, print_json, robot_arg::RobotArgs};
+use super::robot_arg::RobotArgs;
+use super::shared::{CliResult, print_json};
 use serde_json::json;
 
 /// Arguments of `robocal info`.

@@ -1,4 +1,5 @@
-//! Subcommands, one module each, and the error type that decides the exit code.
+//! Subcommands, one module each; [`shared`] holds what several of them use. The error type that
+//! decides the exit code is [`crate::error::CliError`].
 
 mod calibrate;
 mod dataset;
@@ -10,8 +11,10 @@ mod info;
 mod plan_poses;
 mod predict;
 mod robot_arg;
+mod shared;
 mod sweep;
 
+use crate::error::CliResult;
 use clap::{Parser, Subcommand};
 
 /// Simulate robot calibration campaigns with known errors, identify them, and diagnose what is left.
@@ -48,42 +51,6 @@ enum Command {
     Dataset(dataset::Args),
 }
 
-/// A failed command: bad input (exit 2) or a runtime failure (exit 1).
-#[derive(Debug)]
-pub enum CliError {
-    /// The user's input is wrong: a file, a flag value, a table cell.
-    Input(String),
-    /// The input was fine but the work failed.
-    Runtime(String),
-}
-
-impl CliError {
-    /// Exit code per `shared/spec/cli.md`.
-    pub fn exit_code(&self) -> u8 {
-        match self {
-            CliError::Input(_) => 2,
-            CliError::Runtime(_) => 1,
-        }
-    }
-}
-
-impl std::fmt::Display for CliError {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        match self {
-            CliError::Input(m) | CliError::Runtime(m) => f.write_str(m),
-        }
-    }
-}
-
-impl From<sim::SimError> for CliError {
-    fn from(e: sim::SimError) -> Self {
-        CliError::Input(e.to_string())
-    }
-}
-
-/// Result of a subcommand.
-pub type CliResult = Result<(), CliError>;
-
 /// Runs the parsed command line.
 pub fn run(cli: Cli) -> CliResult {
     match cli.command {
@@ -99,12 +66,4 @@ pub fn run(cli: Cli) -> CliResult {
         Command::SweepMerge(a) => sweep::run_merge(a),
         Command::Dataset(a) => dataset::run(a),
     }
-}
-
-/// Prints one JSON document to stdout.
-pub fn print_json(value: &serde_json::Value) -> CliResult {
-    let s = serde_json::to_string_pretty(value)
-        .map_err(|e| CliError::Runtime(format!("cannot write JSON: {e}")))?;
-    println!("{s}");
-    Ok(())
 }

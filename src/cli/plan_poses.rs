@@ -1,6 +1,7 @@
 //! `robocal plan-poses`: choose the measurement poses that determine the kinematic parameters best.
 
-use super::{CliError, CliResult, print_json, robot_arg::RobotArgs};
+use super::robot_arg::RobotArgs;
+use super::shared::{CliError, CliResult, print_json};
 use calib::plan::{PlanOptions, plan_poses};
 use serde_json::json;
 use std::path::PathBuf;
@@ -77,10 +78,9 @@ pub fn run(args: Args) -> CliResult {
         )));
     }
     options.sigma_m = args.noise;
-    let plan = plan_poses(&model, &options).map_err(|e| CliError::Input(e.to_string()))?;
+    let plan = plan_poses(&model, &options)?;
     if let Some(path) = &args.out {
-        calib::io::write_atomic(path, plan.to_csv().as_bytes())
-            .map_err(|e| CliError::Runtime(e.to_string()))?;
+        sim::io::write_atomic(path, plan.to_csv().as_bytes())?;
     }
     if args.json {
         return print_json(&json!({

@@ -1,7 +1,6 @@
 //! `robocal predict`: where a calibrated model says the target is, for every row of a table.
 
-use super::{CliError, CliResult, print_json};
-use calib::CalibError;
+use super::shared::{CliError, CliResult, print_json};
 use calib::model_file::{CalibratedModel, Predictor, calibrated_urdf, urdf_deviation};
 use serde_json::json;
 use sim::SimError;
@@ -28,13 +27,6 @@ pub struct Args {
     json: bool,
 }
 
-fn err(e: CalibError) -> CliError {
-    match e {
-        CalibError::Io { .. } => CliError::Runtime(e.to_string()),
-        _ => CliError::Input(e.to_string()),
-    }
-}
-
 /// A table of joint values: the measurement contract, or (CSV without x, y, z) just `pose, q1..qN`.
 fn read_configs(path: &Path, robot: &sim::Model) -> Result<MeasurementTable, CliError> {
     let table = match measurement_table::read(path) {
@@ -46,7 +38,7 @@ fn read_configs(path: &Path, robot: &sim::Model) -> Result<MeasurementTable, Cli
                 .extension()
                 .is_some_and(|e| e.eq_ignore_ascii_case("csv")) =>
         {
-            calib::io::read_joint_csv(path).map_err(err)?
+            calib::io::read_joint_csv(path)?
         }
         Err(e) => return Err(e.into()),
     };
@@ -67,27 +59,24 @@ fn read_configs(path: &Path, robot: &sim::Model) -> Result<MeasurementTable, Cli
 
 /// Runs `robocal predict`.
 pub fn run(args: Args) -> CliResult {
-    let file = CalibratedModel::load(&args.model).map_err(err)?;
-    let mut predictor = Predictor::from_file(&file).map_err(err)?;
+    let file = CalibratedModel::load(&args.model)?;
+    let mut predictor = Predictor::from_file(&file)?;
     let table = read_configs(&args.data, &predictor.model)?;
-    let preds = predictor
-        .predict_table(&table, &args.data.display().to_string())
-        .map_err(err)?;
-    calib::io::write_atomic(&args.out, preds.to_csv().as_bytes()).map_err(err)?;
+    let preds = predictor.predict_table(&table, &args.data.display().to_string())?;
+    sim::io::write_atomic(&args.out, preds.to_csv().as_bytes())?;
     if let Some(path) = &args.urdf_out {
         let urdf = calibrated_urdf(&predictor.model, &predictor.params);
         let configs: Vec<Vec<f64>> = (0..table.len().min(200))
             .map(|r| table.q_row(r).to_vec())
             .collect();
-        let dev =
-            urdf_deviation(&predictor.model, &predictor.params, &urdf, &configs).map_err(err)?;
+        let dev = urdf_deviation(&predictor.model, &predictor.params, &urdf, &configs)?;
         if dev > 1e-9 {
             return Err(CliError::Runtime(format!(
                 "{}: the calibrated URDF deviates from the model by {dev:.1e}; not written",
                 path.display()
             )));
         }
-        calib::io::write_atomic(path, urdf.as_bytes()).map_err(err)?;
+        sim::io::write_atomic(path, urdf.as_bytes())?;
     }
     if args.json {
         print_json(&json!({

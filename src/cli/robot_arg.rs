@@ -18,7 +18,7 @@ pub struct RobotArgs {
 
 impl RobotArgs {
     /// Loads the model, or a one-line input error.
-    pub fn load(&self) -> Result<Model, super::CliError> {
+    pub fn load(&self) -> Result<Model, crate::error::CliError> {
         let spec = ChainSpec {
             base_link: self.base_link.clone(),
             tip_link: self.tip_link.clone(),

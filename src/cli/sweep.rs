@@ -1,7 +1,7 @@
 //! `robocal sweep`: a sensitivity study over noise levels and pose counts (see `crate::sweep` and
 //! `docs/sweep.md`), and `robocal sweep-merge`, which joins the shards of one sweep.
 
-use super::{CliError, CliResult, print_json};
+use super::shared::{CliError, CliResult, print_json};
 use crate::sweep::table::{self, META_SUBSET, META_SWEEP, SweepRow};
 use crate::sweep::{self as sw, Context, Selection, Subset, SweepSpec};
 use calib::calibrate::CalibrationOptions;
@@ -37,8 +37,8 @@ pub struct Args {
     model: String,
     /// Pose selection: `random` (the scenario's campaign) or `planned` (D-optimal choice among
     /// --candidates poses drawn by the scenario's campaign).
-    #[arg(long, value_name = "random|planned", default_value = "random")]
-    selection: String,
+    #[arg(long, value_name = "random|planned", value_enum, default_value_t = Selection::Random)]
+    selection: Selection,
     /// Candidate poses per planned run (default: 10 × the pose count).
     #[arg(long, value_name = "N")]
     candidates: Option<usize>,
@@ -148,7 +148,7 @@ fn plot_path(out: &Path) -> PathBuf {
 }
 
 fn write(path: &Path, bytes: &[u8]) -> CliResult {
-    calib::io::write_atomic(path, bytes).map_err(|e| CliError::Runtime(e.to_string()))
+    Ok(sim::io::write_atomic(path, bytes)?)
 }
 
 /// Writes the sweep file (and, for a complete sweep, its plot) and reports on stderr / stdout.
@@ -216,18 +216,14 @@ pub fn run(args: Args) -> CliResult {
         .filter(|v| *v >= 1)
         .ok_or_else(|| input("--reps", &args.reps, "must be a whole number ≥ 1"))?;
     if args.model != "kinematic" {
-        calib::extensions::ModelSpec::parse(&args.model).map_err(super::calibrate::input)?;
+        calib::extensions::ModelSpec::parse(&args.model)?;
         return Err(input(
             "--model",
             &args.model,
             "sweep fits only the kinematic model for now",
         ));
     }
-    let selection = match args.selection.as_str() {
-        "random" => Selection::Random,
-        "planned" => Selection::Planned,
-        other => return Err(input("--selection", other, "expected random or planned")),
-    };
+    let selection = args.selection;
     if args.candidates.is_some() && selection != Selection::Planned {
         return Err(input(
             "--candidates",
@@ -353,10 +349,7 @@ pub fn run(args: Args) -> CliResult {
     if let Some(b) = &bar {
         b.finish_and_clear();
     }
-    let rows = rows.map_err(|e| match e {
-        sw::RunError::Input(m) => CliError::Input(m),
-        sw::RunError::Runtime(m) => CliError::Runtime(m),
-    })?;
+    let rows = rows?;
     eprintln!(
         "sweep of {}: {} noise level(s) × {} pose count(s) × {} reps; {} run(s) in {:.1} s on {} thread(s) ({} model, {} poses)",
         spec.scenario_file,

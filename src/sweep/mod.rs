@@ -24,6 +24,7 @@
 
 pub mod table;
 
+use crate::error::CliError;
 use calib::calibrate::{Calibration, CalibrationOptions, Dataset, calibrate};
 use calib::chain::{Chain, ChainScratch};
 use calib::params::ParamLayout;
@@ -36,8 +37,10 @@ use table::SweepRow;
 /// Version of the sweep file layout (columns and metadata).
 pub const FORMAT_VERSION: u32 = 1;
 
-/// How the calibration poses of a run are chosen.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+/// How the calibration poses of a run are chosen (also the values of `robocal sweep --selection`).
+#[derive(
+    Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize, clap::ValueEnum,
+)]
 #[serde(rename_all = "snake_case")]
 pub enum Selection {
     /// The scenario's own campaign (random poses for the shipped scenarios).
@@ -164,25 +167,13 @@ impl Subset {
     }
 }
 
-/// A failed run: bad input (the scenario, too few poses) or a runtime failure.
-#[derive(Clone, Debug, PartialEq)]
-pub enum RunError {
-    /// The input cannot work (exit 2).
-    Input(String),
-    /// The work failed (exit 1).
-    Runtime(String),
-}
-
-impl RunError {
-    fn prefixed(self, id: &RunId) -> RunError {
-        let p = format!(
+impl RunId {
+    /// `run R (cell C, rep K, noise N, poses P, seed S)`: the prefix of a failed run's error.
+    fn describe(&self) -> String {
+        format!(
             "run {} (cell {}, rep {}, noise {}, poses {}, seed {})",
-            id.run, id.cell, id.rep, id.noise_scale, id.poses, id.seed
-        );
-        match self {
-            RunError::Input(m) => RunError::Input(format!("{p}: {m}")),
-            RunError::Runtime(m) => RunError::Runtime(format!("{p}: {m}")),
-        }
+            self.run, self.cell, self.rep, self.noise_scale, self.poses, self.seed
+        )
     }
 }
 
@@ -230,10 +221,10 @@ fn planned_plan(
     (train, test): (usize, usize),
     candidates: usize,
     options: &CalibrationOptions,
-) -> Result<sim::campaign::Plan, RunError> {
+) -> Result<sim::campaign::Plan, CliError> {
     let mut cand_res = res.clone();
     cand_res.campaign.poses = Some(candidates.max(2 * (train + test)));
-    let cand = sim::generate::plan_of(&cand_res).map_err(|e| RunError::Input(e.to_string()))?;
+    let cand = sim::generate::plan_of(&cand_res).map_err(CliError::from)?;
     let configs: Vec<Vec<f64>> = (0..cand.n_poses)
         .map(|k| cand.q_row(k * cand.repeats).to_vec())
         .collect();
@@ -241,8 +232,7 @@ fn planned_plan(
     po.target_offset = res.tracker.p_flange;
     po.calibration = *options;
     po.random_sets = 0;
-    let chosen = calib::plan::select_from(&res.model, &configs, &po)
-        .map_err(|e| RunError::Input(e.to_string()))?;
+    let chosen = calib::plan::select_from(&res.model, &configs, &po).map_err(CliError::from)?;
     let mut list: Vec<Vec<f64>> = chosen.iter().map(|&c| configs[c].clone()).collect();
     list.extend(
         (0..configs.len())
@@ -253,16 +243,15 @@ fn planned_plan(
     let mut spec = res.campaign.clone();
     spec.poses = Some(train + test);
     spec.sampling = sim::campaign::Sampling::List { q: list };
-    sim::campaign::plan(&res.model, &spec, res.seed, &res.scenario.label)
-        .map_err(|e| RunError::Input(e.to_string()))
+    sim::campaign::plan(&res.model, &spec, res.seed, &res.scenario.label).map_err(CliError::from)
 }
 
 /// One run: generate, split, calibrate, score (see the module docs).
-pub fn run_one(ctx: &Context<'_>, id: &RunId) -> Result<SweepRow, RunError> {
-    run_inner(ctx, id).map_err(|e| e.prefixed(id))
+pub fn run_one(ctx: &Context<'_>, id: &RunId) -> Result<SweepRow, CliError> {
+    run_inner(ctx, id).map_err(|e| e.prefixed(&id.describe()))
 }
 
-fn run_inner(ctx: &Context<'_>, id: &RunId) -> Result<SweepRow, RunError> {
+fn run_inner(ctx: &Context<'_>, id: &RunId) -> Result<SweepRow, CliError> {
     let spec = ctx.spec;
     let res = ctx
         .scenario
@@ -271,11 +260,9 @@ fn run_inner(ctx: &Context<'_>, id: &RunId) -> Result<SweepRow, RunError> {
             poses: Some(id.poses),
             noise: Some(id.noise_scale),
         })
-        .map_err(|e| RunError::Input(e.to_string()))?;
+        .map_err(CliError::from)?;
     let plan = match spec.selection {
-        Selection::Random => {
-            sim::generate::plan_of(&res).map_err(|e| RunError::Input(e.to_string()))?
-        }
+        Selection::Random => sim::generate::plan_of(&res).map_err(CliError::from)?,
         Selection::Planned => planned_plan(
             &res,
             split_counts(id.poses, spec.test_fraction),
@@ -283,11 +270,10 @@ fn run_inner(ctx: &Context<'_>, id: &RunId) -> Result<SweepRow, RunError> {
             &ctx.options,
         )?,
     };
-    let truth = sim::effects::Truth::new(&res.model, &res.effects)
-        .map_err(|e| RunError::Input(e.to_string()))?;
+    let truth = sim::effects::Truth::new(&res.model, &res.effects).map_err(CliError::from)?;
     let simulation =
         sim::generate::simulate(&truth, &res.tracker, &res.gravity, &plan, id.seed, None)
-            .map_err(|e| RunError::Runtime(e.to_string()))?;
+            .map_err(CliError::from)?;
     let table = sim::generate::measurement_table(&plan, &simulation, &res.tracker);
     let p_true: Vec<Vector3<f64>> = simulation
         .rows
@@ -317,12 +303,7 @@ fn run_inner(ctx: &Context<'_>, id: &RunId) -> Result<SweepRow, RunError> {
         (!test.rows.is_empty()).then_some(&test),
         &ctx.options,
     )
-    .map_err(|e| match e {
-        calib::CalibError::TooFewPoses { .. } | calib::CalibError::BadValue { .. } => {
-            RunError::Input(e.to_string())
-        }
-        other => RunError::Runtime(other.to_string()),
-    })?;
+    .map_err(CliError::from)?;
     let report = &cal.report;
     let model = &res.model;
     let layout = ParamLayout::new(model, cal.params.r_flange_target.is_some());
@@ -641,7 +622,7 @@ pub fn summary_text(cells: &[CellSummary]) -> String {
 /// The plot: held-out error against the truth vs poses per run, log-log, one colour per noise level;
 /// measured median (line and markers) with its 10–90 % band, and the covariance's prediction (dashed).
 pub fn plot_svg(spec: &SweepSpec, cells: &[CellSummary]) -> String {
-    use calib::plot::{Plot, Series, Style};
+    use plot::{Plot, Series, Style};
     let mut series = Vec::new();
     for &noise in &spec.noise_scale {
         let mine: Vec<&CellSummary> = cells.iter().filter(|c| c.noise_scale == noise).collect();
@@ -689,13 +670,13 @@ pub fn run_sweep(
     ctx: &Context<'_>,
     subset: Subset,
     tick: &(dyn Fn() + Sync),
-) -> Result<Vec<SweepRow>, RunError> {
+) -> Result<Vec<SweepRow>, CliError> {
     use rayon::prelude::*;
     let ids: Vec<RunId> = (0..ctx.spec.runs)
         .map(|r| ctx.spec.run_id(r))
         .filter(|id| subset.contains(id))
         .collect();
-    let results: Vec<Result<SweepRow, RunError>> = ids
+    let results: Vec<Result<SweepRow, CliError>> = ids
         .par_iter()
         .map(|id| {
             let out = run_one(ctx, id);

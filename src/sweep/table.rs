@@ -153,27 +153,19 @@ sweep_columns! {
 
 /// Deterministic Parquet bytes of `rows` (in the order given) with the key-value `metadata`.
 pub fn parquet_bytes(rows: &[SweepRow], metadata: &[(String, String)]) -> Result<Vec<u8>, String> {
-    use parquet::arrow::ArrowWriter;
     use parquet::file::metadata::KeyValue;
     let kv: Vec<KeyValue> = metadata
         .iter()
         .map(|(k, v)| KeyValue::new(k.clone(), v.clone()))
         .collect();
-    let props = sim::measurement_table::deterministic_writer_properties(ROW_GROUP_ROWS)
+    let props = sim::io::deterministic_writer_properties(ROW_GROUP_ROWS)
         .set_key_value_metadata(Some(kv))
         .build();
     let schema = Arc::new(Schema::new(fields()));
-    let batch = RecordBatch::try_new(schema.clone(), arrays(rows))
+    let batch = RecordBatch::try_new(schema, arrays(rows))
         .map_err(|e| format!("cannot build the sweep table: {e}"))?;
-    let err = |e: parquet::errors::ParquetError| format!("cannot write Parquet: {e}");
-    let mut w = ArrowWriter::try_new(Vec::new(), schema, Some(props)).map_err(err)?;
-    let mut start = 0;
-    while start < rows.len() {
-        let len = (rows.len() - start).min(ROW_GROUP_ROWS);
-        w.write(&batch.slice(start, len)).map_err(err)?;
-        start += len;
-    }
-    w.into_inner().map_err(err)
+    sim::io::parquet_bytes(&batch, props, ROW_GROUP_ROWS)
+        .map_err(|e| format!("cannot write Parquet: {e}"))
 }
 
 /// A sweep file read back: its rows (file order) and key-value metadata.

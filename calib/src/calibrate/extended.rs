@@ -109,6 +109,7 @@ pub(super) fn calibrate_extended(
         .payload
         .as_ref()
         .is_some_and(|m| train.rows.iter().any(|&r| m[r] > 0.0));
+    let mut health = cal.report.health;
     for _ in 0..EQUILIBRIUM_REFITS {
         let at = cal.params.extension.clone();
         let com_step = if payload {
@@ -129,11 +130,13 @@ pub(super) fn calibrate_extended(
             .zip(&next.layout.extensions)
             .map(|((a, b), p)| (a - b).abs() / p.scale)
             .fold(0.0, f64::max);
+        health.merge(&next.report.health);
         cal = next;
         if change < 1e-6 && com_step < 1e-6 {
             break;
         }
     }
+    cal.report.health = health;
     Ok(cal)
 }
 

@@ -355,6 +355,8 @@ fn calibrate_with(
     let sigma_rms = (obs.sigma.iter().map(|s| s * s).sum::<f64>() / obs.len() as f64).sqrt();
     let parameters = estimates(&layout, &params, &covariance, &sub);
     let strong_correlations = correlations(&layout, &covariance, &null);
+    let mut health = before.solver.health;
+    health.merge(&report.health);
     let after = FitStage {
         parameters: "kinematic error model (joint error twists and zero offsets, base, target)"
             .into(),
@@ -383,6 +385,7 @@ fn calibrate_with(
         robust: robust_summary,
         learned: None,
         warnings,
+        health,
     };
     Ok(Calibration {
         params,

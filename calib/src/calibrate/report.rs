@@ -1,6 +1,7 @@
 //! What a calibration reports: fit stages, estimates, outliers, the learned stage, and their text.
 
 use super::RobustLoss;
+use crate::health::Health;
 use crate::identifiability::{NullSpaceReport, Observability};
 use crate::lm::MinimizationReport;
 use crate::stats::ResidualStats;
@@ -127,6 +128,10 @@ pub struct CalibrationReport {
     pub learned: Option<LearnedStage>,
     /// Things a user should know (data-specific unidentifiable parameters, weak combinations, …).
     pub warnings: Vec<String>,
+    /// Numerical warnings of every solve behind this report (base-and-target fit, full fit, robust
+    /// rounds, equilibrium refits), counted: empty when every solve was clean.
+    #[serde(default)]
+    pub health: Health,
 }
 
 impl CalibrationReport {
@@ -266,6 +271,9 @@ impl CalibrationReport {
         }
         for w in &self.warnings {
             line(&mut s, format!("warning: {w}"));
+        }
+        for w in self.health.iter() {
+            line(&mut s, format!("numerical warning: {w}"));
         }
         s
     }

@@ -2,6 +2,7 @@
 
 use super::outliers::normalised_norms;
 use super::report::RobustSummary;
+use crate::health::Health;
 use crate::lm::{LmOptions, LmWorkspace, MinimizationReport, Subspace, minimize};
 use crate::params::KinematicParams;
 use crate::problem::{KinematicProblem, Observations};
@@ -46,7 +47,8 @@ impl RobustLoss {
 
 /// Outcome of [`solve`].
 pub(super) struct RobustFit {
-    /// The final solve's report: `χ²` before the first (unweighted) round, iterations of all rounds.
+    /// The final solve's report: `χ²` before the first (unweighted) round, iterations and numerical
+    /// health of all rounds.
     pub report: MinimizationReport,
     /// The SVD split of the final solve.
     pub subspace: Subspace,
@@ -80,12 +82,14 @@ pub(super) fn solve(
     let mut rounds = 0;
     let mut first_cost = None;
     let mut total_iterations = 0;
+    let mut health = Health::new();
     loop {
         rounds += 1;
         let mut prob = KinematicProblem::new(model, obs, params.clone(), active.to_vec());
         let out = minimize(&mut prob, scales, lm, ws);
         first_cost.get_or_insert(out.0.cost_initial);
         total_iterations += out.0.iterations;
+        health.merge(&out.0.health);
         let norms = prob.row_norms();
         *params = prob.into_params();
         let t = normalised_norms(&norms, &obs.weight, dim);
@@ -108,6 +112,8 @@ pub(super) fn solve(
             *params = prob.into_params();
             report.cost_initial = first_cost.unwrap_or(report.cost_initial);
             report.iterations += total_iterations;
+            health.merge(&report.health);
+            report.health = health;
             return RobustFit {
                 report,
                 subspace,

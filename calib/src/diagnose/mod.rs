@@ -30,6 +30,7 @@ pub mod unexplained;
 
 use crate::calibrate::{Calibration, CalibrationOptions, Dataset, calibrate_model, observations};
 use crate::error::{CalibError, Result};
+use crate::health::Health;
 use crate::extensions::{Cause, ModelSpec, Regressors, Term, joint_words};
 use crate::learned::LearnedKind;
 use crate::predict::Prediction;
@@ -201,6 +202,10 @@ pub struct Diagnosis {
     pub alpha: f64,
     /// Split seed.
     pub seed: u64,
+    /// Numerical warnings of every fit diagnose made (the kinematic model and every candidate),
+    /// counted: empty when all were clean.
+    #[serde(default)]
+    pub health: Health,
     /// What `--report` draws (not part of the JSON).
     #[serde(skip)]
     pub plots: report::PlotData,
@@ -584,6 +589,7 @@ pub fn diagnose_with_progress(
         .collect();
     progress("kinematic");
     let mut current = evaluate(model, &split, &ModelSpec::kinematic(), options)?;
+    let mut health = current.cal.report.health;
     let mut steps = vec![current.step.clone()];
     let mut findings = Vec::new();
     let mut trials = Vec::new();
@@ -619,6 +625,7 @@ pub fn diagnose_with_progress(
                 Err(CalibError::TooFewPoses { .. }) => continue,
                 Err(e) => return Err(e),
             };
+            health.merge(&cand.cal.report.health);
             let tz = significance::paired(&current.pose_sq, &cand.pose_sq).z;
             let trz = train_z(&current.cal, &cand.cal);
             let gain = 1.0 - cand.step.test_rms_m / current.step.test_rms_m;
@@ -742,6 +749,7 @@ pub fn diagnose_with_progress(
         trials,
         alpha: options.alpha,
         seed: options.seed,
+        health,
         plots,
     })
 }

@@ -12,10 +12,7 @@ use arrow_schema::{DataType, Field, Schema};
 use parquet::arrow::ArrowWriter;
 use parquet::arrow::ProjectionMask;
 use parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder;
-use parquet::basic::Compression;
-use parquet::file::properties::{
-    DEFAULT_CREATED_BY, EnabledStatistics, WriterProperties, WriterPropertiesBuilder, WriterVersion,
-};
+use parquet::file::properties::WriterProperties;
 use parquet::schema::types::ColumnPath;
 use std::collections::HashMap;
 use std::path::Path;
@@ -34,31 +31,10 @@ pub fn write_parquet_bytes(table: &MeasurementTable) -> Result<Vec<u8>> {
     write_parquet_unchecked(table, IN_MEMORY)
 }
 
-/// Writer properties with every setting that shapes the bytes fixed explicitly (writer version,
-/// creator, Snappy, row groups of at most `max_row_group_rows` rows, page sizes, chunk statistics, no
-/// bloom filters, no metadata, no dictionaries), so that the bytes depend on the data only, whatever
-/// the parquet crate's defaults become. Every deterministic Parquet file of the project starts here.
-pub fn deterministic_writer_properties(max_row_group_rows: usize) -> WriterPropertiesBuilder {
-    WriterProperties::builder()
-        .set_writer_version(WriterVersion::PARQUET_1_0)
-        .set_created_by(DEFAULT_CREATED_BY.to_string())
-        .set_compression(Compression::SNAPPY)
-        .set_max_row_group_row_count(Some(max_row_group_rows))
-        .set_max_row_group_bytes(None)
-        .set_write_batch_size(1024)
-        .set_data_page_size_limit(1024 * 1024)
-        .set_data_page_row_count_limit(20_000)
-        .set_statistics_enabled(EnabledStatistics::Chunk)
-        .set_bloom_filter_enabled(false)
-        .set_key_value_metadata(None)
-        .set_sorting_columns(None)
-        .set_dictionary_enabled(false)
-}
-
 /// Writer properties of a measurement table, all set explicitly so that the bytes depend on the table
 /// only.
 fn writer_properties(table: &MeasurementTable) -> WriterProperties {
-    let mut b = deterministic_writer_properties(PARQUET_MAX_ROW_GROUP_ROWS)
+    let mut b = crate::io::deterministic_writer_properties(PARQUET_MAX_ROW_GROUP_ROWS)
         .set_column_dictionary_enabled(ColumnPath::from("pose"), true);
     if table.dir.is_some() {
         for j in 1..=table.n_joints {
@@ -262,7 +238,7 @@ fn directions(arr: &dyn Array) -> std::result::Result<Vec<i8>, ColumnProblem> {
 
 /// Reads a Parquet measurement table; `file` is the name shown in errors.
 pub(super) fn read_parquet_file(path: &Path, file: &str) -> Result<MeasurementTable> {
-    let f = std::fs::File::open(path).map_err(|e| SimError::Io {
+    let f = std::fs::File::open(path).map_err(|e| SimError::Read {
         path: path.to_path_buf(),
         source: e,
     })?;

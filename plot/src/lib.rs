@@ -10,7 +10,7 @@
 //! are skipped; a plot without any drawable point still renders its frame, title and labels.
 //!
 //! ```
-//! use calib::plot::{Plot, Series, Style};
+//! use plot::{Plot, Series, Style};
 //! let plot = Plot {
 //!     title: "held-out error".into(),
 //!     x_label: "poses".into(),
@@ -26,6 +26,8 @@
 //! let svg = plot.to_svg(640, 420);
 //! assert!(svg.starts_with("<svg") && svg.trim_end().ends_with("</svg>"));
 //! ```
+
+#![warn(missing_docs)]
 
 use std::fmt::Write;
 
