@@ -18,6 +18,9 @@ py="$venv/bin/python"
 echo "== shipped DH robots against their published tables" >&2
 "$py" scripts/check_dh_urdfs.py
 
+echo "== no import cycles between source files" >&2
+"$py" scripts/check_import_cycles.py
+
 echo "== MuJoCo reference, re-run live and compared with the stored golden files" >&2
 live="target/golden-live"
 mkdir -p "$live"

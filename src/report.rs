@@ -163,12 +163,13 @@ pub fn write(
         Ok(())
     };
     let to_um = |v: &[f64]| v.iter().map(|x| x * 1e6).collect::<Vec<_>>();
+    let final_model = d.model.name();
     let hist = histogram_svg(
         "Held-out position errors",
         "error (µm)",
         &[
             ("kinematic", &to_um(&plots.test_errors_kinematic_m)),
-            (&d.model, &to_um(&plots.test_errors_final_m)),
+            (&final_model, &to_um(&plots.test_errors_final_m)),
         ],
         30,
         720,

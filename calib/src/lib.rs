@@ -99,6 +99,7 @@ pub mod learned;
 pub mod lie3;
 pub mod lm;
 pub mod model_file;
+pub mod observations;
 pub mod params;
 pub mod plan;
 pub mod predict;

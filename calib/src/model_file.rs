@@ -190,18 +190,8 @@ impl CalibratedModel {
             }),
             extensions: cal.extensions.as_ref().map(|settings| ExtensionsJson {
                 settings: settings.clone(),
-                names: cal
-                    .layout
-                    .extensions
-                    .iter()
-                    .map(|e| e.name())
-                    .collect(),
-                units: cal
-                    .layout
-                    .extensions
-                    .iter()
-                    .map(|e| e.unit)
-                    .collect(),
+                names: cal.layout.extensions.iter().map(|e| e.name()).collect(),
+                units: cal.layout.extensions.iter().map(|e| e.unit).collect(),
                 values: p.extension.clone(),
             }),
             learned: cal.learned.clone(),

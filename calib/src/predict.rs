@@ -18,8 +18,8 @@ use crate::error::{CalibError, Result};
 use crate::extensions::{Regressors, apply};
 use crate::learned::LearnedResidual;
 use crate::lie3::log_rotation;
+use crate::observations::Observations;
 use crate::params::{KinematicParams, ParamLayout};
-use crate::problem::Observations;
 use nalgebra::{DMatrix, Matrix3, Vector3};
 use rayon::prelude::*;
 use sim::Model;
@@ -134,7 +134,13 @@ impl<'a> Prediction<'a> {
     /// Predicted target position of row `r` (tracker frame, m), learned correction included; the
     /// predicted orientation is left in `s.chain.r_tracker_target`.
     #[inline]
-    pub fn row(&self, regs: &Regressors, r: usize, q: &[f64], s: &mut PredictScratch) -> Vector3<f64> {
+    pub fn row(
+        &self,
+        regs: &Regressors,
+        r: usize,
+        q: &[f64],
+        s: &mut PredictScratch,
+    ) -> Vector3<f64> {
         let p = self.physical(regs, r, q, s).p_tracker;
         match self.learned {
             Some(l) => p + l.predict(q),
@@ -166,21 +172,22 @@ impl<'a> Prediction<'a> {
         let n = self.nq;
         assert_eq!(q.len(), position.len() * n, "joint values per row");
         let rows = position.len();
-        let work = |start: usize, pos: &mut [Vector3<f64>], mut rot: Option<&mut [Matrix3<f64>]>| {
-            let mut s = self.scratch();
-            for (k, p) in pos.iter_mut().enumerate() {
-                let r = start + k;
-                let qr = &q[r * n..(r + 1) * n];
-                *p = if learned {
-                    self.row(regs, r, qr, &mut s)
-                } else {
-                    self.physical(regs, r, qr, &mut s).p_tracker
-                };
-                if let Some(o) = rot.as_deref_mut() {
-                    o[k] = s.chain.r_tracker_target;
+        let work =
+            |start: usize, pos: &mut [Vector3<f64>], mut rot: Option<&mut [Matrix3<f64>]>| {
+                let mut s = self.scratch();
+                for (k, p) in pos.iter_mut().enumerate() {
+                    let r = start + k;
+                    let qr = &q[r * n..(r + 1) * n];
+                    *p = if learned {
+                        self.row(regs, r, qr, &mut s)
+                    } else {
+                        self.physical(regs, r, qr, &mut s).p_tracker
+                    };
+                    if let Some(o) = rot.as_deref_mut() {
+                        o[k] = s.chain.r_tracker_target;
+                    }
                 }
-            }
-        };
+            };
         if rows <= CHUNK_ROWS {
             work(0, position, orientation);
             return;

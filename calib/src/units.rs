@@ -70,13 +70,17 @@ impl Unit {
 
     /// `rad` for a rotational quantity, `m` for a translational one.
     pub fn angle_or_length(rotational: bool) -> Unit {
-        if rotational { Unit::Radian } else { Unit::Metre }
+        if rotational {
+            Unit::Radian
+        } else {
+            Unit::Metre
+        }
     }
 }
 
 impl fmt::Display for Unit {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(self.symbol())
+        f.pad(self.symbol())
     }
 }
 

@@ -163,7 +163,11 @@ fn extensions_are_recovered_within_their_predicted_standard_deviations() {
             &CalibrationOptions::default(),
         )
         .unwrap();
-        assert!(cal.report.health.is_clean(), "seed {seed}: {}", cal.report.health);
+        assert!(
+            cal.report.health.is_clean(),
+            "seed {seed}: {}",
+            cal.report.health
+        );
         // The truth in the estimator's parameters: compliance 1/k, half the dead band, α, no drift.
         let truth = |name: &str| -> f64 {
             match name {

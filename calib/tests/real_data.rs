@@ -46,7 +46,11 @@ fn run(robot: &str, file: &str) -> (f64, f64, f64) {
         "{robot}: {:?}",
         cal.report.after.solver
     );
-    assert!(cal.report.health.is_clean(), "{robot}: {}", cal.report.health);
+    assert!(
+        cal.report.health.is_clean(),
+        "{robot}: {}",
+        cal.report.health
+    );
     let before = cal.report.before.test.as_ref().unwrap();
     let after = cal.report.after.test.as_ref().unwrap();
     eprintln!(

@@ -40,7 +40,11 @@ fn noise_free_errors_are_recovered_to_1e9_m_on_held_out_poses() {
             "{name}: {:?}",
             cal.report.after.solver
         );
-        assert!(cal.report.health.is_clean(), "{name}: {}", cal.report.health);
+        assert!(
+            cal.report.health.is_clean(),
+            "{name}: {}",
+            cal.report.health
+        );
         let chain = calib::chain::Chain::new(&model, &cal.params);
         let mut s = calib::chain::ChainScratch::new(model.nq());
         let mut worst = 0.0f64;
@@ -95,7 +99,11 @@ fn noisy_recovery(name: &str, orientation: bool, reps: usize, seed: u64) {
             "rep {rep}: {:?}",
             cal.report.after.solver
         );
-        assert!(cal.report.health.is_clean(), "rep {rep}: {}", cal.report.health);
+        assert!(
+            cal.report.health.is_clean(),
+            "rep {rep}: {}",
+            cal.report.health
+        );
         let c = &cal.covariance;
         // Identifiable combinations at the training poses.
         let np = c.nrows();
@@ -103,7 +111,8 @@ fn noisy_recovery(name: &str, orientation: bool, reps: usize, seed: u64) {
         let mut j = nalgebra::DMatrix::zeros(dim * configs.len(), np);
         let mut d = nalgebra::DVector::zeros(dim * configs.len());
         for (k, q) in configs.iter().enumerate() {
-            let (p, rot, jq) = calib::calibrate::prediction_and_jacobian(&model, &cal.params, q).unwrap();
+            let (p, rot, jq) =
+                calib::calibrate::prediction_and_jacobian(&model, &cal.params, q).unwrap();
             j.view_mut((dim * k, 0), (dim, np)).copy_from(&jq);
             let (pt, rt) = truth.target(&model, q);
             d.fixed_rows_mut::<3>(dim * k).copy_from(&(p - pt));
@@ -132,7 +141,8 @@ fn noisy_recovery(name: &str, orientation: bool, reps: usize, seed: u64) {
         }
         // Held-out poses: error against the noise-free truth vs trace(J C Jᵀ).
         for q in random_configs(&model, 100, &mut g) {
-            let (p, _, jq) = calib::calibrate::prediction_and_jacobian(&model, &cal.params, &q).unwrap();
+            let (p, _, jq) =
+                calib::calibrate::prediction_and_jacobian(&model, &cal.params, &q).unwrap();
             let (pt, _) = truth.target(&model, &q);
             held_err2 += (p - pt).norm_squared();
             let jp = jq.rows(0, 3);

@@ -4,7 +4,7 @@ use super::robot_arg::RobotArgs;
 use super::shared::{CliError, CliResult, print_json, read_table};
 use calib::CalibError;
 use calib::calibrate::{CalibrationOptions, Dataset, RobustLoss, calibrate_model};
-use calib::extensions::ModelSpec;
+use calib::extensions::ModelChoice;
 use calib::model_file::{CalibratedModel, calibrated_urdf, urdf_deviation};
 use calib::robot::Robot;
 use calib::stats::split_by_pose;
@@ -70,10 +70,9 @@ impl Robust {
 
 /// Runs `robocal calibrate`.
 pub fn run(args: Args) -> CliResult {
-    let model_spec = if args.model == "auto" {
-        None
-    } else {
-        Some(ModelSpec::parse(&args.model)?)
+    let model_spec = match args.model.parse::<ModelChoice>()? {
+        ModelChoice::Auto => None,
+        ModelChoice::Model(m) => Some(m),
     };
     let robust = args.robust.map(Robust::loss);
     if !(0.0..1.0).contains(&args.test_fraction) {
@@ -137,7 +136,7 @@ pub fn run(args: Args) -> CliResult {
             if !args.json {
                 eprintln!("--model auto: diagnose chose {}", d.model);
             }
-            ModelSpec::parse(&d.model)?
+            d.model
         }
     };
     let cal =

@@ -24,17 +24,16 @@ pub mod report;
 pub mod robust;
 pub mod start;
 
+pub use crate::predict::prediction_and_jacobian;
 pub use extended::EQUILIBRIUM_REFITS;
 pub use report::{
     CalibrationReport, Correlation, FitStage, LearnedStage, Outlier, ParameterEstimate,
     RobustSummary,
 };
 pub use robust::RobustLoss;
-pub use crate::predict::prediction_and_jacobian;
 pub use start::{generic_rank, initial_params};
 
 use crate::error::{CalibError, Result};
-use estimates::{correlations, estimates};
 use crate::extensions::{ExtensionSettings, ModelSpec, Regressors};
 use crate::identifiability::{Observability, describe_null_space};
 use crate::learned::LearnedResidual;
@@ -42,6 +41,7 @@ use crate::lm::{LmOptions, LmWorkspace, Subspace, minimize};
 use crate::params::{KinematicParams, ParamLayout, ParameterScales};
 use crate::problem::{KinematicProblem, NoiseModel, Observations};
 use crate::stats::residual_stats;
+use estimates::{correlations, estimates};
 use nalgebra::DMatrix;
 use sim::Model;
 use sim::measurement_table::MeasurementTable;

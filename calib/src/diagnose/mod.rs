@@ -30,8 +30,8 @@ pub mod unexplained;
 
 use crate::calibrate::{Calibration, CalibrationOptions, Dataset, calibrate_model, observations};
 use crate::error::{CalibError, Result};
-use crate::health::Health;
 use crate::extensions::{Cause, ModelSpec, Regressors, Term, joint_words};
+use crate::health::Health;
 use crate::learned::LearnedKind;
 use crate::predict::Prediction;
 use crate::stats::split_by_pose;
@@ -91,8 +91,8 @@ impl Default for DiagnoseOptions {
 /// One model of the sequence: its fit and held-out errors.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Step {
-    /// Model name (`kinematic`, `kinematic+joint_compliance`, …).
-    pub model: String,
+    /// The model (serialised as its name: `kinematic`, `kinematic+joint_compliance`, …).
+    pub model: ModelSpec,
     /// RMS position error on the training poses (m).
     pub train_rms_m: f64,
     /// RMS position error on the test poses (m).
@@ -194,8 +194,8 @@ pub struct Diagnosis {
     pub findings: Vec<Finding>,
     /// Structure no known cause explains.
     pub unexplained: unexplained::Unexplained,
-    /// The chosen model (what `calibrate --model auto` fits).
-    pub model: String,
+    /// The chosen model (what `calibrate --model auto` fits; serialised as its name).
+    pub model: ModelSpec,
     /// Every candidate tried.
     pub trials: Vec<Trial>,
     /// Significance level used.
@@ -304,7 +304,7 @@ pub(crate) fn evaluate(
     let test_err = prediction.errors(&test_obs);
     let pose_sq = per_pose(&split.test_pose, test_err.iter().map(|e| e.norm_squared()));
     let step = Step {
-        model: spec.name(),
+        model: spec.clone(),
         train_rms_m: rms(&train_err),
         test_rms_m: rms(&test_err),
         test_max_m: test_err.iter().map(|e| e.norm()).fold(0.0, f64::max),
@@ -745,7 +745,7 @@ pub fn diagnose_with_progress(
         steps,
         findings,
         unexplained,
-        model: current.spec.name(),
+        model: current.spec.clone(),
         trials,
         alpha: options.alpha,
         seed: options.seed,

@@ -16,8 +16,8 @@
 
 use super::significance::{normal_upper_quantile, paired};
 use super::{DiagnoseOptions, Evaluated, Split, per_pose, rms};
-use crate::learned::LearnedKind;
 use crate::error::Result;
+use crate::learned::LearnedKind;
 use nalgebra::{DMatrix, DVector, Vector3};
 use serde::{Deserialize, Serialize};
 use sim::Model;

@@ -8,8 +8,8 @@
 //! A joint whose torque does not change over the data (joint 1 of an upright arm) cannot be identified;
 //! the solver says so and leaves its compliance at zero.
 
-use super::{Cause, CauseModel, ExtensionParam, ExtensionSettings, PlotAxis, RowInputs, Term};
 use super::per_joint_params;
+use super::{Cause, CauseModel, ExtensionParam, ExtensionSettings, PlotAxis, RowInputs, Term};
 use crate::units::Unit;
 use sim::Model;
 use sim::measurement_table::MeasurementTable;

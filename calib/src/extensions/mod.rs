@@ -31,7 +31,7 @@ pub mod thermal_drift;
 
 pub use regressors::{EQUILIBRIUM_ITERATIONS, Regressors, RowInputs, apply};
 pub use settings::{BacklashSign, ExtensionSettings, ThermalInput};
-pub use spec::ModelSpec;
+pub use spec::{ModelChoice, ModelSpec};
 
 use crate::error::Result;
 use crate::units::Unit;
@@ -175,7 +175,7 @@ impl Cause {
 
 impl std::fmt::Display for Cause {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(self.name())
+        f.pad(self.name())
     }
 }
 

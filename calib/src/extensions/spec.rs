@@ -4,10 +4,11 @@
 use super::Cause;
 use crate::error::{CalibError, Result};
 use crate::learned::LearnedKind;
-use serde::{Deserialize, Serialize};
+use serde::{Deserialize, Deserializer, Serialize, Serializer};
 
 /// Parsed `--model` value: `kinematic`, optionally `+cause` words and one `+learned:KIND`.
-#[derive(Clone, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+/// Serialised as its canonical name ([`ModelSpec::name`]).
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
 pub struct ModelSpec {
     /// Physical extensions, sorted, without repeats.
     pub causes: Vec<Cause>,
@@ -97,6 +98,49 @@ impl ModelSpec {
     }
 }
 
+impl Serialize for ModelSpec {
+    fn serialize<S: Serializer>(&self, s: S) -> std::result::Result<S::Ok, S::Error> {
+        s.serialize_str(&self.name())
+    }
+}
+
+impl<'de> Deserialize<'de> for ModelSpec {
+    fn deserialize<D: Deserializer<'de>>(d: D) -> std::result::Result<Self, D::Error> {
+        let text = String::deserialize(d)?;
+        ModelSpec::parse(&text).map_err(serde::de::Error::custom)
+    }
+}
+
+/// A `--model` choice: a model, or `auto` (what diagnose chooses on the data).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum ModelChoice {
+    /// Diagnose decides.
+    Auto,
+    /// This model.
+    Model(ModelSpec),
+}
+
+impl std::str::FromStr for ModelChoice {
+    type Err = CalibError;
+
+    fn from_str(s: &str) -> Result<Self> {
+        if s.trim() == "auto" {
+            Ok(ModelChoice::Auto)
+        } else {
+            ModelSpec::parse(s).map(ModelChoice::Model)
+        }
+    }
+}
+
+impl std::fmt::Display for ModelChoice {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            ModelChoice::Auto => f.pad("auto"),
+            ModelChoice::Model(m) => m.fmt(f),
+        }
+    }
+}
+
 impl std::str::FromStr for ModelSpec {
     type Err = CalibError;
 
@@ -107,6 +151,6 @@ impl std::str::FromStr for ModelSpec {
 
 impl std::fmt::Display for ModelSpec {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(&self.name())
+        f.pad(&self.name())
     }
 }

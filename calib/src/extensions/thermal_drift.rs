@@ -119,7 +119,12 @@ impl CauseModel for ThermalDrift {
     fn params(&self, model: &Model, settings: &ExtensionSettings) -> Vec<ExtensionParam> {
         let per_kelvin = matches!(settings.thermal, Some(ThermalInput::Temperature { .. }));
         let (rad, m, growth, gain) = if per_kelvin {
-            (Unit::RadianPerKelvin, Unit::MetrePerKelvin, Unit::PerKelvin, 1.0)
+            (
+                Unit::RadianPerKelvin,
+                Unit::MetrePerKelvin,
+                Unit::PerKelvin,
+                1.0,
+            )
         } else {
             (
                 Unit::RadianPerWarmUp,

@@ -86,7 +86,7 @@ impl LearnedKind {
 
 impl std::fmt::Display for LearnedKind {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(self.name())
+        f.pad(self.name())
     }
 }
 
