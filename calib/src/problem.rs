@@ -13,7 +13,7 @@ use crate::lie3::{left_jacobian_inverse, log_rotation};
 use crate::lm::LeastSquaresProblem;
 use crate::params::{KinematicParams, ParamLayout};
 use crate::predict::{PredictScratch, physical_row};
-use nalgebra::{DMatrix, Matrix3, Vector3};
+use nalgebra::{DMatrix, Vector3};
 use sim::Model;
 
 pub use crate::observations::{NoiseModel, Observations};
