@@ -232,13 +232,19 @@ fn planned_plan(
     options: &CalibrationOptions,
 ) -> Result<sim::campaign::Plan, RunError> {
     let mut cand_res = res.clone();
-    cand_res.campaign.poses = Some(candidates.max(2 * (train + test)));
+    cand_res.campaign = res
+        .campaign
+        .to_builder()
+        .label(&res.scenario.label)
+        .poses(Some(candidates.max(2 * (train + test))))
+        .build()
+        .map_err(|e| RunError::Input(e.to_string()))?;
     let cand = sim::generate::plan_of(&cand_res).map_err(|e| RunError::Input(e.to_string()))?;
     let configs: Vec<Vec<f64>> = (0..cand.n_poses)
         .map(|k| cand.q_row(k * cand.repeats).to_vec())
         .collect();
     let mut po = calib::plan::PlanOptions::new(configs.len(), train, res.seed);
-    po.target_offset = res.tracker.p_flange;
+    po.target_offset = *res.tracker.p_flange();
     po.calibration = *options;
     po.random_sets = 0;
     let chosen = calib::plan::select_from(&res.model, &configs, &po)
@@ -250,9 +256,14 @@ fn planned_plan(
             .take(test)
             .map(|c| configs[c].clone()),
     );
-    let mut spec = res.campaign.clone();
-    spec.poses = Some(train + test);
-    spec.sampling = sim::campaign::Sampling::List { q: list };
+    let spec = res
+        .campaign
+        .to_builder()
+        .label(&res.scenario.label)
+        .poses(Some(train + test))
+        .sampling(sim::campaign::Sampling::List { q: list })
+        .build()
+        .map_err(|e| RunError::Input(e.to_string()))?;
     sim::campaign::plan(&res.model, &spec, res.seed, &res.scenario.label)
         .map_err(|e| RunError::Input(e.to_string()))
 }
@@ -359,7 +370,7 @@ fn run_inner(ctx: &Context<'_>, id: &RunId) -> Result<SweepRow, RunError> {
         seed: id.seed,
         train_poses: report.n_train_poses as i64,
         test_poses: report.n_test_poses as i64,
-        sigma_rms_m: if res.tracker.noise_scale > 0.0 {
+        sigma_rms_m: if res.tracker.noise_scale() > 0.0 {
             sigma_rms
         } else {
             0.0
