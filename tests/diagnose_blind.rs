@@ -1,7 +1,7 @@
 //! Blind tests of `robocal diagnose`: each case draws, from a seed kept here, which effect is hidden (or
-//! none, or two at once), on which joints and how large (within published ranges), simulates a campaign
-//! with `robocal generate`, runs `robocal diagnose --json` on the measurements alone as a user would,
-//! and checks the named causes, their joints and that the final held-out RMS is within 1.5× the noise
+//! none, or two at once), on which joints and how large (within published ranges), builds the scenario
+//! in code ([`sim::scenario::ScenarioBuilder`]), simulates its campaign as `robocal generate` does,
+//! runs `robocal diagnose --json` on the measurements alone as a user would, and checks the named causes, their joints and that the final held-out RMS is within 1.5× the noise
 //! floor. The hidden effect never reaches the code under test except through the measurement file.
 //!
 //! `ROBOCAL_BLIND_SEED=N` draws other cases; `ROBOCAL_BLIND_CASES=K` runs K of them (default 30).
@@ -9,6 +9,12 @@
 use rand::rngs::StdRng;
 use rand::{RngExt, SeedableRng};
 use serde_json::Value;
+use sim::campaign::DirectionRule;
+use sim::effects::gear_backlash::BacklashMode;
+use sim::effects::thermal_drift::{TemperatureProfile, WarmUp};
+use sim::scenario::{
+    Draw, KinematicSection, Magnitude, Overrides, PayloadSection, SamplingKind, ScenarioBuilder,
+};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -17,39 +23,33 @@ const DEFAULT_SEED: u64 = 0x5eed_b11d;
 const DEFAULT_CASES: usize = 30;
 
 /// The base campaign: the iiwa 7 with drawn geometric errors, 300 random poses, a typical tracker.
-const BASE: &str = r#"
-name = "blind"
-description = "blind diagnose case"
-seed = 1
-
-[robot]
-name = "iiwa7"
-
-[campaign]
-poses = 300
-repeats = 1
-sampling = "random"
-seconds_per_pose = 15.0
-directions = "move"
-joint_margin_rad = 0.05
-floor_z_m = 0.05
-min_axis_distance_m = 0.10
-
-[tracker]
-xyz_m = [2.5, 1.0, -0.2]
-rpy_rad = [0.0, 0.0, 2.5]
-reflector_m = [0.0, 0.0, 0.05]
-radial_sigma_a_m = 5e-6
-radial_sigma_b_m_per_m = 0.15e-6
-transverse_sigma_a_m = 7.5e-6
-transverse_sigma_b_m_per_m = 3e-6
-outlier_rate = 0.0
-
-[effects.kinematic]
-joint_rotation_rad = { normal = [0.0, 3e-4] }
-joint_translation_m = { normal = [0.0, 2e-4] }
-zero_offset_rad = { normal = [0.0, 5e-4] }
-"#;
+fn base() -> ScenarioBuilder {
+    let list = |v: [f64; 3]| Magnitude::List(v.iter().map(|x| Magnitude::Number(*x)).collect());
+    ScenarioBuilder::builtin("iiwa7")
+        .label("blind scenario")
+        .name("blind")
+        .description("blind diagnose case")
+        .seed(1)
+        .poses(300)
+        .repeats(1)
+        .sampling(SamplingKind::Random)
+        .seconds_per_pose(15.0)
+        .directions(DirectionRule::Move)
+        .joint_margin_rad(0.05)
+        .floor_z_m(0.05)
+        .min_axis_distance_m(0.10)
+        .tracker_placement(list([2.5, 1.0, -0.2]), list([0.0, 0.0, 2.5]))
+        .reflector_m([0.0, 0.0, 0.05])
+        .radial_sigma(5e-6, 0.15e-6)
+        .transverse_sigma(7.5e-6, 3e-6)
+        .outlier_rate(0.0)
+        .kinematic(KinematicSection {
+            joint_rotation_rad: Some(Magnitude::Draw(Draw::Normal([0.0, 3e-4]))),
+            joint_translation_m: Some(Magnitude::Draw(Draw::Normal([0.0, 2e-4]))),
+            zero_offset_rad: Some(Magnitude::Draw(Draw::Normal([0.0, 5e-4]))),
+            ..KinematicSection::default()
+        })
+}
 
 /// One hidden case.
 #[derive(Clone, Debug)]
@@ -58,7 +58,7 @@ struct Case {
     /// cause -> 1-based joints.
     hidden: BTreeMap<String, Vec<usize>>,
     description: String,
-    toml: String,
+    scenario: ScenarioBuilder,
 }
 
 fn pick(rng: &mut StdRng, pool: &[usize], count: usize) -> Vec<usize> {
@@ -70,19 +70,23 @@ fn pick(rng: &mut StdRng, pool: &[usize], count: usize) -> Vec<usize> {
     out
 }
 
-fn array(joints: &[usize], values: &[f64], rest: &str) -> String {
-    let v: Vec<String> = (1..=7)
-        .map(|j| match joints.iter().position(|x| *x == j) {
-            Some(k) => format!("{:e}", values[k]),
-            None => rest.into(),
-        })
-        .collect();
-    format!("[{}]", v.join(", "))
+/// One magnitude per joint of the iiwa 7: `values` at `joints` (in order), `rest` elsewhere.
+fn array(joints: &[usize], values: &[f64], rest: f64) -> Magnitude {
+    Magnitude::List(
+        (1..=7)
+            .map(|j| {
+                Magnitude::Number(match joints.iter().position(|x| *x == j) {
+                    Some(k) => values[k],
+                    None => rest,
+                })
+            })
+            .collect(),
+    )
 }
 
 fn draw(rng: &mut StdRng, seed: u64) -> Case {
     let mut hidden = BTreeMap::new();
-    let mut toml = BASE.to_string();
+    let mut scenario = base();
     let mut description = Vec::new();
     // Which effects: none, one of three, or two at once.
     let kind = rng.random_range(0..7);
@@ -101,10 +105,7 @@ fn draw(rng: &mut StdRng, seed: u64) -> Case {
         let count = rng.random_range(1..=2);
         let joints = pick(rng, &[2, 3, 4], count);
         let k: Vec<f64> = joints.iter().map(|_| rng.random_range(5e3..2e4)).collect();
-        toml.push_str(&format!(
-            "\n[effects.compliance]\nstiffness_nm_per_rad = {}\n",
-            array(&joints, &k, "inf")
-        ));
+        scenario = scenario.compliance(array(&joints, &k, f64::INFINITY));
         description.push(format!(
             "compliance {joints:?} k = {:?} N m/rad",
             k.iter().map(|v| format!("{v:.0}")).collect::<Vec<_>>()
@@ -118,13 +119,11 @@ fn draw(rng: &mut StdRng, seed: u64) -> Case {
                 rng.random_range(-0.02..0.02),
                 rng.random_range(0.0..0.1),
             ];
-            toml.push_str(&format!(
-                "\n[campaign.payload]\nchoice_kg = [0.0, {:e}, {m:e}]\ncom_m = [{:e}, {:e}, {:e}]\n",
-                m / 2.0,
-                com[0],
-                com[1],
-                com[2]
-            ));
+            scenario = scenario.payload(PayloadSection {
+                mass_kg: None,
+                choice_kg: Some(vec![0.0, m / 2.0, m]),
+                com_m: Some(com),
+            });
             description.push(format!("payload ≤ {m:.1} kg at {com:.3?} m"));
         }
         used.extend(joints.iter().copied());
@@ -140,10 +139,7 @@ fn draw(rng: &mut StdRng, seed: u64) -> Case {
             .iter()
             .map(|_| rng.random_range(2e-4..6e-4))
             .collect();
-        toml.push_str(&format!(
-            "\n[effects.backlash]\ndead_band_rad = {}\nmode = \"direction\"\n",
-            array(&joints, &b, "0.0")
-        ));
+        scenario = scenario.backlash(array(&joints, &b, 0.0), BacklashMode::Direction);
         description.push(format!(
             "backlash {joints:?} b = {:?} rad",
             b.iter().map(|v| format!("{v:.2e}")).collect::<Vec<_>>()
@@ -154,10 +150,11 @@ fn draw(rng: &mut StdRng, seed: u64) -> Case {
         // A warm-up of 5 to 15 K with a 20-40 min time constant, aluminium links.
         let delta = rng.random_range(5.0..15.0);
         let tau = rng.random_range(1200.0..2400.0);
-        toml.push_str(&format!(
-            "\n[campaign.temperature]\nwarm_up = {{ t0_c = 20.0, delta_c = {delta}, tau_s = {tau} }}\n\
-             \n[effects.thermal]\nt_ref_c = 20.0\nalpha_per_k = 23e-6\nbeta_rad_per_k = 0.0\n"
-        ));
+        scenario = scenario
+            .temperature(TemperatureProfile::WarmUp(
+                WarmUp::new(20.0, delta, tau).unwrap(),
+            ))
+            .thermal(20.0, Magnitude::Number(23e-6), Some(Magnitude::Number(0.0)));
         description.push(format!("thermal ΔT = {delta:.1} K, τ = {tau:.0} s"));
         hidden.insert("thermal_drift".to_string(), Vec::new());
     }
@@ -168,7 +165,7 @@ fn draw(rng: &mut StdRng, seed: u64) -> Case {
         seed,
         hidden,
         description: description.join(" + "),
-        toml,
+        scenario,
     }
 }
 
@@ -186,24 +183,18 @@ fn work_dir(tag: &str) -> PathBuf {
     d
 }
 
-fn generate(dir: &Path, toml: &str, seed: u64) -> PathBuf {
-    let scenario = dir.join("scenario.toml");
-    std::fs::write(&scenario, toml).unwrap();
+/// Simulates the campaign of `scenario` with `seed` into `dir/data` (as `robocal generate --seed`
+/// does); returns the measurement file, the only thing diagnose gets.
+fn generate(dir: &Path, scenario: &ScenarioBuilder, seed: u64) -> PathBuf {
+    let res = scenario
+        .clone()
+        .resolve(&Overrides {
+            seed: Some(seed),
+            ..Overrides::default()
+        })
+        .unwrap_or_else(|e| panic!("scenario: {e}"));
     let out = dir.join("data");
-    let o = robocal(&[
-        "generate",
-        "--scenario",
-        scenario.to_str().unwrap(),
-        "--out",
-        out.to_str().unwrap(),
-        "--seed",
-        &seed.to_string(),
-    ]);
-    assert!(
-        o.status.success(),
-        "generate failed: {}",
-        String::from_utf8_lossy(&o.stderr)
-    );
+    sim::generate::generate(&res, &out, None).unwrap_or_else(|e| panic!("generate failed: {e}"));
     out.join("measurements.parquet")
 }
 
@@ -253,7 +244,7 @@ fn run_cases(cases: &[Case]) -> Vec<String> {
                     let k = next.fetch_add(1, std::sync::atomic::Ordering::SeqCst);
                     let Some(case) = cases.get(k) else { break };
                     let dir = work_dir(&format!("case{k}"));
-                    let data = generate(&dir, &case.toml, case.seed);
+                    let data = generate(&dir, &case.scenario, case.seed);
                     let d = diagnose(&data);
                     let got = found(&d);
                     let floor = d["noise_floor_m"].as_f64().unwrap();
@@ -334,7 +325,7 @@ fn a_periodic_joint_error_comes_back_as_unexplained() {
     let amplitude = rng.random_range(1.5e-4..3e-4); // rad
     let phase = rng.random_range(0.0..std::f64::consts::TAU);
     let dir = work_dir("periodic");
-    let data = generate(&dir, BASE, rng.random::<u32>() as u64);
+    let data = generate(&dir, &base(), rng.random::<u32>() as u64);
     // The real link angle is q + A sin(2 q + φ): the controller reports q_true − A sin(2 q_true + φ).
     let mut table = sim::measurement_table::read(&data).unwrap();
     let n = table.n_joints;

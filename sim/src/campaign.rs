@@ -51,42 +51,14 @@ use crate::kinematics::{Data, forward_kinematics, point_jacobian, spatial_jacobi
 use crate::lie::{Pose, log_pose, pose_from};
 use crate::model::{JointKind, Model};
 use nalgebra::{DMatrix, DVector, Matrix3, Matrix3xX, Vector3};
-use rand::rngs::Xoshiro256PlusPlus;
-use rand::{RngExt, SeedableRng};
+use rand::RngExt;
 use rayon::prelude::*;
 use std::path::PathBuf;
 
-/// Stream id of the random pose draws (index: pose).
-pub const STREAM_POSES: u64 = 1;
-/// Stream id of the random approach directions (index: pose).
-pub const STREAM_DIRECTIONS: u64 = 2;
-/// Stream id of the payload choices (index: pose).
-pub const STREAM_PAYLOAD: u64 = 3;
-/// Stream id of the tracker noise (index: row).
-pub const STREAM_TRACKER: u64 = 4;
-/// Stream id of the scenario's parameter draws (index: a hash of the key).
-pub const STREAM_PARAMETERS: u64 = 5;
-
-/// SplitMix64 finaliser: a bijective, well-mixing map of 64-bit words (Steele, Lea and Flood 2014).
-#[inline]
-pub fn splitmix64(x: u64) -> u64 {
-    let mut z = x.wrapping_add(0x9E37_79B9_7F4A_7C15);
-    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-    z ^ (z >> 31)
-}
-
-/// The seed of item `index` of stream `stream` under the campaign seed `seed`.
-#[inline]
-pub fn derive_seed(seed: u64, stream: u64, index: u64) -> u64 {
-    splitmix64(splitmix64(splitmix64(seed) ^ stream) ^ index)
-}
-
-/// A generator for item `index` of stream `stream` (see the module docs).
-#[inline]
-pub fn rng_for(seed: u64, stream: u64, index: u64) -> Xoshiro256PlusPlus {
-    Xoshiro256PlusPlus::seed_from_u64(derive_seed(seed, stream, index))
-}
+pub use crate::seeds::{
+    STREAM_DIRECTIONS, STREAM_PARAMETERS, STREAM_PAYLOAD, STREAM_POSES, STREAM_TRACKER,
+    derive_seed, rng_for, splitmix64,
+};
 
 /// Which poses a robot can take in the cell (evaluated with the nominal kinematics).
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
@@ -177,35 +149,37 @@ pub enum PayloadRule {
     Choice(Vec<f64>),
 }
 
-/// Everything that decides the rows of a campaign.
+/// Everything that decides the rows of a campaign. Made with [`CampaignSpec::random`] (the defaults)
+/// or a [`CampaignBuilder`] ([`CampaignSpec::builder`], [`CampaignSpec::to_builder`]), which checks
+/// every value; read with the accessors.
 #[derive(Clone, Debug, PartialEq, serde::Serialize)]
 pub struct CampaignSpec {
     /// Number of poses; `None` = 100 for random sampling, 150 (30 cycles) for ISO 9283, the whole list
     /// for grid and file.
-    pub poses: Option<usize>,
+    poses: Option<usize>,
     /// Measurements per pose (≥ 1).
-    pub repeats: usize,
+    repeats: usize,
     /// Pose source.
-    pub sampling: Sampling,
+    sampling: Sampling,
     /// Cell constraints for random and grid poses.
-    pub reachability: Reachability,
+    reachability: Reachability,
     /// Time between successive poses (s).
-    pub seconds_per_pose: f64,
+    seconds_per_pose: f64,
     /// Time between repeated measurements of one pose (s).
-    pub seconds_per_repeat: f64,
+    seconds_per_repeat: f64,
     /// Approach-direction rule.
-    pub directions: DirectionRule,
+    directions: DirectionRule,
     /// Joint positions before the first pose, for the `move` rule (rad or m); `None` = zero, clamped
     /// into the limits.
-    pub start_q: Option<Vec<f64>>,
+    start_q: Option<Vec<f64>>,
     /// Payload rule.
-    pub payload: PayloadRule,
+    payload: PayloadRule,
     /// Payload centre of mass in the flange frame (m).
-    pub payload_com_m: [f64; 3],
+    payload_com_m: [f64; 3],
     /// Robot temperature over time.
-    pub temperature: TemperatureProfile,
+    temperature: TemperatureProfile,
     /// Target (reflector) position in the flange frame (m), for the reachability filter and ISO 9283.
-    pub p_flange_m: [f64; 3],
+    p_flange_m: [f64; 3],
 }
 
 impl CampaignSpec {
@@ -230,6 +204,223 @@ impl CampaignSpec {
             p_flange_m: crate::tracker::DEFAULT_P_FLANGE_M,
         }
     }
+
+    /// A builder starting from the defaults of [`CampaignSpec::random`]`(100)`.
+    pub fn builder() -> CampaignBuilder {
+        CampaignSpec::random(100).to_builder()
+    }
+
+    /// A builder starting from this campaign.
+    pub fn to_builder(&self) -> CampaignBuilder {
+        CampaignBuilder {
+            spec: self.clone(),
+            label: "campaign".into(),
+        }
+    }
+
+    /// Number of poses (`None`: see [`CampaignBuilder::poses`]).
+    pub fn poses(&self) -> Option<usize> {
+        self.poses
+    }
+    /// Measurements per pose.
+    pub fn repeats(&self) -> usize {
+        self.repeats
+    }
+    /// Pose source.
+    pub fn sampling(&self) -> &Sampling {
+        &self.sampling
+    }
+    /// Cell constraints for random and grid poses.
+    pub fn reachability(&self) -> &Reachability {
+        &self.reachability
+    }
+    /// Time between successive poses (s).
+    pub fn seconds_per_pose(&self) -> f64 {
+        self.seconds_per_pose
+    }
+    /// Time between repeated measurements of one pose (s).
+    pub fn seconds_per_repeat(&self) -> f64 {
+        self.seconds_per_repeat
+    }
+    /// Approach-direction rule.
+    pub fn directions(&self) -> DirectionRule {
+        self.directions
+    }
+    /// Joint positions before the first pose (rad or m), if given.
+    pub fn start_q(&self) -> Option<&[f64]> {
+        self.start_q.as_deref()
+    }
+    /// Payload rule.
+    pub fn payload(&self) -> &PayloadRule {
+        &self.payload
+    }
+    /// Payload centre of mass in the flange frame (m).
+    pub fn payload_com_m(&self) -> [f64; 3] {
+        self.payload_com_m
+    }
+    /// Robot temperature over time.
+    pub fn temperature(&self) -> &TemperatureProfile {
+        &self.temperature
+    }
+    /// Target (reflector) position in the flange frame (m).
+    pub fn p_flange_m(&self) -> [f64; 3] {
+        self.p_flange_m
+    }
+}
+
+/// Builds a [`CampaignSpec`]; [`CampaignBuilder::build`] checks every value that does not need the
+/// robot (the rest is checked by [`plan`]). Errors are [`SimError::Scenario`] under the builder's
+/// label and the scenario key (`campaign.repeats`, …).
+#[must_use = "a builder does nothing until `build` is called"]
+#[derive(Clone, Debug, PartialEq)]
+pub struct CampaignBuilder {
+    spec: CampaignSpec,
+    label: String,
+}
+
+impl CampaignBuilder {
+    /// The name errors give (the scenario file; default `campaign`).
+    pub fn label(mut self, label: &str) -> CampaignBuilder {
+        self.label = label.into();
+        self
+    }
+    /// Number of poses, ≥ 1; `None` = 100 for random sampling, 150 (30 cycles) for ISO 9283, the whole
+    /// list for grid and file.
+    pub fn poses(mut self, poses: Option<usize>) -> CampaignBuilder {
+        self.spec.poses = poses;
+        self
+    }
+    /// Measurements per pose (≥ 1).
+    pub fn repeats(mut self, repeats: usize) -> CampaignBuilder {
+        self.spec.repeats = repeats;
+        self
+    }
+    /// Pose source.
+    pub fn sampling(mut self, sampling: Sampling) -> CampaignBuilder {
+        self.spec.sampling = sampling;
+        self
+    }
+    /// Cell constraints (lengths in m, |value| ≤ 10 m).
+    pub fn reachability(mut self, reachability: Reachability) -> CampaignBuilder {
+        self.spec.reachability = reachability;
+        self
+    }
+    /// Time between successive poses (s, finite, ≥ 0).
+    pub fn seconds_per_pose(mut self, s: f64) -> CampaignBuilder {
+        self.spec.seconds_per_pose = s;
+        self
+    }
+    /// Time between repeated measurements of one pose (s, finite, ≥ 0).
+    pub fn seconds_per_repeat(mut self, s: f64) -> CampaignBuilder {
+        self.spec.seconds_per_repeat = s;
+        self
+    }
+    /// Approach-direction rule.
+    pub fn directions(mut self, rule: DirectionRule) -> CampaignBuilder {
+        self.spec.directions = rule;
+        self
+    }
+    /// Joint positions before the first pose (rad or m; checked against the robot by [`plan`]).
+    pub fn start_q(mut self, q: Option<Vec<f64>>) -> CampaignBuilder {
+        self.spec.start_q = q;
+        self
+    }
+    /// Payload rule (masses finite, ≥ 0 kg) and centre of mass (flange frame, m, |value| ≤ 2 m).
+    pub fn payload(mut self, rule: PayloadRule, com_m: [f64; 3]) -> CampaignBuilder {
+        self.spec.payload = rule;
+        self.spec.payload_com_m = com_m;
+        self
+    }
+    /// Robot temperature over time (°C).
+    pub fn temperature(mut self, profile: TemperatureProfile) -> CampaignBuilder {
+        self.spec.temperature = profile;
+        self
+    }
+    /// Target (reflector) position in the flange frame (m).
+    pub fn p_flange_m(mut self, p: [f64; 3]) -> CampaignBuilder {
+        self.spec.p_flange_m = p;
+        self
+    }
+
+    /// The campaign, every value checked (see the setters).
+    pub fn build(self) -> Result<CampaignSpec> {
+        let f = self.label.as_str();
+        let spec = self.spec;
+        let r = &spec.reachability;
+        for (key, v) in [
+            ("campaign.floor_z_m", r.floor_z_m),
+            ("campaign.min_axis_distance_m", r.min_axis_distance_m),
+        ] {
+            if !v.is_finite() || v.abs() > 10.0 {
+                return Err(err(f, key, format!("{v} is not a plausible length in m")));
+            }
+        }
+        let margin = match &spec.sampling {
+            Sampling::Random {
+                joint_margin_rad, ..
+            }
+            | Sampling::Grid {
+                joint_margin_rad, ..
+            } => Some(*joint_margin_rad),
+            _ => None,
+        };
+        if let Some(m) = margin.filter(|m| !(m.is_finite() && *m >= 0.0)) {
+            return Err(err(
+                f,
+                "campaign.joint_margin_rad",
+                format!("{m} must be finite and ≥ 0"),
+            ));
+        }
+        if spec
+            .payload_com_m
+            .iter()
+            .any(|v| !v.is_finite() || v.abs() > 2.0)
+        {
+            return Err(err(
+                f,
+                "campaign.payload.com_m",
+                format!("{:?} is not a plausible offset in m", spec.payload_com_m),
+            ));
+        }
+        check_model_free(&spec, f)?;
+        Ok(spec)
+    }
+}
+
+/// The checks of `spec` that need no robot (shared by [`CampaignBuilder::build`] and [`plan`]).
+fn check_model_free(spec: &CampaignSpec, file: &str) -> Result<()> {
+    if spec.repeats == 0 {
+        return Err(err(file, "campaign.repeats", "0: must be ≥ 1".into()));
+    }
+    if spec.poses == Some(0) {
+        return Err(err(file, "campaign.poses", "0: must be ≥ 1".into()));
+    }
+    for (key, v) in [
+        ("campaign.seconds_per_pose", spec.seconds_per_pose),
+        ("campaign.seconds_per_repeat", spec.seconds_per_repeat),
+    ] {
+        if !(v.is_finite() && v >= 0.0) {
+            return Err(err(file, key, format!("{v} must be finite and ≥ 0 s")));
+        }
+    }
+    spec.temperature
+        .validate()
+        .map_err(|e| err(file, "campaign.temperature", e.to_string()))?;
+    let masses: &[f64] = match &spec.payload {
+        PayloadRule::Fixed(m) => std::slice::from_ref(m),
+        PayloadRule::Choice(v) => v,
+    };
+    if masses.is_empty() {
+        return Err(err(file, "campaign.payload.choice_kg", "empty list".into()));
+    }
+    if let Some(m) = masses.iter().find(|m| !(m.is_finite() && **m >= 0.0)) {
+        return Err(err(
+            file,
+            "campaign.payload",
+            format!("mass {m} must be finite and ≥ 0 kg"),
+        ));
+    }
+    Ok(())
 }
 
 /// The rows of a campaign: what the controller reports and the environment imposes at each
@@ -662,37 +853,7 @@ fn pose_list(model: &Model, spec: &CampaignSpec, seed: u64, file: &str) -> Resul
 /// `file` names the scenario in errors.
 pub fn plan(model: &Model, spec: &CampaignSpec, seed: u64, file: &str) -> Result<Plan> {
     let n = model.nq();
-    if spec.repeats == 0 {
-        return Err(err(file, "campaign.repeats", "0: must be ≥ 1".into()));
-    }
-    if spec.poses == Some(0) {
-        return Err(err(file, "campaign.poses", "0: must be ≥ 1".into()));
-    }
-    for (key, v) in [
-        ("campaign.seconds_per_pose", spec.seconds_per_pose),
-        ("campaign.seconds_per_repeat", spec.seconds_per_repeat),
-    ] {
-        if !(v.is_finite() && v >= 0.0) {
-            return Err(err(file, key, format!("{v} must be finite and ≥ 0 s")));
-        }
-    }
-    spec.temperature
-        .validate()
-        .map_err(|e| err(file, "campaign.temperature", e.to_string()))?;
-    let masses: &[f64] = match &spec.payload {
-        PayloadRule::Fixed(m) => std::slice::from_ref(m),
-        PayloadRule::Choice(v) => v,
-    };
-    if masses.is_empty() {
-        return Err(err(file, "campaign.payload.choice_kg", "empty list".into()));
-    }
-    if let Some(m) = masses.iter().find(|m| !(m.is_finite() && **m >= 0.0)) {
-        return Err(err(
-            file,
-            "campaign.payload",
-            format!("mass {m} must be finite and ≥ 0 kg"),
-        ));
-    }
+    check_model_free(spec, file)?;
     let poses = pose_list(model, spec, seed, file)?;
     let n_poses = poses.len();
     let rows = n_poses * spec.repeats;
@@ -818,18 +979,25 @@ mod tests {
         let m = robots::load_builtin("iiwa7").unwrap();
         let a = vec![0.1, 0.5, 0.0, -1.0, 0.0, 0.7, 0.2];
         let b = vec![-0.3, 0.8, 0.4, -1.4, 0.1, 0.5, -0.6];
-        let mut spec = CampaignSpec::random(5);
-        spec.sampling = Sampling::List {
-            q: vec![a.clone(), b.clone()],
-        };
+        let spec = CampaignSpec::random(5)
+            .to_builder()
+            .sampling(Sampling::List {
+                q: vec![a.clone(), b.clone()],
+            })
+            .build()
+            .unwrap();
         let p = plan(&m, &spec, 3, "test").unwrap();
         assert_eq!(p.n_poses, 5);
         for (k, want) in [&a, &b, &a, &b, &a].iter().enumerate() {
             assert_eq!(p.q_row(k), want.as_slice());
         }
-        spec.sampling = Sampling::List {
-            q: vec![a, vec![0.0; 6]],
-        };
+        let spec = spec
+            .to_builder()
+            .sampling(Sampling::List {
+                q: vec![a, vec![0.0; 6]],
+            })
+            .build()
+            .unwrap();
         let e = plan(&m, &spec, 3, "test").unwrap_err().to_string();
         assert!(e.contains("pose 1") && e.contains("6 joint values"), "{e}");
     }
@@ -837,8 +1005,11 @@ mod tests {
     #[test]
     fn move_directions_follow_the_sign_of_the_motion() {
         let m = robots::load_builtin("iiwa7").unwrap();
-        let mut spec = CampaignSpec::random(30);
-        spec.repeats = 2;
+        let spec = CampaignSpec::random(30)
+            .to_builder()
+            .repeats(2)
+            .build()
+            .unwrap();
         let p = plan(&m, &spec, 7, "test").unwrap();
         assert_eq!(p.len(), 60);
         let dir = p.dir.as_ref().unwrap();

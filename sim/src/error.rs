@@ -199,3 +199,12 @@ fn table_location(row: &Option<usize>, line: &Option<usize>, column: &Option<Str
     }
     s
 }
+
+/// A [`SimError::Scenario`] about `key` of scenario `file`.
+pub(crate) fn scenario_err(file: &str, key: &str, message: String) -> SimError {
+    SimError::Scenario {
+        file: file.to_string(),
+        key: key.to_string(),
+        message,
+    }
+}

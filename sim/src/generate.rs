@@ -60,7 +60,7 @@
 //! ```
 
 use crate::campaign::{Plan, STREAM_TRACKER, derive_seed, plan, rng_for};
-use crate::effects::{ComplianceSolver, Conditions, Contributions, Truth};
+use crate::effects::{ComplianceSolver, Conditions, Contributions, EffectId, Truth};
 use crate::error::{Result, SimError};
 use crate::io::write_atomic;
 use crate::measurement_table::{self, MeasurementTable, OptionalColumns};
@@ -175,7 +175,7 @@ pub fn simulate(
                     temp_c: plan.temp_c[r],
                     payload: (mass > 0.0).then_some(Payload { mass, com }),
                 };
-                match truth.target(&cond, &tracker.p_flange, gravity, scratch) {
+                match truth.target(&cond, tracker.p_flange(), gravity, scratch) {
                     Ok(tp) => {
                         let pose = plan.pose[r] as u64;
                         let repeat = (r % plan.repeats) as u64;
@@ -228,12 +228,12 @@ pub fn simulate(
 /// The measurement table of a simulation: contract columns only (see the module docs).
 pub fn measurement_table(plan: &Plan, sim: &Simulation, tracker: &Tracker) -> MeasurementTable {
     let cols = OptionalColumns {
-        orientation: tracker.six_dof,
+        orientation: tracker.six_dof(),
         t: true,
         temp: true,
         dir: plan.dir.is_some(),
         payload: true,
-        sigma: tracker.noise_scale > 0.0,
+        sigma: tracker.noise_scale() > 0.0,
     };
     MeasurementTable {
         n_joints: plan.nq,
@@ -259,15 +259,11 @@ pub fn measurement_table(plan: &Plan, sim: &Simulation, tracker: &Tracker) -> Me
 /// Names of the `truth.parquet` columns for `nq` joints (see the module docs).
 pub fn truth_column_names(nq: usize, six_dof: bool) -> Vec<String> {
     let mut v: Vec<String> = vec!["pose".into(), "repeat".into()];
-    for p in [
-        "p_tracker",
-        "p_base",
-        "p_nominal_base",
-        "thermal",
-        "kinematic",
-        "backlash",
-        "compliance",
-    ] {
+    let effects = EffectId::ALL.iter().map(|id| id.key());
+    for p in ["p_tracker", "p_base", "p_nominal_base"]
+        .into_iter()
+        .chain(effects)
+    {
         for a in ["x", "y", "z"] {
             v.push(format!("{p}_{a}"));
         }
@@ -325,10 +321,9 @@ fn truth_batch(plan: &Plan, sim: &Simulation, six_dof: bool) -> Result<RecordBat
         let t = r.contribution.total();
         std::array::from_fn(|k| r.p_base[k] - t[k])
     }));
-    arrays.extend(col3(&|r| r.contribution.thermal));
-    arrays.extend(col3(&|r| r.contribution.kinematic));
-    arrays.extend(col3(&|r| r.contribution.backlash));
-    arrays.extend(col3(&|r| r.contribution.compliance));
+    for id in EffectId::ALL {
+        arrays.extend(col3(&|r| r.contribution.get(*id)));
+    }
     for j in 0..nq {
         arrays.push(f((0..plan.len()).map(|r| sim.q_link[r * nq + j]).collect()));
     }
@@ -390,7 +385,8 @@ fn parquet_bytes(batch: &RecordBatch, path: &Path) -> Result<Vec<u8>> {
 /// Root-mean-square displacement (m) and largest one of one effect over the rows.
 #[derive(Clone, Debug, PartialEq, serde::Serialize)]
 pub struct EffectSize {
-    /// Effect name (`thermal_drift`, `kinematic_offsets`, `gear_backlash`, `joint_compliance`).
+    /// Effect name ([`EffectId::name`]: `thermal_drift`, `kinematic_offsets`, `gear_backlash`,
+    /// `joint_compliance`).
     pub effect: &'static str,
     /// RMS of the displacement length over the rows (m).
     pub rms_m: f64,
@@ -518,20 +514,11 @@ fn summarize(res: &Resolved, plan: &Plan, sim: &Simulation, files: Vec<String>) 
             max_m: mx,
         }
     };
-    let e = &res.effects;
-    let mut effects = Vec::new();
-    if e.thermal.is_some() {
-        effects.push(size("thermal_drift", &|c| c.thermal));
-    }
-    if e.kinematic.is_some() {
-        effects.push(size("kinematic_offsets", &|c| c.kinematic));
-    }
-    if e.backlash.is_some() {
-        effects.push(size("gear_backlash", &|c| c.backlash));
-    }
-    if e.compliance.is_some() {
-        effects.push(size("joint_compliance", &|c| c.compliance));
-    }
+    let effects: Vec<EffectSize> = res
+        .effects
+        .ids()
+        .map(|id| size(id.name(), &|c| c.get(id)))
+        .collect();
     let total = size("total", &|c| c.total());
     let mut d: Vec<f64> = sim.rows.iter().map(|r| len(r.reading.p_true)).collect();
     d.sort_unstable_by(f64::total_cmp);
@@ -554,7 +541,7 @@ fn summarize(res: &Resolved, plan: &Plan, sim: &Simulation, files: Vec<String>) 
         rows: plan.len(),
         effects,
         total_rms_m: total.rms_m,
-        noise_scale: res.tracker.noise_scale,
+        noise_scale: res.tracker.noise_scale(),
         median_distance_m: median,
         sigma_at_median_m: [sr, st],
         noise_rms_m: if m > 0 { (s2 / m as f64).sqrt() } else { 0.0 },
@@ -651,12 +638,12 @@ fn truth_json(res: &Resolved, plan: &Plan, summary: &Summary) -> TruthDoc {
         gravity_m_per_s2: [res.gravity.x, res.gravity.y, res.gravity.z],
         effects: to_value(&res.effects),
         tracker: json!({
-            "T_tracker_base": pose_json(res.tracker_xyz_m, res.tracker_rpy_rad, &tr.t_tracker_base),
-            "reflector_flange_m": [tr.p_flange.x, tr.p_flange.y, tr.p_flange.z],
-            "six_dof": tr.six_dof,
-            "R_flange_probe": (0..3).map(|r| (0..3).map(|c| tr.r_flange_probe[(r, c)]).collect::<Vec<_>>()).collect::<Vec<_>>(),
-            "noise_model": tr.noise,
-            "noise_scale": tr.noise_scale,
+            "T_tracker_base": pose_json(res.tracker_xyz_m, res.tracker_rpy_rad, tr.t_tracker_base()),
+            "reflector_flange_m": [tr.p_flange().x, tr.p_flange().y, tr.p_flange().z],
+            "six_dof": tr.six_dof(),
+            "R_flange_probe": (0..3).map(|r| (0..3).map(|c| tr.r_flange_probe()[(r, c)]).collect::<Vec<_>>()).collect::<Vec<_>>(),
+            "noise_model": tr.noise(),
+            "noise_scale": tr.noise_scale(),
             "noise_law": "error = s (σ_r n_r u + σ_t (n1 e1 + n2 e2)), σ_r = radial_a_m + radial_b_m_per_m d, σ_t = transverse_a_m + transverse_b_m_per_m d; u line of sight, e1 = z×u/|z×u|, e2 = u×e1; plus, at outlier_rate, s outlier_magnitude_m in a uniform direction",
             "sigma_column": "sqrt((σ_r² + 2 σ_t²)/3) at the measured distance (RMS of the per-axis σ), scaled by noise_scale; absent when noise_scale = 0",
         }),
@@ -667,7 +654,7 @@ fn truth_json(res: &Resolved, plan: &Plan, summary: &Summary) -> TruthDoc {
         summary: to_value(summary),
         files: json!({
             "measurements": MEASUREMENTS_FILE, "truth_rows": TRUTH_PARQUET_FILE,
-            "truth_rows_columns": truth_column_names(plan.nq, tr.six_dof),
+            "truth_rows_columns": truth_column_names(plan.nq, tr.six_dof()),
         }),
         scenario: to_value(&sc.file),
         scenario_text: sc.text.clone(),
@@ -703,7 +690,7 @@ pub fn write_dataset(
     let j_path = out_dir.join(TRUTH_JSON_FILE);
     let table = measurement_table(plan, &sim, &res.tracker);
     measurement_table::write(&m_path, &table)?;
-    let batch = truth_batch(plan, &sim, res.tracker.six_dof)?;
+    let batch = truth_batch(plan, &sim, res.tracker.six_dof())?;
     write_atomic(&t_path, &parquet_bytes(&batch, &t_path)?)?;
     let files = [&m_path, &t_path, &j_path]
         .iter()

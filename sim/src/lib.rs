@@ -36,6 +36,7 @@ pub mod model;
 pub mod rapier_truth;
 pub mod robots;
 pub mod scenario;
+pub mod seeds;
 pub mod statics;
 pub mod tracker;
 pub mod trig;

@@ -73,7 +73,7 @@
 //! assert!(s.residual < 1e-6);
 //! ```
 
-use crate::effects::joint_compliance::JointCompliance;
+use crate::effects::stiffness;
 use crate::error::{Result, SimError};
 use crate::lie::{Pose, pose_from};
 use crate::model::{JointKind, Model};
@@ -320,8 +320,8 @@ impl RapierArm {
         options: SettleOptions,
     ) -> Result<RapierArm> {
         let n = model.nq();
-        let compliance = JointCompliance::new(stiffness_nm_per_rad.to_vec())?;
-        compliance.check_fits(n)?;
+        stiffness::check_values(stiffness_nm_per_rad)?;
+        stiffness::check_len(stiffness_nm_per_rad, n)?;
         model.require_inertials()?;
         options.check()?;
         let cond = |field: String, value: String, problem: &str| SimError::BadCondition {

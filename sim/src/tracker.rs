@@ -174,21 +174,22 @@ impl NoiseModel {
     }
 }
 
-/// A laser tracker placed in the world, with its reflector on the flange.
+/// A laser tracker placed in the world, with its reflector on the flange. Made (and validated) by
+/// [`Tracker::new`] and [`Tracker::with_six_dof`]; read with the accessors.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Tracker {
     /// Pose of the robot base in the tracker frame (m).
-    pub t_tracker_base: Pose,
+    t_tracker_base: Pose,
     /// Reflector (target) position in the flange frame (m).
-    pub p_flange: Vector3<f64>,
+    p_flange: Vector3<f64>,
     /// True when a 6-DoF probe also reports orientation.
-    pub six_dof: bool,
+    six_dof: bool,
     /// Orientation of the 6-DoF probe in the flange frame (identity when the probe is aligned with it).
-    pub r_flange_probe: Matrix3<f64>,
+    r_flange_probe: Matrix3<f64>,
     /// Noise model at scale 1.
-    pub noise: NoiseModel,
+    noise: NoiseModel,
     /// Multiplier `s` on every error term (σ's and the outlier size); 0 = noise-free.
-    pub noise_scale: f64,
+    noise_scale: f64,
 }
 
 /// One simulated tracker reading, with what went into it.
@@ -280,6 +281,36 @@ impl Tracker {
         self.r_flange_probe =
             rotation_from_rpy(probe_rpy_rad[0], probe_rpy_rad[1], probe_rpy_rad[2]);
         self
+    }
+
+    /// Pose of the robot base in the tracker frame, `T_tracker_base` (m).
+    pub fn t_tracker_base(&self) -> &Pose {
+        &self.t_tracker_base
+    }
+
+    /// Reflector (target) position in the flange frame (m).
+    pub fn p_flange(&self) -> &Vector3<f64> {
+        &self.p_flange
+    }
+
+    /// True when a 6-DoF probe also reports orientation.
+    pub fn six_dof(&self) -> bool {
+        self.six_dof
+    }
+
+    /// Orientation of the 6-DoF probe in the flange frame, `R_flange_probe`.
+    pub fn r_flange_probe(&self) -> &Matrix3<f64> {
+        &self.r_flange_probe
+    }
+
+    /// Noise model at scale 1.
+    pub fn noise(&self) -> &NoiseModel {
+        &self.noise
+    }
+
+    /// Multiplier `s` on every error term; 0 = noise-free.
+    pub fn noise_scale(&self) -> f64 {
+        self.noise_scale
     }
 
     /// Scaled `(σ_r, σ_t)` (m) at distance `d` (m).

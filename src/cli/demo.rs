@@ -8,7 +8,9 @@ use super::shared::{CliError, CliResult, print_json};
 use crate::report;
 use rand::{RngExt, SeedableRng};
 use serde_json::json;
-use sim::scenario::{Overrides, Scenario};
+use sim::effects::gear_backlash::BacklashMode;
+use sim::effects::thermal_drift::{TemperatureProfile, WarmUp};
+use sim::scenario::{Magnitude, Overrides, Scenario, ScenarioBuilder};
 use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
 
@@ -32,14 +34,40 @@ pub struct Args {
     json: bool,
 }
 
-/// A hidden effect: its cause, joints (1-based) and the scenario text that injects it.
+/// What a hidden effect adds to the scenario.
+#[derive(Clone, Debug)]
+enum Injection {
+    /// `[effects.compliance]` with this stiffness per joint (N m/rad; inf = rigid).
+    Compliance(Vec<f64>),
+    /// `[effects.backlash]`, direction mode, with this dead band per joint (rad).
+    Backlash(Vec<f64>),
+    /// A warm-up by this many kelvin (τ 30 min) and `[effects.thermal]` with aluminium links.
+    Thermal(f64),
+}
+
+impl Injection {
+    fn apply(&self, b: ScenarioBuilder) -> Result<ScenarioBuilder, CliError> {
+        let list = |v: &[f64]| Magnitude::List(v.iter().map(|x| Magnitude::Number(*x)).collect());
+        Ok(match self {
+            Injection::Compliance(k) => b.compliance(list(k)),
+            Injection::Backlash(band) => b.backlash(list(band), BacklashMode::Direction),
+            Injection::Thermal(delta) => b
+                .temperature(TemperatureProfile::WarmUp(WarmUp::new(
+                    20.0, *delta, 1800.0,
+                )?))
+                .thermal(20.0, Magnitude::Number(23e-6), Some(Magnitude::Number(0.0))),
+        })
+    }
+}
+
+/// A hidden effect: its cause, joints (1-based) and what it adds to the scenario.
 #[derive(Clone, Debug, serde::Serialize)]
 struct Hidden {
     cause: &'static str,
     joints: Vec<usize>,
     description: String,
     #[serde(skip)]
-    toml: String,
+    injection: Injection,
 }
 
 /// Distinct joints drawn from `pool`, `count` of them, ascending.
@@ -54,17 +82,11 @@ fn draw_joints(rng: &mut rand::rngs::StdRng, pool: &[usize], count: usize) -> Ve
     out
 }
 
-fn per_joint(joints: &[usize], value: impl Fn(usize) -> f64, rest: &str) -> String {
-    let v: Vec<String> = (1..=7)
-        .map(|j| {
-            if joints.contains(&j) {
-                format!("{:e}", value(j))
-            } else {
-                rest.to_string()
-            }
-        })
-        .collect();
-    format!("[{}]", v.join(", "))
+/// One value per joint of the iiwa 7: `value(j)` at `joints`, `rest` elsewhere.
+fn per_joint(joints: &[usize], value: impl Fn(usize) -> f64, rest: f64) -> Vec<f64> {
+    (1..=7)
+        .map(|j| if joints.contains(&j) { value(j) } else { rest })
+        .collect()
 }
 
 /// Draws what to hide: nothing, compliance, backlash, thermal drift, or compliance and backlash.
@@ -85,10 +107,7 @@ fn draw_hidden(rng: &mut rand::rngs::StdRng) -> Vec<Hidden> {
                     .collect::<Vec<_>>()
                     .join(", ")
             ),
-            toml: format!(
-                "\n[effects.compliance]\nstiffness_nm_per_rad = {}\n",
-                per_joint(&joints, stiff, "inf")
-            ),
+            injection: Injection::Compliance(per_joint(&joints, stiff, f64::INFINITY)),
             joints,
         }
     };
@@ -111,10 +130,7 @@ fn draw_hidden(rng: &mut rand::rngs::StdRng) -> Vec<Hidden> {
                     .collect::<Vec<_>>()
                     .join(", ")
             ),
-            toml: format!(
-                "\n[effects.backlash]\ndead_band_rad = {}\nmode = \"direction\"\n",
-                per_joint(&joints, band, "0.0")
-            ),
+            injection: Injection::Backlash(per_joint(&joints, band, 0.0)),
             joints,
         }
     };
@@ -128,10 +144,7 @@ fn draw_hidden(rng: &mut rand::rngs::StdRng) -> Vec<Hidden> {
                 cause: "thermal_drift",
                 joints: Vec::new(),
                 description: format!("warm-up by {delta:.1} K (τ 30 min), aluminium links"),
-                toml: format!(
-                    "\n[campaign.temperature]\nwarm_up = {{ t0_c = 20.0, delta_c = {delta}, tau_s = 1800.0 }}\n\
-                     \n[effects.thermal]\nt_ref_c = 20.0\nalpha_per_k = 23e-6\nbeta_rad_per_k = 0.0\n"
-                ),
+                injection: Injection::Thermal(delta),
             }]
         }
         _ => {
@@ -159,12 +172,12 @@ pub fn run(args: Args) -> CliResult {
     let seed = args.seed.unwrap_or_else(clock_seed);
     let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
     let hidden = draw_hidden(&mut rng);
-    let mut toml = BASE_SCENARIO.replace("name = \"iiwa7_kinematic\"", "name = \"iiwa7_demo\"");
+    let base = Scenario::parse(BASE_SCENARIO, "demo scenario", Path::new("."))?;
+    let mut builder = ScenarioBuilder::from_scenario(&base).name("iiwa7_demo");
     for h in &hidden {
-        toml.push_str(&h.toml);
+        builder = h.injection.apply(builder)?;
     }
-    let scenario = Scenario::parse(&toml, "demo scenario", Path::new("."))?;
-    let resolved = scenario.resolve(&Overrides {
+    let resolved = builder.resolve(&Overrides {
         seed: Some(seed),
         poses: Some(args.poses),
         noise: None,

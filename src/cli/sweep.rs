@@ -281,7 +281,7 @@ pub fn run(args: Args) -> CliResult {
         noise: Some(noise[0]),
     })?;
     let options = CalibrationOptions::default();
-    let orientation = probe.tracker.six_dof;
+    let orientation = probe.tracker.six_dof();
     let rank = calib::calibrate::generic_rank(&probe.model, orientation, &options);
     let dim = if orientation { 6 } else { 3 };
     let needed = (rank + 1).div_ceil(dim);

@@ -223,13 +223,19 @@ fn planned_plan(
     options: &CalibrationOptions,
 ) -> Result<sim::campaign::Plan, CliError> {
     let mut cand_res = res.clone();
-    cand_res.campaign.poses = Some(candidates.max(2 * (train + test)));
+    cand_res.campaign = res
+        .campaign
+        .to_builder()
+        .label(&res.scenario.label)
+        .poses(Some(candidates.max(2 * (train + test))))
+        .build()
+        .map_err(CliError::from)?;
     let cand = sim::generate::plan_of(&cand_res).map_err(CliError::from)?;
     let configs: Vec<Vec<f64>> = (0..cand.n_poses)
         .map(|k| cand.q_row(k * cand.repeats).to_vec())
         .collect();
     let mut po = calib::plan::PlanOptions::new(configs.len(), train, res.seed);
-    po.target_offset = res.tracker.p_flange;
+    po.target_offset = *res.tracker.p_flange();
     po.calibration = *options;
     po.random_sets = 0;
     let chosen = calib::plan::select_from(&res.model, &configs, &po).map_err(CliError::from)?;
@@ -240,10 +246,16 @@ fn planned_plan(
             .take(test)
             .map(|c| configs[c].clone()),
     );
-    let mut spec = res.campaign.clone();
-    spec.poses = Some(train + test);
-    spec.sampling = sim::campaign::Sampling::List { q: list };
-    sim::campaign::plan(&res.model, &spec, res.seed, &res.scenario.label).map_err(CliError::from)
+    let spec = res
+        .campaign
+        .to_builder()
+        .label(&res.scenario.label)
+        .poses(Some(train + test))
+        .sampling(sim::campaign::Sampling::List { q: list })
+        .build()
+        .map_err(CliError::from)?;
+    sim::campaign::plan(&res.model, &spec, res.seed, &res.scenario.label)
+        .map_err(CliError::from)
 }
 
 /// One run: generate, split, calibrate, score (see the module docs).
@@ -340,7 +352,7 @@ fn run_inner(ctx: &Context<'_>, id: &RunId) -> Result<SweepRow, CliError> {
         seed: id.seed,
         train_poses: report.n_train_poses as i64,
         test_poses: report.n_test_poses as i64,
-        sigma_rms_m: if res.tracker.noise_scale > 0.0 {
+        sigma_rms_m: if res.tracker.noise_scale() > 0.0 {
             sigma_rms
         } else {
             0.0

@@ -27,6 +27,8 @@
 //!
 //! The shift enters the chain as an angle change, `θ` replacing `q` in the product of exponentials.
 
+use super::effect::{Effect, Moved, Needs, Prepare, ResolveCx, State};
+use super::gravity::chain_gravity_torques;
 use crate::error::{Result, SimError};
 
 /// Largest accepted dead band (rad): gears with more lost motion than 0.1 rad (5.7°) are not modelled,
@@ -215,6 +217,109 @@ impl GearBacklash {
             _ => f64::from(dir.signum()),
         };
         side * half
+    }
+}
+
+/// `[effects.backlash]`.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct BacklashSection {
+    /// Switch (default on).
+    pub enabled: Option<bool>,
+    /// Dead band (rad; m for prismatic joints), shape `[n]`.
+    pub dead_band_rad: crate::scenario::magnitude::Magnitude,
+    /// Flank rule; default `direction`.
+    pub mode: Option<BacklashMode>,
+    /// Gravity-mode holding-torque threshold (N m), shape `[n]`.
+    pub threshold_nm: Option<crate::scenario::magnitude::Magnitude>,
+}
+
+impl Effect for GearBacklash {
+    const NAME: &'static str = EFFECT;
+    const KEY: &'static str = "backlash";
+    type Section = BacklashSection;
+    type Stage = GearBacklash;
+    type Scratch = ();
+
+    fn enabled(section: &BacklashSection) -> bool {
+        section.enabled.unwrap_or(true)
+    }
+
+    fn from_section(b: &BacklashSection, cx: &ResolveCx<'_>) -> Result<Self> {
+        let n = cx.nq();
+        let band = cx.draw(&b.dead_band_rad, "dead_band_rad", &[n])?;
+        let mode = b.mode.unwrap_or(BacklashMode::Direction);
+        let bl = match (mode, &b.threshold_nm) {
+            (BacklashMode::Direction, None) => GearBacklash::direction(band),
+            (BacklashMode::Direction, Some(_)) => {
+                return Err(cx.err("threshold_nm", "only used with mode = \"gravity\"".into()));
+            }
+            (BacklashMode::Gravity, None) => {
+                return Err(cx.err(
+                    "threshold_nm",
+                    "mode = \"gravity\" needs a holding-torque threshold (N m)".into(),
+                ));
+            }
+            (BacklashMode::Gravity, Some(t)) => {
+                cx.require_inertials("mode", "gravity-mode backlash")?;
+                let t = cx.draw(t, "threshold_nm", &[n])?;
+                GearBacklash::gravity(band, t)
+            }
+        };
+        cx.checked(bl)
+    }
+
+    fn needs(&self) -> Needs {
+        let gravity = self.mode == BacklashMode::Gravity;
+        Needs {
+            dir: true,
+            payload: gravity,
+            inertials: gravity,
+            ..Needs::default()
+        }
+    }
+
+    fn check_lengths(&self, nq: usize) -> Result<()> {
+        self.check_fits(nq)
+    }
+
+    fn prepare(&self, _cx: &Prepare<'_>) -> Result<GearBacklash> {
+        Ok(self.clone())
+    }
+
+    fn scratch(_stage: &GearBacklash, _nq: usize) {}
+
+    /// Link-side angle shifted by half the dead band: `φᵢ −= sᵢ` (gravity torques, in gravity mode,
+    /// from the last evaluation: the angles before backlash).
+    #[inline]
+    fn act<'t>(stage: &'t GearBacklash, st: &mut State<'t, '_>, _: &mut ()) -> Result<Moved> {
+        let by_gravity = stage.mode == BacklashMode::Gravity;
+        if by_gravity {
+            chain_gravity_torques(
+                st.geom,
+                st.poses,
+                &st.flange,
+                st.bodies,
+                st.cond.payload.as_ref(),
+                st.gravity,
+                st.work,
+            );
+        }
+        let mut moved = false;
+        for i in 0..st.angles.len() {
+            let dir = st.cond.dir.map_or(0, |d| d[i]);
+            let tau = if by_gravity { st.work.tau[i] } else { 0.0 };
+            let sh = stage.shift(i, dir, tau);
+            st.angles[i] -= sh;
+            st.q_link[i] -= sh;
+            st.q_link_first[i] -= sh;
+            moved |= sh != 0.0;
+        }
+        Ok(if moved {
+            Moved::Changed
+        } else {
+            Moved::Unchanged
+        })
     }
 }
 

@@ -30,11 +30,14 @@
 //! micrometres at the flange; the real geometry is what the physical robot feels, so the truth uses it.
 //! Centres of mass are not moved by thermal growth (see [`super::thermal_drift`]).
 
-use super::kinematic_offsets::Chain;
+use super::chain::Chain;
+use super::effect::{ComplianceSolver, Effect, Moved, Needs, Prepare, ResolveCx, State};
+use super::gravity::{BodyMasses, GravityWork, chain_gravity_hessian, chain_gravity_torques};
+use super::rapier_compliance::{RapierCache, RapierCompliance};
 use crate::error::{Result, SimError};
 use crate::lie::Pose;
 use crate::statics::Payload;
-use nalgebra::{Point3, Vector3};
+use nalgebra::Vector3;
 
 /// Convergence threshold on the Newton step, `max |Δθ|` (rad; m for prismatic joints).
 pub const TOLERANCE_RAD: f64 = 1e-13;
@@ -44,16 +47,7 @@ pub const MAX_ITERATIONS: usize = 50;
 /// pose worth the name (a real robot's sag is below 0.01 rad).
 pub const MAX_DEFLECTION_RAD: f64 = 0.5;
 
-const EFFECT: &str = "joint_compliance";
-
-fn bad(field: impl Into<String>, value: impl ToString, problem: impl Into<String>) -> SimError {
-    SimError::BadEffect {
-        effect: EFFECT,
-        field: field.into(),
-        value: value.to_string(),
-        problem: problem.into(),
-    }
-}
+use super::stiffness::{EFFECT, bad};
 
 /// Per-joint stiffness (see the module docs for the model).
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -123,15 +117,7 @@ impl JointCompliance {
     /// Joint springs of stiffness `stiffness_nm_per_rad` (N m/rad or N/m, one per joint): each > 0, or
     /// `f64::INFINITY` for a rigid joint. Refuses NaN, zero and negative values.
     pub fn new(stiffness_nm_per_rad: Vec<f64>) -> Result<Self> {
-        for (i, &k) in stiffness_nm_per_rad.iter().enumerate() {
-            if k.is_nan() || k <= 0.0 {
-                return Err(bad(
-                    format!("stiffness_nm_per_rad[{i}]"),
-                    k,
-                    "must be > 0 N m/rad (inf = rigid)",
-                ));
-            }
-        }
+        super::stiffness::check_values(&stiffness_nm_per_rad)?;
         Ok(JointCompliance {
             stiffness_nm_per_rad,
         })
@@ -154,133 +140,7 @@ impl JointCompliance {
 
     /// Checks that the length fits a robot with `nq` joints.
     pub fn check_fits(&self, nq: usize) -> Result<()> {
-        if self.stiffness_nm_per_rad.len() != nq {
-            return Err(bad(
-                "stiffness_nm_per_rad",
-                format!("{} entries", self.stiffness_nm_per_rad.len()),
-                format!("the robot has {nq} joints"),
-            ));
-        }
-        Ok(())
-    }
-}
-
-/// Mass (kg) and centre of mass (joint frame, m) of each moving body, in chain order.
-pub(crate) type BodyMasses = [(f64, Vector3<f64>)];
-
-/// Workspace for gravity torques and the equilibrium solve on an `n`-joint chain.
-#[derive(Clone, Debug)]
-pub(crate) struct GravityWork {
-    /// Joint axes in the base frame (unit).
-    pub w: Vec<Vector3<f64>>,
-    /// First moment of everything beyond joint `i` about joint `i`'s origin, `Σ m (c − pᵢ)` (kg m).
-    pub r: Vec<Vector3<f64>>,
-    /// Mass beyond joint `i`, joint `i`'s body included (kg).
-    pub mass: Vec<f64>,
-    /// Holding torques (N m or N).
-    pub tau: Vec<f64>,
-    /// Hessian `∂τ/∂θ`, row-major n×n (N m/rad).
-    pub hess: Vec<f64>,
-    /// Newton matrix, row-major n×n.
-    pub jac: Vec<f64>,
-    /// Newton right-hand side / step.
-    pub step: Vec<f64>,
-    /// Row permutation of the LU factors in `jac`.
-    pub piv: Vec<usize>,
-    /// `wⱼ·g` per joint (m/s²).
-    pub wg: Vec<f64>,
-    /// `rⱼ·g` per joint (kg m²/s²).
-    pub rg: Vec<f64>,
-}
-
-impl GravityWork {
-    /// Workspace for `n` joints.
-    pub fn new(n: usize) -> Self {
-        GravityWork {
-            w: vec![Vector3::zeros(); n],
-            r: vec![Vector3::zeros(); n],
-            mass: vec![0.0; n],
-            tau: vec![0.0; n],
-            hess: vec![0.0; n * n],
-            jac: vec![0.0; n * n],
-            step: vec![0.0; n],
-            piv: vec![0; n],
-            wg: vec![0.0; n],
-            rg: vec![0.0; n],
-        }
-    }
-}
-
-/// Holding torques `τ_g` (into `ws.tau`) of the chain whose frames `poses` and `flange` were just
-/// evaluated, for `gravity` (base frame, m/s²); also fills `ws.w`, `ws.r`, `ws.mass` for the Hessian.
-pub(crate) fn chain_gravity_torques(
-    chain: &Chain,
-    poses: &[Pose],
-    flange: &Pose,
-    bodies: &BodyMasses,
-    payload: Option<&Payload>,
-    gravity: &Vector3<f64>,
-    ws: &mut GravityWork,
-) {
-    // Walk from the tip, as `statics::gravity_torques`: mass and first moment Σ m c beyond joint i.
-    let mut mass = 0.0;
-    let mut moment = Vector3::zeros();
-    if let Some(pl) = payload {
-        let c = flange * Point3::from(Vector3::from(pl.com));
-        mass += pl.mass;
-        moment += c.coords * pl.mass;
-    }
-    for i in (0..chain.nq()).rev() {
-        let t = &poses[i];
-        let (m, com) = &bodies[i];
-        let c = t * Point3::from(*com);
-        mass += m;
-        moment += c.coords * *m;
-        let joint = &chain.joints[i];
-        let w = t.rotation * joint.axis;
-        let r = moment - t.translation.vector * mass;
-        ws.tau[i] = if joint.rotational {
-            -w.dot(&r.cross(gravity))
-        } else {
-            -w.dot(&(gravity * mass))
-        };
-        ws.w[i] = w;
-        ws.r[i] = r;
-        ws.mass[i] = mass;
-    }
-}
-
-/// Hessian `H = ∂τ_g/∂θ` (into `ws.hess`, row-major) from the quantities of the last
-/// [`chain_gravity_torques`] call. For `j ≥ i` (joint `j` moves everything beyond `i`'s part that
-/// `τᵢ` depends on), with `rⱼ` the first moment beyond `j` about joint `j` and `mⱼ` the mass beyond `j`:
-///
-/// ```text
-/// i, j rotational:            Hᵢⱼ = −[(wᵢ·rⱼ)(wⱼ·g) − (wᵢ·wⱼ)(rⱼ·g)]
-/// i rotational, j prismatic:  Hᵢⱼ = −mⱼ wᵢ·(wⱼ × g)
-/// i prismatic:                Hᵢⱼ = 0
-/// ```
-///
-/// and `Hⱼᵢ = Hᵢⱼ` (a Hessian of the potential energy).
-pub(crate) fn chain_gravity_hessian(chain: &Chain, gravity: &Vector3<f64>, ws: &mut GravityWork) {
-    let n = chain.nq();
-    for j in 0..n {
-        ws.wg[j] = ws.w[j].dot(gravity);
-        ws.rg[j] = ws.r[j].dot(gravity);
-    }
-    for i in 0..n {
-        let wi = ws.w[i];
-        let rot_i = chain.joints[i].rotational;
-        for j in i..n {
-            let h = if !rot_i {
-                0.0
-            } else if chain.joints[j].rotational {
-                -(wi.dot(&ws.r[j]) * ws.wg[j] - wi.dot(&ws.w[j]) * ws.rg[j])
-            } else {
-                -ws.mass[j] * wi.dot(&ws.w[j].cross(gravity))
-            };
-            ws.hess[i * n + j] = h;
-            ws.hess[j * n + i] = h;
-        }
+        super::stiffness::check_len(&self.stiffness_nm_per_rad, nq)
     }
 }
 
@@ -467,6 +327,156 @@ impl Equilibrium<'_> {
                 "no convergence in {MAX_ITERATIONS} Newton steps (last step {last_step:.3e} rad > {TOLERANCE_RAD:e})"
             ),
         })
+    }
+}
+
+/// `[effects.compliance]`.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ComplianceSection {
+    /// Switch (default on).
+    pub enabled: Option<bool>,
+    /// Joint stiffness (N m/rad; N/m for prismatic joints), shape `[n]`.
+    pub stiffness_nm_per_rad: crate::scenario::magnitude::Magnitude,
+}
+
+/// The prepared compliance stage: `1/kᵢ` per joint and, with [`ComplianceSolver::Rapier`], the
+/// rapier arm builder.
+#[derive(Clone, Debug)]
+pub struct ComplianceStage {
+    /// `1/kᵢ` per joint (rad/(N m) or m/N).
+    compliance: Vec<f64>,
+    rapier: Option<RapierCompliance>,
+}
+
+impl ComplianceStage {
+    /// The rapier settle options, when the stage settles in the physics engine.
+    pub fn rapier_options(&self) -> Option<crate::rapier_truth::SettleOptions> {
+        self.rapier.as_ref().map(|r| *r.options())
+    }
+}
+
+/// Per-thread workspace of the compliance stage.
+#[derive(Clone, Debug)]
+pub struct ComplianceScratch {
+    /// Chain angles after compliance (rad or m).
+    theta: Vec<f64>,
+    /// First-order chain angles after compliance (rad or m).
+    first: Vec<f64>,
+    /// Joint frames for a consistency check in debug builds.
+    check_poses: Vec<Pose>,
+    /// Prepared rapier arms (rapier compliance only).
+    rapier: RapierCache,
+}
+
+impl Effect for JointCompliance {
+    const NAME: &'static str = EFFECT;
+    const KEY: &'static str = "compliance";
+    type Section = ComplianceSection;
+    type Stage = ComplianceStage;
+    type Scratch = ComplianceScratch;
+
+    fn enabled(section: &ComplianceSection) -> bool {
+        section.enabled.unwrap_or(true)
+    }
+
+    fn from_section(c: &ComplianceSection, cx: &ResolveCx<'_>) -> Result<Self> {
+        cx.require_inertials("", "compliance")?;
+        let k = cx.draw(&c.stiffness_nm_per_rad, "stiffness_nm_per_rad", &[cx.nq()])?;
+        cx.checked(JointCompliance::new(k))
+    }
+
+    fn needs(&self) -> Needs {
+        Needs {
+            payload: true,
+            inertials: true,
+            ..Needs::default()
+        }
+    }
+
+    fn check_lengths(&self, nq: usize) -> Result<()> {
+        self.check_fits(nq)
+    }
+
+    fn prepare(&self, cx: &Prepare<'_>) -> Result<ComplianceStage> {
+        let rapier = match cx.solver {
+            ComplianceSolver::Analytic => None,
+            ComplianceSolver::Rapier(options) => Some(RapierCompliance::new(
+                cx.model,
+                &self.stiffness_nm_per_rad,
+                options,
+            )?),
+        };
+        Ok(ComplianceStage {
+            compliance: self.compliance(),
+            rapier,
+        })
+    }
+
+    fn scratch(_stage: &ComplianceStage, nq: usize) -> ComplianceScratch {
+        ComplianceScratch {
+            theta: vec![0.0; nq],
+            first: vec![0.0; nq],
+            check_poses: vec![Pose::identity(); nq],
+            rapier: RapierCache::default(),
+        }
+    }
+
+    /// The link side settles where the springs balance gravity and payload, anchored at the angles
+    /// after backlash: `φ ← θ` with `K (φ − θ) = τ_g(θ)`. With the rapier solver the flange comes from
+    /// the engine and the joint frames in the state stay those of the anchor angles.
+    fn act<'t>(
+        stage: &'t ComplianceStage,
+        st: &mut State<'t, '_>,
+        sc: &mut ComplianceScratch,
+    ) -> Result<Moved> {
+        let payload = st.cond.payload.as_ref();
+        let eq = Equilibrium {
+            chain: st.geom,
+            dt: st.dt,
+            bodies: st.bodies,
+            payload,
+            gravity: st.gravity,
+            compliance: &stage.compliance,
+        };
+        // The state holds the chain evaluated at the anchor angles (from whichever stage ran last).
+        debug_assert_eq!(
+            st.geom.eval(st.angles, st.dt, &mut sc.check_poses),
+            st.flange,
+            "stage bookkeeping: the last evaluation must be at the post-backlash angles"
+        );
+        let (it, f) = match &stage.rapier {
+            None => eq.solve(
+                st.angles,
+                &mut sc.theta,
+                &mut sc.first,
+                st.poses,
+                st.flange,
+                st.work,
+            )?,
+            Some(r) => {
+                // First-order solution from the analytic statics at the anchor angles, for the
+                // `q_link_first_order` comparison; the rest state comes from the engine.
+                eq.first_order(st.angles, &mut sc.first, st.poses, &st.flange, st.work);
+                r.settle(
+                    st.geom,
+                    st.dt,
+                    payload,
+                    st.gravity,
+                    st.angles,
+                    &mut sc.theta,
+                    &mut sc.rapier,
+                )?
+            }
+        };
+        for i in 0..st.angles.len() {
+            st.q_link[i] -= st.angles[i] - sc.theta[i];
+            st.q_link_first[i] -= st.angles[i] - sc.first[i];
+        }
+        st.angles.copy_from_slice(&sc.theta);
+        st.flange = f;
+        st.iterations = it;
+        Ok(Moved::Evaluated)
     }
 }
 

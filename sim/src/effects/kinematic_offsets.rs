@@ -29,10 +29,12 @@
 //!
 //! The base frame is the nominal robot's base (the frame the tracker-to-base transform refers to).
 
+use super::chain::Chain;
+use super::effect::{Effect, Moved, Needs, Prepare, ResolveCx, State};
 use crate::error::{Result, SimError};
-use crate::lie::{Pose, adjoint_apply, exp_twist, pose_from};
+use crate::lie::{adjoint_apply, exp_twist};
 use crate::model::Model;
-use nalgebra::{Matrix3, Vector3, Vector6};
+use nalgebra::{Vector3, Vector6};
 
 /// Largest accepted rotation part `|ω|` of an error twist and largest zero offset (rad): these are
 /// errors, not poses; more than 0.5 rad is almost surely a value in degrees.
@@ -225,189 +227,116 @@ impl KinematicOffsets {
     }
 }
 
-/// One joint of a [`Chain`]: local axis, folded rotation terms and a temperature-affine origin.
-#[derive(Clone, Debug)]
-pub(crate) struct ChainJoint {
-    /// Revolute or continuous (true) vs prismatic.
-    pub rotational: bool,
-    /// Unit axis in the joint frame.
-    pub axis: Vector3<f64>,
-    /// Rodrigues terms of the origin rotation and axis (see [`crate::model::Joint::rotation_terms`]).
-    pub terms: [Matrix3<f64>; 3],
-    /// Origin rotation (used by prismatic joints).
-    pub origin_rot: Matrix3<f64>,
-    /// Origin translation at `T_ref` (m), in the previous joint frame.
-    pub p0: Vector3<f64>,
-    /// Change of the origin translation per kelvin (m/K).
-    pub dp: Vector3<f64>,
+/// `[effects.kinematic]`.
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct KinematicSection {
+    /// Switch (default on).
+    pub enabled: Option<bool>,
+    /// Rotation part ω of each joint's error twist (rad, base frame), shape `[n][3]`.
+    pub joint_rotation_rad: Option<crate::scenario::magnitude::Magnitude>,
+    /// Translation part v of each joint's error twist (m, base frame), shape `[n][3]`.
+    pub joint_translation_m: Option<crate::scenario::magnitude::Magnitude>,
+    /// Joint zero offsets (rad; m for prismatic joints), shape `[n]`.
+    pub zero_offset_rad: Option<crate::scenario::magnitude::Magnitude>,
+    /// Base error twist rotation (rad), shape `[3]`.
+    pub base_rotation_rad: Option<crate::scenario::magnitude::Magnitude>,
+    /// Base error twist translation (m), shape `[3]`.
+    pub base_translation_m: Option<crate::scenario::magnitude::Magnitude>,
+    /// Tool error twist rotation (rad, flange frame), shape `[3]`.
+    pub tool_rotation_rad: Option<crate::scenario::magnitude::Magnitude>,
+    /// Tool error twist translation (m, flange frame), shape `[3]`.
+    pub tool_translation_m: Option<crate::scenario::magnitude::Magnitude>,
 }
 
-/// A serial chain prepared for evaluation: optional base pose, joint origins affine in `ΔT`, flange
-/// offset affine in `ΔT`. Evaluates without allocating.
+/// The prepared kinematic-offsets stage: the real chain (thermally grown when thermal drift is
+/// present) and the zero offsets.
 #[derive(Clone, Debug)]
-pub(crate) struct Chain {
-    /// Pose of the chain's root in the base frame (`None` = identity, keeping nominal results exact).
-    pub base: Option<Pose>,
-    /// Joints from base to tip.
-    pub joints: Vec<ChainJoint>,
-    /// Flange rotation in the last joint frame.
-    pub flange_rot: Matrix3<f64>,
-    /// Flange translation in the last joint frame at `T_ref` (m).
-    pub flange_p0: Vector3<f64>,
-    /// Change of the flange translation per kelvin (m/K).
-    pub flange_dp: Vector3<f64>,
+pub struct KinematicStage {
+    real: Chain,
+    zero_offsets: Vec<f64>,
 }
 
-/// Growth per kelvin of each joint's home origin, `g[i]` (base frame, m/K), and of the flange origin,
-/// for per-link coefficients `alpha` (links 0 … n); all zero without thermal drift.
-fn growth(model: &Model, alpha: Option<&[f64]>) -> (Vec<Vector3<f64>>, Vector3<f64>) {
-    let a = |k: usize| alpha.map_or(0.0, |al| al[k]);
-    let mut g = Vec::with_capacity(model.nq());
-    let mut acc = Vector3::zeros();
-    let mut r_prev = Matrix3::identity();
-    for (k, j) in model.joints.iter().enumerate() {
-        acc += r_prev * j.origin.translation.vector * a(k);
-        g.push(acc);
-        r_prev = *j.home.rotation.matrix();
+impl KinematicOffsets {
+    /// The real chain of `model` with these errors, grown with `alpha` (1/K, links 0 … n).
+    pub(crate) fn real_chain(&self, model: &Model, alpha: Option<&[f64]>) -> Chain {
+        Chain::real(
+            model,
+            alpha,
+            &self.joint_twists,
+            &self.base_twist,
+            &self.tool_twist,
+        )
     }
-    let gf = acc + r_prev * model.flange_offset.translation.vector * a(model.nq());
-    (g, gf)
 }
 
-impl Chain {
-    /// The nominal chain, with link growth `alpha` (1/K, links 0 … n) when given. At `ΔT = 0` it
-    /// evaluates exactly like [`crate::forward_kinematics`].
-    pub fn grown(model: &Model, alpha: Option<&[f64]>) -> Chain {
-        let a = |k: usize| alpha.map_or(0.0, |al| al[k]);
-        let joints = model
-            .joints
-            .iter()
-            .enumerate()
-            .map(|(k, j)| ChainJoint {
-                rotational: j.kind.is_rotational(),
-                axis: j.axis,
-                terms: j.rotation_terms,
-                origin_rot: *j.origin.rotation.matrix(),
-                p0: j.origin.translation.vector,
-                dp: j.origin.translation.vector * a(k),
+impl Effect for KinematicOffsets {
+    const NAME: &'static str = EFFECT;
+    const KEY: &'static str = "kinematic";
+    type Section = KinematicSection;
+    type Stage = KinematicStage;
+    type Scratch = ();
+
+    fn enabled(section: &KinematicSection) -> bool {
+        section.enabled.unwrap_or(true)
+    }
+
+    fn from_section(k: &KinematicSection, cx: &ResolveCx<'_>) -> Result<Self> {
+        let n = cx.nq();
+        let w = cx.draw_or_zero(&k.joint_rotation_rad, "joint_rotation_rad", &[n, 3])?;
+        let v = cx.draw_or_zero(&k.joint_translation_m, "joint_translation_m", &[n, 3])?;
+        let dq = cx.draw_or_zero(&k.zero_offset_rad, "zero_offset_rad", &[n])?;
+        let bw = cx.draw_or_zero(&k.base_rotation_rad, "base_rotation_rad", &[3])?;
+        let bv = cx.draw_or_zero(&k.base_translation_m, "base_translation_m", &[3])?;
+        let tw = cx.draw_or_zero(&k.tool_rotation_rad, "tool_rotation_rad", &[3])?;
+        let tv = cx.draw_or_zero(&k.tool_translation_m, "tool_translation_m", &[3])?;
+        let twists = (0..n)
+            .map(|i| {
+                [
+                    w[3 * i],
+                    w[3 * i + 1],
+                    w[3 * i + 2],
+                    v[3 * i],
+                    v[3 * i + 1],
+                    v[3 * i + 2],
+                ]
             })
             .collect();
-        let f = &model.flange_offset;
-        Chain {
-            base: None,
-            joints,
-            flange_rot: *f.rotation.matrix(),
-            flange_p0: f.translation.vector,
-            flange_dp: f.translation.vector * a(model.nq()),
-        }
+        let six = |a: &[f64], b: &[f64]| [a[0], a[1], a[2], b[0], b[1], b[2]];
+        cx.checked(KinematicOffsets::new(
+            twists,
+            dq,
+            six(&bw, &bv),
+            six(&tw, &tv),
+        ))
     }
 
-    /// The real chain: kinematic offsets `kin` applied to the chain grown with `alpha` (see the module
-    /// docs). `kin` must fit the model (checked by the caller).
-    pub fn real(model: &Model, alpha: Option<&[f64]>, kin: &KinematicOffsets) -> Chain {
-        let (g, g_flange) = growth(model, alpha);
-        let mut prev_r = Matrix3::identity();
-        let mut prev_h = Vector3::zeros();
-        let mut prev_g = Vector3::zeros();
-        let mut joints = Vec::with_capacity(model.nq());
-        for ((j, xi), gi) in model.joints.iter().zip(&kin.joint_twists).zip(&g) {
-            let e = exp_twist(&vec6(xi));
-            let re = e.rotation.matrix();
-            let r = re * j.home.rotation.matrix();
-            let h = re * j.home.translation.vector + e.translation.vector;
-            let gg = re * gi;
-            let origin_rot = prev_r.transpose() * r;
-            let p0 = prev_r.transpose() * (h - prev_h);
-            let dp = prev_r.transpose() * (gg - prev_g);
-            let origin = pose_from(origin_rot, p0);
-            joints.push(ChainJoint {
-                rotational: j.kind.is_rotational(),
-                axis: j.axis,
-                terms: crate::model::Joint::rotation_terms_for(&origin, &j.axis),
-                origin_rot,
-                p0,
-                dp,
-            });
-            (prev_r, prev_h, prev_g) = (r, h, gg);
-        }
-        let x = exp_twist(&vec6(&kin.tool_twist));
-        let m = &model.home_flange;
-        let rm = m.rotation.matrix();
-        let flange_rot = prev_r.transpose() * rm * x.rotation.matrix();
-        let flange_p0 =
-            prev_r.transpose() * (rm * x.translation.vector + m.translation.vector - prev_h);
-        let flange_dp = prev_r.transpose() * (g_flange - prev_g);
-        Chain {
-            base: Some(exp_twist(&vec6(&kin.base_twist))),
-            joints,
-            flange_rot,
-            flange_p0,
-            flange_dp,
-        }
+    fn needs(&self) -> Needs {
+        Needs::default()
     }
 
-    /// Number of joints.
+    fn check_lengths(&self, nq: usize) -> Result<()> {
+        self.check_fits(nq)
+    }
+
+    fn prepare(&self, cx: &Prepare<'_>) -> Result<KinematicStage> {
+        Ok(KinematicStage {
+            real: self.real_chain(cx.model, cx.growth),
+            zero_offsets: self.zero_offsets.clone(),
+        })
+    }
+
+    fn scratch(_stage: &KinematicStage, _nq: usize) {}
+
+    /// Real screws, base and tool errors (the stage's chain replaces the grown nominal one) and zero
+    /// offsets `φᵢ += δqᵢ`.
     #[inline]
-    pub fn nq(&self) -> usize {
-        self.joints.len()
-    }
-
-    /// This chain at temperature offset `dt` (K) as a [`Model`] of the real robot: `nominal`'s names,
-    /// joint kinds, limits and inertials (masses, centres of mass and inertia tensors stay in their
-    /// joint frames), with the chain's joint origins `Oᵢ'(ΔT)` (the base pose folded into the first
-    /// origin, so the model's base frame is still the nominal base frame), flange offset, and the
-    /// derived home poses and screw axes. Its forward kinematics equal [`Chain::eval`] at `dt` (up to
-    /// rounding; a test checks it). `nominal` must be the model the chain was made from.
-    pub fn model_at(&self, nominal: &Model, dt: f64) -> Model {
-        let mut model = nominal.clone();
-        let mut home = self.base.unwrap_or_else(Pose::identity);
-        for (k, (joint, cj)) in model.joints.iter_mut().zip(&self.joints).enumerate() {
-            let local = pose_from(cj.origin_rot, cj.p0 + cj.dp * dt);
-            joint.origin = match (k, &self.base) {
-                (0, Some(b)) => b * local,
-                _ => local,
-            };
-            home *= local;
-            joint.home = home;
-            let w = home.rotation * cj.axis;
-            let v = if cj.rotational {
-                -w.cross(&home.translation.vector)
-            } else {
-                w
-            };
-            let w = if cj.rotational { w } else { Vector3::zeros() };
-            joint.screw = Vector6::new(w.x, w.y, w.z, v.x, v.y, v.z);
-            joint.refresh_derived();
+    fn act<'t>(stage: &'t KinematicStage, st: &mut State<'t, '_>, _: &mut ()) -> Result<Moved> {
+        st.geom = &stage.real;
+        for (a, b) in st.angles.iter_mut().zip(&stage.zero_offsets) {
+            *a += b;
         }
-        model.flange_offset = pose_from(self.flange_rot, self.flange_p0 + self.flange_dp * dt);
-        model.home_flange = home * model.flange_offset;
-        model
-    }
-
-    /// Joint frames `T_base_joint[i]` into `poses` and the flange pose `T_base_flange` (m), at joint
-    /// angles `angles` (rad or m) and temperature offset `dt` (K).
-    #[inline]
-    pub fn eval(&self, angles: &[f64], dt: f64, poses: &mut [Pose]) -> Pose {
-        debug_assert_eq!(angles.len(), self.nq());
-        let (mut r, mut p) = match &self.base {
-            Some(b) => (*b.rotation.matrix(), b.translation.vector),
-            None => (Matrix3::identity(), Vector3::zeros()),
-        };
-        // Same arithmetic, in the same order, as `forward_kinematics`: bit-identical at dt = 0.
-        for ((joint, &qi), out) in self.joints.iter().zip(angles).zip(poses.iter_mut()) {
-            let po = joint.p0 + joint.dp * dt;
-            p += r * po;
-            if joint.rotational {
-                let (s, c) = crate::trig::sin_cos(qi);
-                let [k0, k1, k2] = &joint.terms;
-                r *= k0 + k1 * c + k2 * s;
-            } else {
-                r *= joint.origin_rot;
-                p += r * (joint.axis * qi);
-            }
-            *out = pose_from(r, p);
-        }
-        poses[self.nq() - 1] * pose_from(self.flange_rot, self.flange_p0 + self.flange_dp * dt)
+        Ok(Moved::Changed)
     }
 }
 
@@ -415,6 +344,7 @@ impl Chain {
 mod tests {
     use super::*;
     use crate::kinematics::{Data, forward_kinematics, poe_pose};
+    use crate::lie::Pose;
     use crate::lie::exp_se3;
     use crate::robots;
 
@@ -448,7 +378,7 @@ mod tests {
             twist(13, 0.01),
         )
         .unwrap();
-        let c = Chain::real(&m, None, &kin);
+        let c = kin.real_chain(&m, None);
         let screws = kin.real_screws(&m).unwrap();
         let home = m.home_flange * exp_twist(&vec6(&kin.tool_twist));
         let base = exp_twist(&vec6(&kin.base_twist));
@@ -488,7 +418,7 @@ mod tests {
         )
         .unwrap();
         let alpha: Vec<f64> = (0..8).map(|k| 20e-6 + 1e-6 * k as f64).collect();
-        let c = Chain::real(&m, Some(&alpha), &kin);
+        let c = kin.real_chain(&m, Some(&alpha));
         let dt = 7.5;
         let real = c.model_at(&m, dt);
         let mut d = Data::new(&real);

@@ -30,6 +30,14 @@
 //! in the controller's joint coordinates, reported as [`TrueTarget::q_link`]. Gravity torques for
 //! backlash and compliance are those of the nominal inertials in this real geometry.
 //!
+//! # One effect, one file
+//!
+//! Each effect is one module implementing [`Effect`] (see [`effect`]: its name and key, its scenario
+//! section, its parameters, the columns it needs, how it acts on the pipeline) and one line in the
+//! registry at the end of this module's source, which generates [`EffectId`], the fields of
+//! [`Effects`], [`EffectsSection`] and [`Contributions`], and the stage loop of [`Truth::target`]
+//! (statically dispatched, in registry order). The registry order is the stage order above.
+//!
 //! For many measurements, prepare once with [`Truth::new`] and evaluate with [`Truth::target`] and a
 //! [`TruthScratch`]: no allocation per pose; [`true_target`] is the one-shot wrapper.
 //!
@@ -58,91 +66,277 @@
 //! assert!((truth.p_base.z - p_nominal.z - total[2]).abs() < 1e-15);
 //! ```
 
-use crate::error::{Result, SimError};
+use crate::error::{Result, SimError, scenario_err};
 use crate::lie::Pose;
 use crate::model::Model;
-use crate::statics::Payload;
-use joint_compliance::{Equilibrium, GravityWork, chain_gravity_torques};
-use kinematic_offsets::Chain;
+use chain::Chain;
+use gravity::GravityWork;
 use nalgebra::{Point3, Vector3};
 
+pub mod chain;
+pub mod effect;
 pub mod gear_backlash;
+pub(crate) mod gravity;
 pub mod joint_compliance;
 pub mod kinematic_offsets;
 pub mod rapier_compliance;
+pub(crate) mod stiffness;
 pub mod thermal_drift;
 
-/// How the compliance stage (4) of [`Truth`] finds the link-side angles where the joint springs
-/// balance gravity and payload. Every other stage is the same for both.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
-pub enum ComplianceSolver {
-    /// Newton's method on `K (q − θ) = τ_g(θ)` ([`joint_compliance`]).
-    #[default]
-    Analytic,
-    /// The real robot as a rapier multibody with joint springs, settled to rest
-    /// ([`rapier_compliance`], [`crate::rapier_truth`]). Needs a compliance effect.
-    Rapier(crate::rapier_truth::SettleOptions),
+pub use effect::{ComplianceSolver, Conditions, Effect, Moved, Needs, Prepare, ResolveCx, State};
+
+/// Generates, from one line per effect (`key: Type => Id`, in stage order), the typed ids, the
+/// containers and the statically dispatched stage loop.
+macro_rules! registry {
+    ($( $(#[$doc:meta])* $key:ident : $ty:ty => $id:ident ),+ $(,)?) => {
+        /// Typed identity of an injected effect; [`EffectId::ALL`] lists them in stage order.
+        #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, serde::Serialize)]
+        #[serde(rename_all = "snake_case")]
+        pub enum EffectId {
+            $( $(#[$doc])* $id, )+
+        }
+
+        impl EffectId {
+            /// Every effect, in stage order.
+            pub const ALL: &'static [EffectId] = &[$(EffectId::$id),+];
+
+            /// Name in summaries and errors (`gear_backlash`, [`Effect::NAME`]).
+            pub fn name(self) -> &'static str {
+                match self {
+                    $( EffectId::$id => <$ty as Effect>::NAME, )+
+                }
+            }
+
+            /// Key of the scenario section, `truth.json` entry and `truth.parquet` columns
+            /// (`backlash`, [`Effect::KEY`]).
+            pub fn key(self) -> &'static str {
+                match self {
+                    $( EffectId::$id => <$ty as Effect>::KEY, )+
+                }
+            }
+        }
+
+        /// Every effect injected into one simulated robot; `None` = effect absent. Unknown keys are
+        /// refused when deserializing, so a misspelt effect is an error rather than silently absent.
+        #[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+        #[serde(deny_unknown_fields)]
+        pub struct Effects {
+            $( $(#[$doc])* pub $key: Option<$ty>, )+
+        }
+
+        /// `[effects]` of a scenario file: one section per effect, as written (see
+        /// [`Effect::Section`]).
+        #[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+        #[serde(deny_unknown_fields)]
+        pub struct EffectsSection {
+            $( $(#[$doc])* pub $key: Option<<$ty as Effect>::Section>, )+
+        }
+
+        /// Displacements of the target point by each effect (base frame, m).
+        #[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+        pub struct Contributions {
+            $( $(#[$doc])* pub $key: [f64; 3], )+
+        }
+
+        impl Contributions {
+            /// The displacement by effect `id` (base frame, m).
+            pub fn get(&self, id: EffectId) -> [f64; 3] {
+                match id {
+                    $( EffectId::$id => self.$key, )+
+                }
+            }
+        }
+
+        impl Effects {
+            /// True when effect `id` is present.
+            pub fn contains(&self, id: EffectId) -> bool {
+                match id {
+                    $( EffectId::$id => self.$key.is_some(), )+
+                }
+            }
+
+            /// What the present effects read, together.
+            pub fn needs(&self) -> Needs {
+                let mut n = Needs::default();
+                $( if let Some(e) = &self.$key {
+                    let m = Effect::needs(e);
+                    n.dir |= m.dir;
+                    n.temp |= m.temp;
+                    n.t |= m.t;
+                    n.payload |= m.payload;
+                    n.inertials |= m.inertials;
+                } )+
+                n
+            }
+
+            /// Checks that every effect fits `model` (list lengths) and that the model has the
+            /// inertials the effects need ([`Needs::inertials`]).
+            pub fn check_fits(&self, model: &Model) -> Result<()> {
+                $( if let Some(e) = &self.$key {
+                    Effect::check_lengths(e, model.nq())?;
+                    if Effect::needs(e).inertials {
+                        model.require_inertials()?;
+                    }
+                } )+
+                Ok(())
+            }
+
+            /// Link growth per kelvin of the chain every stage evaluates (the first effect that
+            /// gives one, [`Effect::link_growth_per_k`]).
+            fn link_growth_per_k(&self) -> Option<&[f64]> {
+                let mut g = None;
+                $( if g.is_none() {
+                    g = self.$key.as_ref().and_then(|e| Effect::link_growth_per_k(e));
+                } )+
+                g
+            }
+
+            /// Resolves the `[effects]` sections of scenario `file` for `model`, drawing from
+            /// `seed` (sections with `enabled = false` are left out), and checks the result
+            /// against the robot. Errors name the file and the key.
+            pub fn from_sections(
+                sections: &EffectsSection,
+                model: &Model,
+                seed: u64,
+                file: &str,
+            ) -> Result<Effects> {
+                let mut effects = Effects::default();
+                $( if let Some(s) = sections.$key.as_ref().filter(|s| <$ty as Effect>::enabled(s)) {
+                    let cx = ResolveCx { model, seed, file, section: <$ty as Effect>::KEY };
+                    effects.$key = Some(<$ty as Effect>::from_section(s, &cx)?);
+                } )+
+                effects
+                    .check_fits(model)
+                    .map_err(|e| scenario_err(file, "effects", e.to_string()))?;
+                Ok(effects)
+            }
+        }
+
+        $( impl Registered for $ty {
+            const ID: EffectId = EffectId::$id;
+            fn get(effects: &Effects) -> Option<&Self> {
+                effects.$key.as_ref()
+            }
+            fn slot(effects: &mut Effects) -> &mut Option<Self> {
+                &mut effects.$key
+            }
+            fn section_slot(sections: &mut EffectsSection) -> &mut Option<Self::Section> {
+                &mut sections.$key
+            }
+        } )+
+
+        /// The prepared stage of each present effect.
+        #[derive(Clone, Debug)]
+        struct Stages {
+            $( $key: Option<<$ty as Effect>::Stage>, )+
+        }
+
+        /// The per-thread workspace of each present stage.
+        #[derive(Clone, Debug)]
+        struct StageScratch {
+            $( $key: Option<<$ty as Effect>::Scratch>, )+
+        }
+
+        impl Stages {
+            fn prepare(effects: &Effects, cx: &Prepare<'_>) -> Result<Stages> {
+                Ok(Stages {
+                    $( $key: match &effects.$key {
+                        Some(e) => Some(Effect::prepare(e, cx)?),
+                        None => None,
+                    }, )+
+                })
+            }
+
+            fn scratch(&self, nq: usize) -> StageScratch {
+                StageScratch {
+                    $( $key: self.$key.as_ref().map(|s| <$ty as Effect>::scratch(s, nq)), )+
+                }
+            }
+
+            /// Runs every present stage in order on `st`, recording each one's displacement of the
+            /// target `p_flange` (flange frame) in `contribution`; `p` is the target so far.
+            #[inline]
+            fn run<'t>(
+                &'t self,
+                st: &mut State<'t, '_>,
+                scratch: &mut StageScratch,
+                p_flange: &Vector3<f64>,
+                contribution: &mut Contributions,
+                p: &mut Vector3<f64>,
+            ) -> Result<()> {
+                $( if let (Some(stage), Some(scr)) = (&self.$key, scratch.$key.as_mut()) {
+                    let moved = <$ty as Effect>::act(stage, st, scr)?;
+                    if moved != Moved::Unchanged {
+                        if moved == Moved::Changed {
+                            st.flange = st.geom.eval(st.angles, st.dt, st.poses);
+                        }
+                        let pk = point(&st.flange, p_flange);
+                        contribution.$key = arr(pk - *p);
+                        *p = pk;
+                    }
+                } )+
+                Ok(())
+            }
+        }
+    };
 }
 
-/// Every effect injected into one simulated robot; `None` = effect absent. Unknown keys are refused
-/// when deserializing, so a misspelt effect is an error rather than silently absent.
-#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct Effects {
-    /// Geometric errors.
-    pub kinematic: Option<kinematic_offsets::KinematicOffsets>,
-    /// Joint stiffness.
-    pub compliance: Option<joint_compliance::JointCompliance>,
-    /// Gear lost motion.
-    pub backlash: Option<gear_backlash::GearBacklash>,
-    /// Temperature-driven growth and drift.
-    pub thermal: Option<thermal_drift::ThermalDrift>,
+/// An effect of the registry: its typed id and where it sits in [`Effects`] and [`EffectsSection`].
+/// Implemented by the registry for every effect.
+pub trait Registered: Effect {
+    /// Its typed id.
+    const ID: EffectId;
+    /// Its entry in `effects`.
+    fn get(effects: &Effects) -> Option<&Self>;
+    /// Its entry in `effects`, to set.
+    fn slot(effects: &mut Effects) -> &mut Option<Self>;
+    /// Its section in `sections`, to set.
+    fn section_slot(sections: &mut EffectsSection) -> &mut Option<Self::Section>;
+}
+
+impl Contributions {
+    /// Sum of the contributions: the total deviation from the nominal target position (base frame,
+    /// m), summed in stage order.
+    pub fn total(&self) -> [f64; 3] {
+        let (first, rest) = EffectId::ALL
+            .split_first()
+            .expect("the registry is not empty");
+        let mut t = self.get(*first);
+        for id in rest {
+            let c = self.get(*id);
+            for k in 0..3 {
+                t[k] += c[k];
+            }
+        }
+        t
+    }
 }
 
 impl Effects {
-    /// Checks that every effect fits `model` (list lengths) and that the model has the inertials that
-    /// compliance and gravity-mode backlash need.
-    pub fn check_fits(&self, model: &Model) -> Result<()> {
-        let n = model.nq();
-        if let Some(k) = &self.kinematic {
-            k.check_fits(n)?;
-        }
-        if let Some(t) = &self.thermal {
-            t.check_fits(n)?;
-        }
-        if let Some(b) = &self.backlash {
-            b.check_fits(n)?;
-            if b.mode() == gear_backlash::BacklashMode::Gravity {
-                model.require_inertials()?;
-            }
-        }
-        if let Some(c) = &self.compliance {
-            c.check_fits(n)?;
-            model.require_inertials()?;
-        }
-        Ok(())
-    }
-
     /// True when no effect is present.
     pub fn is_empty(&self) -> bool {
-        self.kinematic.is_none()
-            && self.compliance.is_none()
-            && self.backlash.is_none()
-            && self.thermal.is_none()
+        !EffectId::ALL.iter().any(|id| self.contains(*id))
     }
-}
 
-/// What the controller reports and the environment imposes at one measurement.
-#[derive(Clone, Copy, Debug)]
-pub struct Conditions<'a> {
-    /// Motor-side joint positions the controller reports (rad or m), length `model.nq()`.
-    pub q: &'a [f64],
-    /// Sign of each joint's last motion (−1, 0, +1), or `None` when unknown.
-    pub dir: Option<&'a [i8]>,
-    /// Robot temperature (°C).
-    pub temp_c: f64,
-    /// Mass at the flange, if any.
-    pub payload: Option<Payload>,
+    /// Effect `E`, if present.
+    pub fn get<E: Registered>(&self) -> Option<&E> {
+        E::get(self)
+    }
+
+    /// These effects with `effect` added (or replaced).
+    #[must_use]
+    pub fn with<E: Registered>(mut self, effect: E) -> Effects {
+        *E::slot(&mut self) = Some(effect);
+        self
+    }
+
+    /// The present effects, in stage order.
+    pub fn ids(&self) -> impl Iterator<Item = EffectId> + '_ {
+        EffectId::ALL
+            .iter()
+            .copied()
+            .filter(|id| self.contains(*id))
+    }
 }
 
 /// The noise-free truth of one measurement.
@@ -162,29 +356,6 @@ pub struct TrueTarget {
     /// Newton iterations the compliance equilibrium took, or rapier engine steps with
     /// [`ComplianceSolver::Rapier`] (0 without compliance).
     pub compliance_iterations: usize,
-}
-
-/// Displacements of the target point by each effect (base frame, m).
-#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct Contributions {
-    /// Thermal drift.
-    pub thermal: [f64; 3],
-    /// Kinematic offsets.
-    pub kinematic: [f64; 3],
-    /// Gear backlash.
-    pub backlash: [f64; 3],
-    /// Joint compliance.
-    pub compliance: [f64; 3],
-}
-
-impl Contributions {
-    /// Sum of the four contributions: the total deviation from the nominal target position (base
-    /// frame, m).
-    pub fn total(&self) -> [f64; 3] {
-        std::array::from_fn(|k| {
-            self.thermal[k] + self.kinematic[k] + self.backlash[k] + self.compliance[k]
-        })
-    }
 }
 
 /// The truth of one measurement without the per-joint vectors (those stay in the [`TruthScratch`]).
@@ -209,40 +380,25 @@ pub struct Truth {
     nq: usize,
     /// Nominal chain with thermal growth coefficients (exactly nominal at ΔT = 0).
     grown: Chain,
-    /// Grown chain with kinematic offsets, when there are any.
-    real: Option<Chain>,
-    thermal: Option<thermal_drift::ThermalDrift>,
-    zero_offsets: Option<Vec<f64>>,
-    backlash: Option<gear_backlash::GearBacklash>,
-    /// `1/kᵢ` per joint (rad/(N m) or m/N).
-    compliance: Option<Vec<f64>>,
+    /// The prepared stage of every present effect.
+    stages: Stages,
+    /// What the present effects read.
+    needs: Needs,
     /// Mass (kg) and centre of mass (joint frame, m) of each moving body.
     bodies: Vec<(f64, Vector3<f64>)>,
-    /// The rapier compliance stage, when the truth was made with [`ComplianceSolver::Rapier`].
-    rapier: Option<rapier_compliance::RapierCompliance>,
+    solver: ComplianceSolver,
 }
 
 /// Per-thread workspace of a [`Truth`]: made with [`Truth::scratch`], reused for every pose.
 #[derive(Clone, Debug)]
 pub struct TruthScratch {
     poses: Vec<Pose>,
-    /// Chain angles before backlash: `q + β ΔT + δq` (rad or m).
-    phi0: Vec<f64>,
-    /// Backlash shift `sᵢ` (rad or m).
-    shift: Vec<f64>,
-    /// Chain angles after backlash (rad or m).
-    phib: Vec<f64>,
-    /// Chain angles after compliance (rad or m).
-    theta: Vec<f64>,
-    /// First-order chain angles after compliance (rad or m).
-    first: Vec<f64>,
+    /// Chain angles of the pipeline (rad or m).
+    angles: Vec<f64>,
     q_link: Vec<f64>,
     q_link_first: Vec<f64>,
     work: GravityWork,
-    /// Joint frames for a consistency check in debug builds.
-    check_poses: Vec<Pose>,
-    /// Prepared rapier arms (rapier compliance only).
-    rapier: rapier_compliance::RapierCache,
+    stages: StageScratch,
 }
 
 impl TruthScratch {
@@ -293,51 +449,35 @@ impl Truth {
         solver: ComplianceSolver,
     ) -> Result<Truth> {
         effects.check_fits(model)?;
-        let rapier = match solver {
-            ComplianceSolver::Analytic => None,
-            ComplianceSolver::Rapier(options) => {
-                let c = effects.compliance.as_ref().ok_or_else(|| SimError::BadEffect {
-                    effect: "joint_compliance",
-                    field: "stiffness_nm_per_rad".into(),
-                    value: "absent".into(),
-                    problem: "the rapier truth settles the compliant joints: give a compliance effect"
-                        .into(),
-                })?;
-                Some(rapier_compliance::RapierCompliance::new(
-                    model,
-                    c.stiffness_nm_per_rad(),
-                    options,
-                )?)
-            }
+        if matches!(solver, ComplianceSolver::Rapier(_)) && effects.compliance.is_none() {
+            return Err(SimError::BadEffect {
+                effect: "joint_compliance",
+                field: "stiffness_nm_per_rad".into(),
+                value: "absent".into(),
+                problem: "the rapier truth settles the compliant joints: give a compliance effect"
+                    .into(),
+            });
+        }
+        let growth = effects.link_growth_per_k();
+        let cx = Prepare {
+            model,
+            growth,
+            solver,
         };
-        let alpha = effects.thermal.as_ref().map(|t| t.alpha_per_k());
-        let grown = Chain::grown(model, alpha);
-        let real = effects
-            .kinematic
-            .as_ref()
-            .map(|k| Chain::real(model, alpha, k));
+        let stages = Stages::prepare(effects, &cx)?;
         Ok(Truth {
             nq: model.nq(),
-            grown,
-            real,
-            thermal: effects.thermal.clone(),
-            zero_offsets: effects
-                .kinematic
-                .as_ref()
-                .map(|k| k.zero_offsets().to_vec()),
-            backlash: effects.backlash.clone(),
-            compliance: effects.compliance.as_ref().map(|c| c.compliance()),
+            grown: Chain::grown(model, growth),
+            stages,
+            needs: effects.needs(),
             bodies: model.bodies.iter().map(|b| (b.mass, b.com)).collect(),
-            rapier,
+            solver,
         })
     }
 
     /// The compliance solver in use.
     pub fn solver(&self) -> ComplianceSolver {
-        match &self.rapier {
-            Some(r) => ComplianceSolver::Rapier(*r.options()),
-            None => ComplianceSolver::Analytic,
-        }
+        self.solver
     }
 
     /// Number of joints.
@@ -350,16 +490,11 @@ impl Truth {
         let n = self.nq;
         TruthScratch {
             poses: vec![Pose::identity(); n],
-            phi0: vec![0.0; n],
-            shift: vec![0.0; n],
-            phib: vec![0.0; n],
-            theta: vec![0.0; n],
-            first: vec![0.0; n],
+            angles: vec![0.0; n],
             q_link: vec![0.0; n],
             q_link_first: vec![0.0; n],
             work: GravityWork::new(n),
-            check_poses: vec![Pose::identity(); n],
-            rapier: rapier_compliance::RapierCache::default(),
+            stages: self.stages.scratch(n),
         }
     }
 
@@ -394,7 +529,7 @@ impl Truth {
                 return Err(cond_err(format!("dir[{i}]"), v, "must be -1, 0 or +1"));
             }
         }
-        if self.thermal.is_some() && !cond.temp_c.is_finite() {
+        if self.needs.temp && !cond.temp_c.is_finite() {
             return Err(cond_err(
                 "temp_c",
                 cond.temp_c,
@@ -436,137 +571,37 @@ impl Truth {
         scratch: &mut TruthScratch,
     ) -> Result<TruePoint> {
         self.check(cond, p_flange, gravity)?;
-        let n = self.nq;
         let s = scratch;
         let q = cond.q;
-        let payload = cond.payload.as_ref();
         let mut contribution = Contributions::default();
-
         // 0. Nominal.
-        let mut flange = self.grown.eval(q, 0.0, &mut s.poses);
+        let flange = self.grown.eval(q, 0.0, &mut s.poses);
         let mut p = point(&flange, p_flange);
-
-        // 1. Thermal drift: grown links, drifted zeros.
-        s.phi0.copy_from_slice(q);
-        let mut dt = 0.0;
-        if let Some(th) = &self.thermal {
-            dt = th.delta_k(cond.temp_c);
-            for (a, b) in s.phi0.iter_mut().zip(th.beta_rad_per_k()) {
-                *a += b * dt;
-            }
-            flange = self.grown.eval(&s.phi0, dt, &mut s.poses);
-            let p1 = point(&flange, p_flange);
-            contribution.thermal = arr(p1 - p);
-            p = p1;
-        }
-
-        // 2. Kinematic offsets: real screws, zero offsets, base and tool errors.
-        let geom = self.real.as_ref().unwrap_or(&self.grown);
-        if let Some(dq) = &self.zero_offsets {
-            for (a, b) in s.phi0.iter_mut().zip(dq) {
-                *a += b;
-            }
-            flange = geom.eval(&s.phi0, dt, &mut s.poses);
-            let p2 = point(&flange, p_flange);
-            contribution.kinematic = arr(p2 - p);
-            p = p2;
-        }
-        // `s.poses` and `flange` now hold `geom` at `phi0` and `dt` (whichever stages ran).
-
-        // 3. Backlash.
-        s.phib.copy_from_slice(&s.phi0);
-        s.shift.fill(0.0);
-        if let Some(bl) = &self.backlash {
-            let by_gravity = bl.mode() == gear_backlash::BacklashMode::Gravity;
-            if by_gravity {
-                chain_gravity_torques(
-                    geom,
-                    &s.poses,
-                    &flange,
-                    &self.bodies,
-                    payload,
-                    gravity,
-                    &mut s.work,
-                );
-            }
-            let mut moved = false;
-            for i in 0..n {
-                let dir = cond.dir.map_or(0, |d| d[i]);
-                let tau = if by_gravity { s.work.tau[i] } else { 0.0 };
-                let sh = bl.shift(i, dir, tau);
-                s.shift[i] = sh;
-                s.phib[i] -= sh;
-                moved |= sh != 0.0;
-            }
-            if moved {
-                flange = geom.eval(&s.phib, dt, &mut s.poses);
-                let p3 = point(&flange, p_flange);
-                contribution.backlash = arr(p3 - p);
-                p = p3;
-            }
-        }
-
-        // 4. Compliance.
-        let mut iterations = 0;
-        if let Some(c) = &self.compliance {
-            let eq = Equilibrium {
-                chain: geom,
-                dt,
-                bodies: &self.bodies,
-                payload,
-                gravity,
-                compliance: c,
-            };
-            // `s.poses` and `flange` hold `geom` at `phib` here (from whichever stage ran last).
-            debug_assert_eq!(
-                geom.eval(&s.phib, dt, &mut s.check_poses),
-                flange,
-                "stage bookkeeping: the last evaluation must be at the post-backlash angles"
-            );
-            let (it, f) = match &self.rapier {
-                None => eq.solve(
-                    &s.phib,
-                    &mut s.theta,
-                    &mut s.first,
-                    &mut s.poses,
-                    flange,
-                    &mut s.work,
-                )?,
-                Some(r) => {
-                    // First-order solution from the analytic statics at the anchor angles, for the
-                    // `q_link_first_order` comparison; the rest state comes from the engine.
-                    eq.first_order(&s.phib, &mut s.first, &s.poses, &flange, &mut s.work);
-                    r.settle(
-                        geom,
-                        dt,
-                        payload,
-                        gravity,
-                        &s.phib,
-                        &mut s.theta,
-                        &mut s.rapier,
-                    )?
-                }
-            };
-            iterations = it;
-            flange = f;
-            let p4 = point(&flange, p_flange);
-            contribution.compliance = arr(p4 - p);
-            p = p4;
-        } else {
-            s.theta.copy_from_slice(&s.phib);
-            s.first.copy_from_slice(&s.phib);
-        }
-        // Six parallel vectors: indexing reads clearer than a five-fold zip.
-        #[allow(clippy::needless_range_loop)]
-        for i in 0..n {
-            s.q_link[i] = q[i] - s.shift[i] - (s.phib[i] - s.theta[i]);
-            s.q_link_first[i] = q[i] - s.shift[i] - (s.phib[i] - s.first[i]);
-        }
-        Ok(TruePoint {
+        s.angles.copy_from_slice(q);
+        s.q_link.copy_from_slice(q);
+        s.q_link_first.copy_from_slice(q);
+        let mut st = State {
+            cond,
+            gravity,
+            bodies: &self.bodies,
+            geom: &self.grown,
+            dt: 0.0,
+            angles: &mut s.angles,
+            poses: &mut s.poses,
             flange,
+            work: &mut s.work,
+            q_link: &mut s.q_link,
+            q_link_first: &mut s.q_link_first,
+            iterations: 0,
+        };
+        // 1 … n. The effects, in registry order.
+        self.stages
+            .run(&mut st, &mut s.stages, p_flange, &mut contribution, &mut p)?;
+        Ok(TruePoint {
+            flange: st.flange,
             p_base: p,
             contribution,
-            compliance_iterations: iterations,
+            compliance_iterations: st.iterations,
         })
     }
 }
@@ -595,4 +630,17 @@ pub fn true_target(
         q_link_first_order: scratch.q_link_first,
         compliance_iterations: t.compliance_iterations,
     })
+}
+
+// The registry: one line per effect, in stage order (see the module docs). Adding an effect is one
+// new module above and one line here.
+registry! {
+    /// Thermal drift.
+    thermal: thermal_drift::ThermalDrift => ThermalDrift,
+    /// Kinematic offsets (geometric errors).
+    kinematic: kinematic_offsets::KinematicOffsets => KinematicOffsets,
+    /// Gear backlash.
+    backlash: gear_backlash::GearBacklash => GearBacklash,
+    /// Joint compliance.
+    compliance: joint_compliance::JointCompliance => JointCompliance,
 }

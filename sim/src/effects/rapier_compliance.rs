@@ -6,7 +6,7 @@
 //! The same physical robot as the analytic stage ([`super::joint_compliance`]): the *real* geometry
 //! (thermally grown links at the measurement's `ΔT`, kinematic error twists, base and tool errors) with
 //! the nominal inertials attached to the real joint frames, the payload at the real flange, gravity in
-//! the nominal base frame. [`super::kinematic_offsets::Chain::model_at`] turns that geometry into a
+//! the nominal base frame. `Chain::model_at` turns that geometry into a
 //! [`Model`], and [`RapierArm::new`] builds the multibody from it; the motor-side anchor of every
 //! joint spring is the chain angle after zero offset, zero drift and backlash (`φ − s`, see
 //! [`super`]). The engine returns the link-side chain angles at rest and `T_base_flange` from its own
@@ -21,7 +21,7 @@
 //! commanded pose and resets the whole engine state, so its result does not depend on which arm was
 //! cached or what it settled before: same inputs, same bits, whatever the thread count.
 
-use super::kinematic_offsets::Chain;
+use super::chain::Chain;
 use crate::error::Result;
 use crate::lie::Pose;
 use crate::model::Model;

@@ -26,6 +26,7 @@
 //!
 //! `α` has `n + 1` entries (links 0 … n), `β` has `n` (joints 1 … n, 0-based in the vectors).
 
+use super::effect::{Effect, Moved, Needs, Prepare, ResolveCx, State};
 use crate::error::{Result, SimError};
 
 /// Linear expansion coefficient of aluminium alloys (1/K), the default link material.
@@ -337,6 +338,72 @@ impl TemperatureProfile {
             TemperatureProfile::WarmUp(w) => w.temp_at(t_s),
             TemperatureProfile::Schedule(s) => s.temp_at(t_s),
         }
+    }
+}
+
+/// `[effects.thermal]`.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ThermalSection {
+    /// Switch (default on).
+    pub enabled: Option<bool>,
+    /// Temperature at which the nominal model is exact (°C); default 20.
+    pub t_ref_c: Option<f64>,
+    /// Link expansion coefficients (1/K), shape `[n + 1]`.
+    pub alpha_per_k: crate::scenario::magnitude::Magnitude,
+    /// Joint-zero drift (rad/K), shape `[n]`; default 0.
+    pub beta_rad_per_k: Option<crate::scenario::magnitude::Magnitude>,
+}
+
+impl Effect for ThermalDrift {
+    const NAME: &'static str = EFFECT;
+    const KEY: &'static str = "thermal";
+    type Section = ThermalSection;
+    type Stage = ThermalDrift;
+    type Scratch = ();
+
+    fn enabled(section: &ThermalSection) -> bool {
+        section.enabled.unwrap_or(true)
+    }
+
+    fn from_section(t: &ThermalSection, cx: &ResolveCx<'_>) -> Result<Self> {
+        let n = cx.nq();
+        let alpha = cx.draw(&t.alpha_per_k, "alpha_per_k", &[n + 1])?;
+        let beta = cx.draw_or_zero(&t.beta_rad_per_k, "beta_rad_per_k", &[n])?;
+        cx.checked(ThermalDrift::new(t.t_ref_c.unwrap_or(20.0), alpha, beta))
+    }
+
+    fn needs(&self) -> Needs {
+        Needs {
+            temp: true,
+            ..Needs::default()
+        }
+    }
+
+    fn check_lengths(&self, nq: usize) -> Result<()> {
+        self.check_fits(nq)
+    }
+
+    fn link_growth_per_k(&self) -> Option<&[f64]> {
+        Some(&self.alpha_per_k)
+    }
+
+    fn prepare(&self, _cx: &Prepare<'_>) -> Result<ThermalDrift> {
+        Ok(self.clone())
+    }
+
+    fn scratch(_stage: &ThermalDrift, _nq: usize) {}
+
+    /// Grown links (the chain every stage evaluates carries `α`; here `ΔT` is set) and drifted zeros
+    /// `φᵢ += βᵢ ΔT`.
+    #[inline]
+    fn act<'t>(stage: &'t ThermalDrift, st: &mut State<'t, '_>, _: &mut ()) -> Result<Moved> {
+        let dt = stage.delta_k(st.cond.temp_c);
+        for (a, b) in st.angles.iter_mut().zip(&stage.beta_rad_per_k) {
+            *a += b * dt;
+        }
+        st.dt = dt;
+        Ok(Moved::Changed)
     }
 }
 
