@@ -3,7 +3,8 @@
 
 For every crate of the workspace (sim, calib, plot, the CLI in src/), reads each .rs file's `use`
 declarations and inline `crate::`/`super::` paths, maps each to the source file of the module it names,
-and looks for cycles in that file graph (Tarjan's strongly connected components). A parent module file
+and looks for cycles in that file graph (Tarjan's strongly connected components). The unit-test module
+at the end of a file is left out (its `super` is the file itself). A parent module file
 (`mod.rs`, `lib.rs`) naming its own children in `mod` declarations is not an import; a child using its
 parent's items is. Exits 1 and names the files of every cycle; 0 when there is none.
 
@@ -36,8 +37,11 @@ def module_files(src):
 
 
 def strip_comments(text):
+    """Comments and the unit-test module (`#[cfg(test)] mod tests`, where `super` is the file itself)."""
     text = re.sub(r"//[^\n]*", "", text)
-    return re.sub(r"/\*.*?\*/", "", text, flags=re.S)
+    text = re.sub(r"/\*.*?\*/", "", text, flags=re.S)
+    m = re.search(r"#\[cfg\(test\)\]\s*mod\s+\w+\s*\{", text)
+    return text[: m.start()] if m else text
 
 
 def expand(tree):

@@ -254,8 +254,7 @@ fn planned_plan(
         .sampling(sim::campaign::Sampling::List { q: list })
         .build()
         .map_err(CliError::from)?;
-    sim::campaign::plan(&res.model, &spec, res.seed, &res.scenario.label)
-        .map_err(CliError::from)
+    sim::campaign::plan(&res.model, &spec, res.seed, &res.scenario.label).map_err(CliError::from)
 }
 
 /// One run: generate, split, calibrate, score (see the module docs).
