@@ -166,7 +166,7 @@ impl<'a> Prediction<'a> {
         q: &[f64],
         regs: &Regressors,
         position: &mut [Vector3<f64>],
-        mut orientation: Option<&mut [Matrix3<f64>]>,
+        orientation: Option<&mut [Matrix3<f64>]>,
         learned: bool,
     ) {
         let n = self.nq;
@@ -192,7 +192,7 @@ impl<'a> Prediction<'a> {
             work(0, position, orientation);
             return;
         }
-        match orientation.as_deref_mut() {
+        match orientation {
             Some(o) => position
                 .par_chunks_mut(CHUNK_ROWS)
                 .zip(o.par_chunks_mut(CHUNK_ROWS))
