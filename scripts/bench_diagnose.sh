@@ -3,15 +3,20 @@
 # candidate cause, the probes for unexplained structure and the learned models, in release mode, on all
 # cores. Prints the wall time of each run, the median, and the peak resident memory.
 # Targets: iiwa7_clean under 6 s (issue 11); iiwa7_all under 15 s with peak memory under 1 GB (issue 12).
-# Usage: scripts/bench_diagnose.sh [SCENARIO.toml] [POSES] [RUNS]
+# Usage: [ROBOCAL_BIN=…] scripts/bench_diagnose.sh [SCENARIO.toml] [POSES] [RUNS]
 set -euo pipefail
 cd "$(dirname "$0")/.."
 scenario="${1:-scenarios/iiwa7_clean.toml}"
 poses="${2:-100000}"
 runs="${3:-3}"
 out="${TMPDIR:-/tmp}/robocal_bench_diagnose_$(basename "$scenario" .toml)_$poses"
-cargo build --release --quiet --bin robocal
-bin="${CARGO_TARGET_DIR:-target}/release/robocal"
+# ROBOCAL_BIN=path/to/robocal compares another build (e.g. an earlier commit's) on the same data.
+if [ -n "${ROBOCAL_BIN:-}" ]; then
+  bin="$ROBOCAL_BIN"
+else
+  cargo build --release --quiet --bin robocal
+  bin="${CARGO_TARGET_DIR:-target}/release/robocal"
+fi
 if [ ! -f "$out/measurements.parquet" ]; then
   "$bin" generate --scenario "$scenario" --out "$out" --seed 1 --poses "$poses" >/dev/null 2>&1
 fi
