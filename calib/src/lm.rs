@@ -10,7 +10,10 @@
 //! eigenvalues above `max(1e-11 λ_max, floor²)` (cheap, and accurate enough to step in); at the solution
 //! the SVD `J_s = U Σ Vᵀ` (Householder QR, then the SVD of `R`) decides: singular values below
 //! `max(rank_rtol · σ_max, min_singular_value)` are unidentifiable. Should the SVD find another rank
-//! than the start, the iterations go on in its subspace. Each iteration solves the damped reduced normal
+//! than the start, the iterations go on in its subspace; a long solve also takes the SVD every 50
+//! iterations, so that a combination whose σ sinks below the floor on the way (a weakly determined
+//! joint compliance once the torques move to the equilibrium) is dropped instead of being walked
+//! until the iteration cap. Each iteration solves the damped reduced normal
 //! equations `(Bᵀ J_sᵀ J_s B + μ diag) z = −Bᵀ J_sᵀ r` (Cholesky; Marquardt's diagonal damping with
 //! Nielsen's update of `μ`) and steps by `D B z`. Restricting to `B` makes every step the minimum-norm
 //! (in scaled units) Gauss–Newton step.
@@ -82,7 +85,11 @@ pub trait LeastSquaresProblem {
 /// Settings of [`minimize`].
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct LmOptions {
-    /// Safety cap on iterations; reaching it is an unsuccessful termination. Default 100.
+    /// Safety cap on iterations; reaching it is an unsuccessful termination. Default 500. A fit of a
+    /// model that misses a large effect (the kinematic model on `scenarios/iiwa7_all.toml`: millimetres
+    /// of joint compliance, `χ²/dof` over 10⁴) walks a long, flat valley of weakly determined
+    /// combinations and converges linearly: 176 iterations on that scenario's 200 poses at seed 7.
+    /// Clean fits converge in under 10.
     pub max_iterations: usize,
     /// Singular values of the scaled, weighted Jacobian below `rank_rtol · σ_max` are unidentifiable.
     /// Default 1e-8: structural null directions sit at rounding level (about 1e-15 σ_max), while any
@@ -106,7 +113,7 @@ pub struct LmOptions {
 impl Default for LmOptions {
     fn default() -> Self {
         LmOptions {
-            max_iterations: 100,
+            max_iterations: 500,
             rank_rtol: 1e-8,
             min_singular_value: 0.1,
             decrease_tol: 1e-12,
@@ -417,16 +424,31 @@ pub fn minimize<P: LeastSquaresProblem>(
     }
     // Starting subspace from the eigenvectors of the scaled normal matrix (cheap, and accurate enough
     // to step in); the decision that counts is the SVD at the solution. Should that find a different
-    // rank (a combination with σ/σ_max between `rank_rtol` and √GRAM_RTOL), the iterations go on in
-    // the SVD's subspace, at most twice.
+    // rank (a combination with σ/σ_max between `rank_rtol` and √GRAM_RTOL, or one whose σ crossed the
+    // floor on the way), the iterations go on in the SVD's subspace. The SVD is also taken every
+    // RANK_CHECK_INTERVAL iterations of a long solve: a combination that sinks below the floor while
+    // the solve walks a long valley is dropped then, not after the iteration cap.
     let mut basis = gram_basis(&ws.gram, options.min_singular_value);
     let mut fresh = true;
+    let mut damping = Damping::new(options);
     let mut sub;
     loop {
         if basis.ncols() == 0 {
             report.termination = TerminationReason::NoIdentifiableParameters;
         } else {
-            iterate(problem, scales, options, ws, &basis, fresh, &mut report);
+            let cap = (options.max_iterations - report.iterations.min(options.max_iterations))
+                .min(RANK_CHECK_INTERVAL);
+            iterate(
+                problem,
+                scales,
+                ws,
+                &basis,
+                fresh,
+                cap,
+                &mut damping,
+                options,
+                &mut report,
+            );
         }
         fresh = false;
         problem.jacobian(&mut ws.jacobian);
@@ -439,10 +461,23 @@ pub fn minimize<P: LeastSquaresProblem>(
         );
         report.rank = sub.rank;
         let settled = sub.rank == basis.ncols();
-        if settled || !report.was_successful() || report.evaluations > 10 * options.max_iterations {
+        let paused = report.termination == TerminationReason::MaxIterations
+            && report.iterations < options.max_iterations;
+        if report.termination == TerminationReason::MaxIterations && !paused {
+            report
+                .health
+                .record(Warning::IterationLimit, report.iterations);
+        }
+        if (settled && !paused)
+            || (!report.was_successful() && !paused)
+            || report.evaluations > 10 * options.max_iterations
+        {
             break;
         }
-        basis = sub.v.columns(0, sub.rank).into_owned();
+        if !settled {
+            basis = sub.v.columns(0, sub.rank).into_owned();
+            damping = Damping::new(options);
+        }
     }
     if sub.near_singular_count() > 0 {
         report
@@ -450,6 +485,25 @@ pub fn minimize<P: LeastSquaresProblem>(
             .record(Warning::NearSingularNormalMatrix, report.iterations);
     }
     (report, sub)
+}
+
+/// Iterations between two rank decisions (SVD) of a long solve, see [`minimize`].
+const RANK_CHECK_INTERVAL: usize = 50;
+
+/// Marquardt damping `μ` and Nielsen's growth factor `ν`, carried across the rounds of one subspace.
+#[derive(Clone, Copy, Debug)]
+struct Damping {
+    mu: f64,
+    nu: f64,
+}
+
+impl Damping {
+    fn new(options: &LmOptions) -> Self {
+        Damping {
+            mu: options.initial_damping,
+            nu: 2.0,
+        }
+    }
 }
 
 /// Relative eigenvalue threshold of the scaled normal matrix for the starting subspace: rounding in
@@ -474,13 +528,16 @@ fn gram_basis(gram: &DMatrix<f64>, floor: f64) -> DMatrix<f64> {
 
 /// The LM iterations in the subspace `sub`; leaves the trial point at the linearisation point.
 /// With `fresh`, `ws.gram` and `ws.gradient` already hold the normal equations at the current point.
+#[allow(clippy::too_many_arguments)]
 fn iterate<P: LeastSquaresProblem>(
     problem: &mut P,
     scales: &[f64],
-    options: &LmOptions,
     ws: &mut LmWorkspace,
     b: &DMatrix<f64>,
     mut fresh: bool,
+    cap: usize,
+    damping: &mut Damping,
+    options: &LmOptions,
     report: &mut MinimizationReport,
 ) {
     let p = scales.len();
@@ -490,8 +547,7 @@ fn iterate<P: LeastSquaresProblem>(
     let mut grad_r = DVector::zeros(r);
     let mut z = DVector::zeros(r);
     let mut step = vec![0.0; p];
-    let mut mu = options.initial_damping;
-    let mut nu = 2.0;
+    let Damping { mut mu, mut nu } = *damping;
     let start_iterations = report.iterations;
     loop {
         let cost = if fresh {
@@ -533,11 +589,9 @@ fn iterate<P: LeastSquaresProblem>(
             report.termination = TerminationReason::Converged;
             return;
         }
-        if report.iterations - start_iterations >= options.max_iterations {
+        if report.iterations - start_iterations >= cap {
             report.termination = TerminationReason::MaxIterations;
-            report
-                .health
-                .record(Warning::IterationLimit, report.iterations);
+            *damping = Damping { mu, nu };
             return;
         }
         report.iterations += 1;
