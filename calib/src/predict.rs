@@ -148,6 +148,15 @@ impl<'a> Prediction<'a> {
         }
     }
 
+    /// Jacobian of the chain's target position at the row last evaluated into `s` with respect to a
+    /// step of every kinematic parameter of `layout` (3 × [`ParamLayout::len`], row-major; m per unit).
+    /// It differentiates the chain at the effective joint values `θ`: for a kinematic model (no
+    /// extensions, as in the sweep) that is the whole prediction's Jacobian; extension and learned
+    /// terms are not differentiated.
+    pub fn position_jacobian(&self, s: &PredictScratch, layout: &ParamLayout, out: &mut [f64]) {
+        self.chain.position_jacobian(&s.chain, layout, out);
+    }
+
     /// Predicted positions (tracker frame, m) and, when `orientation` is given, orientations of every
     /// row of `q` (row-major, `nq` per row) with regressors `regs`; parallel over chunks of rows.
     pub fn positions(

@@ -26,8 +26,9 @@ pub mod table;
 
 use crate::error::CliError;
 use calib::calibrate::{Calibration, CalibrationOptions, Dataset, calibrate};
-use calib::chain::{Chain, ChainScratch};
+use calib::extensions::Regressors;
 use calib::params::ParamLayout;
+use calib::predict::Prediction;
 use nalgebra::{DMatrix, DVector, Vector3};
 use sim::campaign::splitmix64;
 use sim::measurement_table::MeasurementTable;
@@ -427,19 +428,19 @@ fn held_out_scores(
         };
     }
     let np = layout.len();
-    let chain = Chain::new(model, &cal.params);
-    let nominal = Chain::new(model, &cal.before);
-    let mut scratch = ChainScratch::new(model.nq());
+    let calibrated = Prediction::new(model, &cal.params);
+    let nominal = Prediction::new(model, &cal.before);
+    let none = Regressors::none();
+    let mut scratch = calibrated.scratch();
     let mut jbuf = vec![0.0; 3 * np];
     let (mut e2, mut emax, mut pred2, mut nom2) = (0.0, 0.0f64, 0.0, 0.0);
     for &row in rows {
-        nominal.forward(&mut scratch, table.q_row(row));
-        nom2 += (scratch.p_tracker - p_true[row]).norm_squared();
-        chain.forward(&mut scratch, table.q_row(row));
-        let e = (scratch.p_tracker - p_true[row]).norm();
+        let q = table.q_row(row);
+        nom2 += (nominal.row(&none, row, q, &mut scratch) - p_true[row]).norm_squared();
+        let e = (calibrated.row(&none, row, q, &mut scratch) - p_true[row]).norm();
         e2 += e * e;
         emax = emax.max(e);
-        chain.position_jacobian(&scratch, layout, &mut jbuf);
+        calibrated.position_jacobian(&scratch, layout, &mut jbuf);
         for a in 0..3 {
             let ja = &jbuf[a * np..(a + 1) * np];
             for c in 0..l.ncols() {
@@ -486,20 +487,21 @@ fn parameter_scores(
             last_pose = Some(table.pose[row]);
         }
     }
-    let chain = Chain::new(model, &cal.params);
-    let mut scratch = ChainScratch::new(model.nq());
+    let calibrated = Prediction::new(model, &cal.params);
+    let none = Regressors::none();
+    let mut scratch = calibrated.scratch();
     let mut jbuf = vec![0.0; 3 * np];
     let m = 3 * first_rows.len();
     let mut j = DMatrix::zeros(m, np);
     let mut d = DVector::zeros(m);
     for (i, &row) in first_rows.iter().enumerate() {
-        chain.forward(&mut scratch, table.q_row(row));
-        chain.position_jacobian(&scratch, layout, &mut jbuf);
+        let p = calibrated.row(&none, row, table.q_row(row), &mut scratch);
+        calibrated.position_jacobian(&scratch, layout, &mut jbuf);
         for a in 0..3 {
             for k in 0..np {
                 j[(3 * i + a, k)] = jbuf[a * np + k];
             }
-            d[3 * i + a] = scratch.p_tracker[a] - p_true[row][a];
+            d[3 * i + a] = p[a] - p_true[row][a];
         }
     }
     let mut out = ParameterScores {
