@@ -97,6 +97,7 @@ pub mod identifiability;
 pub mod io;
 pub mod learned;
 pub mod lie3;
+pub mod linalg;
 pub mod lm;
 pub mod model_file;
 pub mod observations;

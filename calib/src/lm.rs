@@ -223,15 +223,14 @@ impl Subspace {
     /// values above `max(rtol · σ_max, floor)` are identifiable.
     pub fn analyze(j: &DMatrix<f64>, scales: &[f64], rtol: f64, floor: f64) -> Subspace {
         let (m, p) = j.shape();
-        let mut js = j.clone();
-        for (c, s) in scales.iter().enumerate() {
-            js.column_mut(c).scale_mut(*s);
-        }
         let square = if m > p {
-            js.qr().r()
+            crate::linalg::r_factor_scaled(j, Some(scales))
         } else {
             let mut sq = DMatrix::zeros(p, p);
-            sq.view_mut((0, 0), (m, p)).copy_from(&js);
+            sq.view_mut((0, 0), (m, p)).copy_from(j);
+            for (c, s) in scales.iter().enumerate() {
+                sq.column_mut(c).scale_mut(*s);
+            }
             sq
         };
         let svd = square.svd(false, true);
@@ -468,8 +467,7 @@ pub fn minimize<P: LeastSquaresProblem>(
                 .health
                 .record(Warning::IterationLimit, report.iterations);
         }
-        if (settled && !paused)
-            || (!report.was_successful() && !paused)
+        if (!paused && (settled || !report.was_successful()))
             || report.evaluations > 10 * options.max_iterations
         {
             break;

@@ -14,6 +14,7 @@ use crate::lm::LeastSquaresProblem;
 use crate::params::{KinematicParams, ParamLayout};
 use crate::predict::{PredictScratch, physical_row};
 use nalgebra::{DMatrix, Vector3};
+use rayon::prelude::*;
 use sim::Model;
 
 pub use crate::observations::{NoiseModel, Observations};
@@ -75,15 +76,46 @@ pub struct KinematicProblem<'a> {
     lin: KinematicParams,
     trial: KinematicParams,
     chain: Chain,
-    /// The current row's evaluation (effective joint values, frames).
-    scratch: PredictScratch,
     step_full: Vec<f64>,
+    /// The serial path's row workspace (problems of at most [`CHUNK_ROWS`] rows).
+    ws: RowScratch,
+}
+
+/// Measurement rows per parallel work item. The partial sums of the normal equations are added in
+/// chunk order, so the result does not depend on the number of threads; a problem of at most this
+/// many rows is one chunk, summed in row order.
+const CHUNK_ROWS: usize = 2048;
+
+/// Workspace of one row's evaluation: made once per chunk of rows, reused without allocating.
+#[derive(Clone, Debug)]
+struct RowScratch {
+    /// The row's evaluation (effective joint values, frames).
+    predict: PredictScratch,
     /// Jacobian rows of one measurement (dim × layout.len()), row-major.
     block: Vec<f64>,
     /// Orientation Jacobian before `J_l⁻¹` (3 × layout.len()).
     rot: Vec<f64>,
     /// Active, weighted, scaled Jacobian rows of one measurement (dim × active), row-major.
     rows: Vec<f64>,
+}
+
+impl RowScratch {
+    fn new(nq: usize, dim: usize, np: usize, active: usize) -> Self {
+        RowScratch {
+            predict: PredictScratch::new(nq),
+            block: vec![0.0; dim * np],
+            rot: vec![0.0; 3 * np],
+            rows: vec![0.0; dim * active],
+        }
+    }
+}
+
+/// One chunk's share of the normal equations: `χ²`, the gradient and the lower triangle of the
+/// normal matrix (column-major, p × p).
+struct NormalPart {
+    cost: f64,
+    gradient: Vec<f64>,
+    gram: Vec<f64>,
 }
 
 fn copy_params(dst: &mut KinematicParams, src: &KinematicParams) {
@@ -122,13 +154,10 @@ impl<'a> KinematicProblem<'a> {
             model,
             obs,
             chain: Chain::new(model, &start),
-            scratch: PredictScratch::new(model.nq()),
             trial: start.clone(),
             lin: start,
             step_full: vec![0.0; np],
-            block: vec![0.0; dim * np],
-            rot: vec![0.0; 3 * np],
-            rows: vec![0.0; dim * active.len()],
+            ws: RowScratch::new(model.nq(), dim, np, active.len()),
             active,
             layout,
         }
@@ -154,9 +183,18 @@ impl<'a> KinematicProblem<'a> {
         self.lin
     }
 
-    /// Fills `self.block` with the weighted residuals' Jacobian of row `r` and returns the weighted
+    fn scratch(&self) -> RowScratch {
+        RowScratch::new(
+            self.model.nq(),
+            self.obs.dim(),
+            self.layout.len(),
+            self.active.len(),
+        )
+    }
+
+    /// Fills `ws.block` with the weighted residuals' Jacobian of row `r` and returns the weighted
     /// residuals (first `dim` entries used) at the trial point.
-    fn row_block(&mut self, r: usize, with_jacobian: bool) -> [f64; 6] {
+    fn row_block(&self, r: usize, with_jacobian: bool, ws: &mut RowScratch) -> [f64; 6] {
         let obs = self.obs;
         let pred = physical_row(
             &self.chain,
@@ -164,7 +202,7 @@ impl<'a> KinematicProblem<'a> {
             &obs.ext,
             r,
             obs.q_row(r),
-            &mut self.scratch,
+            &mut ws.predict,
         );
         let (p, lever, growth) = (pred.p_tracker, pred.lever, pred.growth);
         let sw = obs.weight[r].sqrt();
@@ -173,48 +211,45 @@ impl<'a> KinematicProblem<'a> {
         let mut res = [dp.x * sp, dp.y * sp, dp.z * sp, 0.0, 0.0, 0.0];
         let np = self.layout.len();
         if with_jacobian {
-            self.chain.position_jacobian(
-                &self.scratch.chain,
-                &self.layout,
-                &mut self.block[..3 * np],
-            );
+            self.chain
+                .position_jacobian(&ws.predict.chain, &self.layout, &mut ws.block[..3 * np]);
             if growth != 0.0 {
-                grow_columns(&self.layout, growth, &p, &mut self.block[..3 * np]);
+                grow_columns(&self.layout, growth, &p, &mut ws.block[..3 * np]);
             }
             extension_columns(
                 &self.layout,
                 obs.ext.row(r),
                 &lever,
                 3,
-                &mut self.block[..3 * np],
+                &mut ws.block[..3 * np],
             );
-            for v in &mut self.block[..3 * np] {
+            for v in &mut ws.block[..3 * np] {
                 *v *= sp;
             }
         }
         if let Some(meas) = &obs.orientation {
             let so = sw / obs.sigma_rotation;
-            let e = log_rotation(&(self.scratch.chain.r_tracker_target * meas[r].transpose()));
+            let e = log_rotation(&(ws.predict.chain.r_tracker_target * meas[r].transpose()));
             res[3] = e.x * so;
             res[4] = e.y * so;
             res[5] = e.z * so;
             if with_jacobian {
                 self.chain
-                    .orientation_jacobian(&self.scratch.chain, &self.layout, &mut self.rot);
+                    .orientation_jacobian(&ws.predict.chain, &self.layout, &mut ws.rot);
                 extension_columns(
                     &self.layout,
                     obs.ext.row(r),
                     &Vector3::zeros(),
                     3,
-                    &mut self.rot,
+                    &mut ws.rot,
                 );
                 let jl = left_jacobian_inverse(&e);
                 for row in 0..3 {
                     for k in 0..np {
-                        self.block[(3 + row) * np + k] = so
-                            * (jl[(row, 0)] * self.rot[k]
-                                + jl[(row, 1)] * self.rot[np + k]
-                                + jl[(row, 2)] * self.rot[2 * np + k]);
+                        ws.block[(3 + row) * np + k] = so
+                            * (jl[(row, 0)] * ws.rot[k]
+                                + jl[(row, 1)] * ws.rot[np + k]
+                                + jl[(row, 2)] * ws.rot[2 * np + k]);
                     }
                 }
             }
@@ -227,12 +262,68 @@ impl<'a> KinematicProblem<'a> {
         let zero = vec![0.0; self.active.len()];
         self.set_params(&zero);
         let d = self.obs.dim();
-        (0..self.obs.len())
-            .map(|r| {
-                let res = self.row_block(r, false);
-                res[..d].iter().map(|v| v * v).sum::<f64>().sqrt()
-            })
-            .collect()
+        let mut out = vec![0.0; self.obs.len()];
+        let this = &*self;
+        out.par_chunks_mut(CHUNK_ROWS)
+            .enumerate()
+            .for_each(|(c, dst)| {
+                let mut ws = this.scratch();
+                for (k, v) in dst.iter_mut().enumerate() {
+                    let res = this.row_block(c * CHUNK_ROWS + k, false, &mut ws);
+                    *v = res[..d].iter().map(|v| v * v).sum::<f64>().sqrt();
+                }
+            });
+        out
+    }
+
+    /// Chunk `c`'s share of the normal equations (rows `c · CHUNK_ROWS ..`), scaled by `scales`.
+    fn normal_part(&self, c: usize, scales: &[f64], ws: &mut RowScratch, part: &mut NormalPart) {
+        let d = self.obs.dim();
+        let np = self.layout.len();
+        let p = self.active.len();
+        let rows = c * CHUNK_ROWS..((c + 1) * CHUNK_ROWS).min(self.obs.len());
+        let gs = &mut part.gram;
+        let gradient = &mut part.gradient;
+        for r in rows {
+            let res = self.row_block(r, true, ws);
+            // Gather the active, scaled rows of this measurement (d × p, row-major).
+            for (row, &e) in res.iter().enumerate().take(d) {
+                let base = row * np;
+                part.cost += e * e;
+                let dst = &mut ws.rows[row * p..(row + 1) * p];
+                for ((x, &k), &s) in dst.iter_mut().zip(&self.active).zip(scales) {
+                    *x = ws.block[base + k] * s;
+                }
+                for (g, &j) in gradient.iter_mut().zip(dst.iter()) {
+                    *g += j * e;
+                }
+            }
+            // Lower triangle of the rank-d update, one pass over the normal matrix per measurement.
+            if d == 3 {
+                let (r0, rest) = ws.rows.split_at(p);
+                let (r1, r2) = rest.split_at(p);
+                for a in 0..p {
+                    let (x0, x1, x2) = (r0[a], r1[a], r2[a]);
+                    let col = &mut gs[a * p + a..(a + 1) * p];
+                    for (((g, &y0), &y1), &y2) in
+                        col.iter_mut().zip(&r0[a..]).zip(&r1[a..]).zip(&r2[a..])
+                    {
+                        *g += x0 * y0 + x1 * y1 + x2 * y2;
+                    }
+                }
+            } else {
+                for row in 0..d {
+                    let jr = &ws.rows[row * p..(row + 1) * p];
+                    for a in 0..p {
+                        let ja = jr[a];
+                        let col = &mut gs[a * p + a..(a + 1) * p];
+                        for (g, &jb) in col.iter_mut().zip(&jr[a..]) {
+                            *g += ja * jb;
+                        }
+                    }
+                }
+            }
+        }
     }
 }
 
@@ -261,20 +352,47 @@ impl LeastSquaresProblem for KinematicProblem<'_> {
 
     fn residuals(&mut self, out: &mut [f64]) {
         let d = self.obs.dim();
-        for r in 0..self.obs.len() {
-            let res = self.row_block(r, false);
-            out[r * d..(r + 1) * d].copy_from_slice(&res[..d]);
-        }
+        let this = &*self;
+        out.par_chunks_mut(CHUNK_ROWS * d)
+            .enumerate()
+            .for_each(|(c, dst)| {
+                let mut ws = this.scratch();
+                for (k, v) in dst.chunks_exact_mut(d).enumerate() {
+                    let res = this.row_block(c * CHUNK_ROWS + k, false, &mut ws);
+                    v.copy_from_slice(&res[..d]);
+                }
+            });
     }
 
     fn jacobian(&mut self, out: &mut DMatrix<f64>) {
         let d = self.obs.dim();
         let np = self.layout.len();
-        for r in 0..self.obs.len() {
-            self.row_block(r, true);
-            for row in 0..d {
-                for (a, &k) in self.active.iter().enumerate() {
-                    out[(r * d + row, a)] = self.block[row * np + k];
+        let p = self.active.len();
+        let n = self.obs.len();
+        // Row-major blocks per chunk in parallel, then scattered into the column-major `out`.
+        let this = &*self;
+        let blocks: Vec<Vec<f64>> = (0..n.div_ceil(CHUNK_ROWS))
+            .into_par_iter()
+            .map(|c| {
+                let mut ws = this.scratch();
+                let rows = c * CHUNK_ROWS..((c + 1) * CHUNK_ROWS).min(n);
+                let mut dst = vec![0.0; rows.len() * d * p];
+                for (k, r) in rows.enumerate() {
+                    this.row_block(r, true, &mut ws);
+                    for row in 0..d {
+                        for (a, &col) in this.active.iter().enumerate() {
+                            dst[(k * d + row) * p + a] = ws.block[row * np + col];
+                        }
+                    }
+                }
+                dst
+            })
+            .collect();
+        for (c, block) in blocks.iter().enumerate() {
+            let first = c * CHUNK_ROWS * d;
+            for (i, row) in block.chunks_exact(p).enumerate() {
+                for (a, &v) in row.iter().enumerate() {
+                    out[(first + i, a)] = v;
                 }
             }
         }
@@ -286,59 +404,54 @@ impl LeastSquaresProblem for KinematicProblem<'_> {
         gram: &mut DMatrix<f64>,
         gradient: &mut [f64],
     ) -> f64 {
-        let d = self.obs.dim();
-        let np = self.layout.len();
         let p = self.active.len();
-        gram.fill(0.0);
-        gradient.fill(0.0);
-        let mut cost = 0.0;
-        for r in 0..self.obs.len() {
-            let res = self.row_block(r, true);
-            // Gather the active, scaled rows of this measurement (d × p, row-major).
-            for (row, &e) in res.iter().enumerate().take(d) {
-                let base = row * np;
-                cost += e * e;
-                let dst = &mut self.rows[row * p..(row + 1) * p];
-                for ((x, &k), &s) in dst.iter_mut().zip(&self.active).zip(scales) {
-                    *x = self.block[base + k] * s;
+        let chunks = self.obs.len().div_ceil(CHUNK_ROWS);
+        let empty = || NormalPart {
+            cost: 0.0,
+            gradient: vec![0.0; p],
+            gram: vec![0.0; p * p],
+        };
+        let total = if chunks <= 1 {
+            let mut ws = std::mem::replace(&mut self.ws, RowScratch::new(0, 0, 0, 0));
+            let mut part = empty();
+            if chunks == 1 {
+                self.normal_part(0, scales, &mut ws, &mut part);
+            }
+            self.ws = ws;
+            part
+        } else {
+            let this = &*self;
+            let parts: Vec<NormalPart> = (0..chunks)
+                .into_par_iter()
+                .map(|c| {
+                    let mut ws = this.scratch();
+                    let mut part = empty();
+                    this.normal_part(c, scales, &mut ws, &mut part);
+                    part
+                })
+                .collect();
+            // Added in chunk order: the same sums on any number of threads.
+            let mut parts = parts.into_iter();
+            let mut total = parts.next().expect("at least two chunks");
+            for part in parts {
+                total.cost += part.cost;
+                for (t, v) in total.gradient.iter_mut().zip(&part.gradient) {
+                    *t += v;
                 }
-                for (g, &j) in gradient.iter_mut().zip(dst.iter()) {
-                    *g += j * e;
+                for (t, v) in total.gram.iter_mut().zip(&part.gram) {
+                    *t += v;
                 }
             }
-            // Lower triangle of the rank-d update, one pass over the normal matrix per measurement.
-            let gs = gram.as_mut_slice();
-            if d == 3 {
-                let (r0, rest) = self.rows.split_at(p);
-                let (r1, r2) = rest.split_at(p);
-                for a in 0..p {
-                    let (x0, x1, x2) = (r0[a], r1[a], r2[a]);
-                    let col = &mut gs[a * p + a..(a + 1) * p];
-                    for (((g, &y0), &y1), &y2) in
-                        col.iter_mut().zip(&r0[a..]).zip(&r1[a..]).zip(&r2[a..])
-                    {
-                        *g += x0 * y0 + x1 * y1 + x2 * y2;
-                    }
-                }
-            } else {
-                for row in 0..d {
-                    let jr = &self.rows[row * p..(row + 1) * p];
-                    for a in 0..p {
-                        let ja = jr[a];
-                        let col = &mut gs[a * p + a..(a + 1) * p];
-                        for (g, &jb) in col.iter_mut().zip(&jr[a..]) {
-                            *g += ja * jb;
-                        }
-                    }
-                }
-            }
-        }
+            total
+        };
+        gram.as_mut_slice().copy_from_slice(&total.gram);
+        gradient.copy_from_slice(&total.gradient);
         // Mirror the lower triangle.
         for a in 0..p {
             for b in a + 1..p {
                 gram[(a, b)] = gram[(b, a)];
             }
         }
-        cost
+        total.cost
     }
 }

@@ -185,8 +185,8 @@ impl RidgeSystem {
                 yc[(i, c)] = y[c];
             }
         }
-        let gram = fc.tr_mul(&fc);
-        let rhs = fc.tr_mul(&yc);
+        let gram = crate::linalg::tr_mul(&fc, &fc);
+        let rhs = crate::linalg::tr_mul(&fc, &yc);
         let eig = SymmetricEigen::new(gram);
         let projected = eig.eigenvectors.tr_mul(&rhs);
         RidgeSystem {
