@@ -27,6 +27,11 @@ mkdir -p "$live"
 "$py" scripts/mujoco_reference.py --out "$live" --compare-to golden
 export ROBOCAL_GOLDEN_LIVE="$PWD/$live"
 
+echo "== Parquet as pandas, polars and DuckDB write it (read back by the Rust tests)" >&2
+variants="target/reader-variants"
+"$py" scripts/write_reader_variants.py ../shared/data/real/ur5_jacobi2025_grid.csv "$variants"
+export ROBOCAL_READER_VARIANTS="$PWD/$variants"
+
 if [ -z "${ROBOCAL_SKIP_LINT:-}" ]; then
   echo "== cargo fmt --check and clippy" >&2
   cargo fmt --all -- --check
@@ -35,3 +40,9 @@ fi
 
 echo "== cargo test" >&2
 cargo test --workspace --no-fail-fast
+
+echo "== pandas, polars and DuckDB read robocal's own tables identically" >&2
+cargo test --workspace --quiet --test measurement_table -- --ignored write_files_for_check_readers
+tmp="${TMPDIR:-/tmp}"
+"$py" scripts/check_readers.py "$tmp/robocal_table.parquet" "$tmp/robocal_table.csv"
+"$py" scripts/check_readers.py "$tmp/robocal_ur5.parquet" "$tmp/robocal_ur5.csv"

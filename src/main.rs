@@ -14,6 +14,7 @@ use std::process::ExitCode;
 const USAGE: u8 = 2;
 
 fn main() -> ExitCode {
+    sim::decoder_guard::install_quiet_hook();
     let args = match cli::Cli::try_parse() {
         Ok(a) => a,
         Err(e) if e.kind() == ErrorKind::InvalidValue => {

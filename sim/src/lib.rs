@@ -25,6 +25,7 @@
 #![warn(missing_docs)]
 
 pub mod campaign;
+pub mod decoder_guard;
 pub mod effects;
 pub mod error;
 pub mod generate;

@@ -236,12 +236,44 @@ fn directions(arr: &dyn Array) -> std::result::Result<Vec<i8>, ColumnProblem> {
         .collect()
 }
 
-/// Reads a Parquet measurement table; `file` is the name shown in errors.
+/// Rows reserved up front from the file's own row count; beyond, the columns grow as rows arrive (a
+/// corrupt footer can claim any count).
+const MAX_RESERVED_ROWS: usize = 1 << 20;
+
+/// Reads a Parquet measurement table; `file` is the name shown in errors. A panic of the Parquet
+/// decoder on a corrupt file becomes the same one-line error as a decoding failure
+/// ([`crate::decoder_guard`]).
 pub(super) fn read_parquet_file(path: &Path, file: &str) -> Result<MeasurementTable> {
     let f = std::fs::File::open(path).map_err(|e| SimError::Read {
         path: path.to_path_buf(),
         source: e,
     })?;
+    crate::decoder_guard::contain(|| read_parquet(f, file)).unwrap_or_else(|message| {
+        Err(table_err(
+            file,
+            None,
+            None,
+            format!(
+                "not a readable Parquet file: the decoder failed ({}): is the file corrupt?",
+                one_line(&message)
+            ),
+        ))
+    })
+}
+
+/// `message` on one line: control characters as spaces, at most 120 characters.
+fn one_line(message: &str) -> String {
+    let flat: String = message
+        .chars()
+        .map(|c| if c.is_control() { ' ' } else { c })
+        .collect();
+    match flat.char_indices().nth(120) {
+        Some((i, _)) => format!("{}…", &flat[..i]),
+        None => flat,
+    }
+}
+
+fn read_parquet(f: std::fs::File, file: &str) -> Result<MeasurementTable> {
     let bad_file = |e: &dyn std::fmt::Display| {
         table_err(
             file,
@@ -266,7 +298,9 @@ pub(super) fn read_parquet_file(path: &Path, file: &str) -> Result<MeasurementTa
         .map(|&i| (names[i].as_str(), layout.roles[i]))
         .collect();
     let mask = ProjectionMask::roots(builder.parquet_schema(), used.iter().copied());
-    let n_rows = usize::try_from(builder.metadata().file_metadata().num_rows()).unwrap_or(0);
+    let n_rows = usize::try_from(builder.metadata().file_metadata().num_rows())
+        .unwrap_or(0)
+        .min(MAX_RESERVED_ROWS);
     let reader = builder
         .with_projection(mask)
         .with_batch_size(65_536)
@@ -290,7 +324,18 @@ pub(super) fn read_parquet_file(path: &Path, file: &str) -> Result<MeasurementTa
             let Some(&role) = role_of.get(name) else {
                 continue;
             };
-            let arr = arr.as_ref();
+            // A dictionary-typed column (a pandas categorical, say) as its plain values.
+            let plain;
+            let arr = match arr.as_any_dictionary_opt() {
+                Some(dict) => {
+                    plain = arrow_select::take::take(dict.values().as_ref(), dict.keys(), None)
+                        .map_err(|e| {
+                            table_err(file, None, Some(name), format!("dictionary: {e}"))
+                        })?;
+                    plain.as_ref()
+                }
+                None => arr.as_ref(),
+            };
             let res = match role {
                 Role::Ignore => Ok(()),
                 Role::Pose => integers(arr).map(|v| pose.extend(v)),
