@@ -166,20 +166,26 @@ impl RidgeSystem {
     fn new(f: &DMatrix<f64>, residual_m: &[Vector3<f64>], rows: &[usize]) -> Self {
         let p = f.ncols();
         let n = rows.len();
+        // Column by column: `f` is column-major, so each column is one contiguous pass.
         let mut feature_mean = vec![0.0; p];
-        for &r in rows {
-            for (k, m) in feature_mean.iter_mut().enumerate() {
-                *m += f[(r, k)];
+        for (k, m) in feature_mean.iter_mut().enumerate() {
+            let col = f.column(k);
+            for &r in rows {
+                *m += col[r];
             }
         }
         feature_mean.iter_mut().for_each(|m| *m /= n as f64);
         let y_mean = mean_of(residual_m, rows);
         let mut fc = DMatrix::zeros(n, p);
         let mut yc = DMatrix::zeros(n, 3);
-        for (i, &r) in rows.iter().enumerate() {
-            for k in 0..p {
-                fc[(i, k)] = f[(r, k)] - feature_mean[k];
+        for k in 0..p {
+            let src = f.column(k);
+            let mean = feature_mean[k];
+            for (dst, &r) in fc.column_mut(k).iter_mut().zip(rows) {
+                *dst = src[r] - mean;
             }
+        }
+        for (i, &r) in rows.iter().enumerate() {
             let y = residual_m[r] - y_mean;
             for c in 0..3 {
                 yc[(i, c)] = y[c];
