@@ -3,6 +3,7 @@
 //! Writes `DIR/measurements.parquet` (the measurement contract), `DIR/truth.json` and
 //! `DIR/truth.parquet` (the ground truth); see `sim::generate` and `docs/generate.md`.
 
+use super::paths::Inputs;
 use super::shared::{CliError, CliResult, print_json};
 use sim::scenario::{Overrides, Scenario};
 use std::io::IsTerminal;
@@ -45,6 +46,9 @@ pub fn run(args: Args) -> CliResult {
         )));
     }
     let scenario = Scenario::load(&args.scenario)?;
+    Inputs::new()
+        .add_scenario("--scenario", &args.scenario, &scenario)
+        .check_dir("--out", &args.out, &sim::generate::OUTPUT_FILES)?;
     let overrides = Overrides {
         seed: args.seed,
         poses: args.poses,

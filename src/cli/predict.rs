@@ -1,5 +1,6 @@
 //! `robocal predict`: where a calibrated model says the target is, for every row of a table.
 
+use super::paths::{Inputs, check_distinct};
 use super::shared::{CliError, CliResult, print_json};
 use calib::model_file::{CalibratedModel, Predictor, calibrated_urdf, urdf_deviation};
 use serde_json::json;
@@ -59,6 +60,13 @@ fn read_configs(path: &Path, robot: &sim::Model) -> Result<MeasurementTable, Cli
 
 /// Runs `robocal predict`.
 pub fn run(args: Args) -> CliResult {
+    let mut inputs = Inputs::new();
+    inputs.add("--model", &args.model).add("--data", &args.data);
+    inputs.check("--out", &args.out)?;
+    if let Some(u) = &args.urdf_out {
+        inputs.check("--urdf-out", u)?;
+        check_distinct(("--out", &args.out), ("--urdf-out", u))?;
+    }
     let file = CalibratedModel::load(&args.model)?;
     let mut predictor = Predictor::from_file(&file)?;
     let table = read_configs(&args.data, &predictor.model)?;

@@ -1,6 +1,7 @@
 //! `robocal sweep`: a sensitivity study over noise levels and pose counts (see `crate::sweep` and
 //! `docs/sweep.md`), and `robocal sweep-merge`, which joins the shards of one sweep.
 
+use super::paths::Inputs;
 use super::shared::{CliError, CliResult, print_json};
 use crate::sweep::table::{self, META_SUBSET, META_SWEEP, SweepRow};
 use crate::sweep::{self as sw, Context, Selection, Subset, SweepSpec};
@@ -147,6 +148,12 @@ fn plot_path(out: &Path) -> PathBuf {
     out.with_extension("svg")
 }
 
+/// Refuses an `--out` (or the plot beside it) that is one of `inputs`.
+fn check_outputs(inputs: &Inputs, out: &Path) -> CliResult {
+    inputs.check("--out", out)?;
+    inputs.check_as("--out", out, &plot_path(out))
+}
+
 fn write(path: &Path, bytes: &[u8]) -> CliResult {
     Ok(sim::io::write_atomic(path, bytes)?)
 }
@@ -274,6 +281,10 @@ pub fn run(args: Args) -> CliResult {
         ));
     }
     let scenario = Scenario::load(&args.scenario)?;
+    check_outputs(
+        Inputs::new().add_scenario("--scenario", &args.scenario, &scenario),
+        &args.out,
+    )?;
     // Check the scenario and the smallest pose count once, before any work.
     let probe = scenario.resolve(&Overrides {
         seed: Some(args.seed),
@@ -370,6 +381,11 @@ pub fn run(args: Args) -> CliResult {
 
 /// Runs `robocal sweep-merge`.
 pub fn run_merge(args: MergeArgs) -> CliResult {
+    let mut inputs = Inputs::new();
+    for s in &args.shards {
+        inputs.add("SHARD", s);
+    }
+    check_outputs(&inputs, &args.out)?;
     let mut spec_text: Option<(String, PathBuf)> = None;
     let mut owner: Vec<Option<usize>> = Vec::new();
     let mut rows: Vec<Option<SweepRow>> = Vec::new();
