@@ -38,6 +38,9 @@ pub fn run(args: Args) -> CliResult {
     if args.poses == Some(0) {
         return Err(CliError::Input("--poses: 0: must be ≥ 1".into()));
     }
+    if let Some(p) = args.poses {
+        sim::campaign::check_row_count(Some(p), &format!("--poses {p}")).map_err(CliError::Input)?;
+    }
     if let Some(m) = args.noise
         && !(m.is_finite() && m >= 0.0)
     {

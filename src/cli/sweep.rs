@@ -115,9 +115,14 @@ pub(crate) fn parse_noise(text: &str) -> Result<Vec<f64>, CliError> {
 
 /// `--poses`: integers ≥ 1.
 pub(crate) fn parse_poses(text: &str) -> Result<Vec<usize>, CliError> {
-    parse_list("--poses", text, "a whole number ≥ 1", |s| {
+    let poses = parse_list("--poses", text, "a whole number ≥ 1", |s| {
         s.parse::<usize>().ok().filter(|v| *v >= 1)
-    })
+    })?;
+    for p in &poses {
+        sim::campaign::check_row_count(Some(*p), &format!("--poses {text}: item {p}"))
+            .map_err(CliError::Input)?;
+    }
+    Ok(poses)
 }
 
 /// `--shard K/N` with `0 ≤ K < N`.
@@ -289,6 +294,12 @@ pub fn run(args: Args) -> CliResult {
     let probe = scenario.resolve(&Overrides {
         seed: Some(args.seed),
         poses: Some(poses[0]),
+        noise: Some(noise[0]),
+    })?;
+    // And the largest, so that a count beyond the campaign limit is refused before any work.
+    scenario.resolve(&Overrides {
+        seed: Some(args.seed),
+        poses: poses.iter().max().copied(),
         noise: Some(noise[0]),
     })?;
     let options = CalibrationOptions::default();
