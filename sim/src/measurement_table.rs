@@ -61,7 +61,7 @@ pub use check::{LIMIT_TOLERANCE, check_against_model, reach_bound};
 pub use csv::{read_csv_str, write_csv_string};
 pub use parquet::{PARQUET_MAX_ROW_GROUP_ROWS, write_parquet_bytes};
 
-use crate::error::{Result, SimError};
+use crate::error::{Result, SimError, fragment};
 use std::collections::HashMap;
 use std::path::Path;
 
@@ -653,7 +653,10 @@ fn numbered(name: &str, prefix: &str) -> Option<std::result::Result<usize, ()>> 
 
 /// Maps file column names to [`Role`]s and checks the contract's column rules.
 fn resolve_columns(names: &[String], file: &str) -> Result<Layout> {
-    let fail = |column: Option<&str>, message: String| table_err(file, None, column, message);
+    // Names are quoted into messages: escaped and cut to one short line (a binary file's "header").
+    let fail = |column: Option<&str>, message: String| {
+        table_err(file, None, column.map(fragment).as_deref(), message)
+    };
     let err = |column: Option<&str>, message: String| Err(fail(column, message));
     let mut seen: HashMap<&str, usize> = HashMap::new();
     for (i, name) in names.iter().enumerate() {
@@ -717,9 +720,9 @@ fn resolve_columns(names: &[String], file: &str) -> Result<Layout> {
         roles.push(role);
     }
     let found = || {
-        let mut list: Vec<&str> = names.iter().take(20).map(String::as_str).collect();
+        let mut list: Vec<String> = names.iter().take(20).map(|n| fragment(n)).collect();
         if names.len() > 20 {
-            list.push("…");
+            list.push("…".into());
         }
         list.join(", ")
     };
@@ -727,7 +730,7 @@ fn resolve_columns(names: &[String], file: &str) -> Result<Layout> {
         let hint = names
             .iter()
             .find(|n| n.eq_ignore_ascii_case(col))
-            .map(|n| format!("; there is '{n}', but names are case-sensitive"))
+            .map(|n| format!("; there is '{}', but names are case-sensitive", fragment(n)))
             .unwrap_or_default();
         err(
             Some(col),

@@ -1,7 +1,7 @@
 //! CSV reading and writing of the measurement table (see the parent module for the format).
 
 use super::{IN_MEMORY, Layout, MeasurementTable, Role, resolve_columns};
-use crate::error::{Result, SimError};
+use crate::error::{Result, SimError, fragment, fragment_n};
 use std::io::Write;
 
 /// Parses a CSV measurement table from text; `file` is the name shown in errors.
@@ -148,12 +148,7 @@ fn is_blank(cells: &[Cell]) -> bool {
 
 /// The text of a cell for an error message (quoted, shortened).
 fn show(bytes: &[u8]) -> String {
-    let s = String::from_utf8_lossy(bytes);
-    if s.chars().count() > 40 {
-        format!("'{}…'", s.chars().take(40).collect::<String>())
-    } else {
-        format!("'{s}'")
-    }
+    format!("'{}'", fragment_n(&String::from_utf8_lossy(bytes), 40))
 }
 
 /// The cell `start..end` as text: sliced from `text` (the whole buffer, when it is valid UTF-8), else
@@ -297,6 +292,23 @@ fn parse(bytes: &[u8], file: &str) -> Result<MeasurementTable> {
             Ok(Some(_)) => break,
         }
     }
+    let header = &bytes[cells.first().map_or(0, |c| c.start)..cells.last().map_or(0, |c| c.end)];
+    // Control bytes other than tab and line ends: not text (a binary file). Other bytes that are not
+    // UTF-8 (a Latin-1 name of an ignored column) are read as before.
+    if header
+        .iter()
+        .any(|&b| (b < 0x20 && !matches!(b, b'\t' | b'\r' | b'\n')) || b == 0x7f)
+    {
+        return Err(super::table_err(
+            file,
+            None,
+            None,
+            format!(
+                "not a CSV text file: the header holds binary bytes ({})",
+                show(header)
+            ),
+        ));
+    }
     let names: Vec<String> = cells
         .iter()
         .map(|c| {
@@ -348,7 +360,7 @@ fn parse(bytes: &[u8], file: &str) -> Result<MeasurementTable> {
                     file: file.to_string(),
                     row: e.row.map(|r| rows_before + r),
                     line: Some(line_before + e.line),
-                    column: e.column.map(|c| names[c].clone()),
+                    column: e.column.map(|c| fragment(&names[c])),
                     message: e.message,
                 });
             }

@@ -310,7 +310,7 @@ pub(super) fn read_parquet_file(path: &Path, file: &str) -> Result<MeasurementTa
                 return Err(table_err(
                     file,
                     i.map(|i| row0 + i + 1),
-                    Some(name),
+                    Some(&crate::error::fragment(name)),
                     message,
                 ));
             }
