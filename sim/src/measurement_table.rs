@@ -194,15 +194,37 @@ impl Format {
 /// Reads a measurement table from `path` (CSV or Parquet by extension) and checks it
 /// ([`MeasurementTable::validate`]). Checks against a robot are separate ([`check_against_model`]).
 pub fn read(path: &Path) -> Result<MeasurementTable> {
+    read_with(path, Positions::Required)
+}
+
+/// [`read`] or [`read_configurations`].
+fn read_with(path: &Path, positions: Positions) -> Result<MeasurementTable> {
     let format = Format::from_path(path)?;
     let name = path.display().to_string();
     match format {
         Format::Csv => {
             let bytes = std::fs::read(path).map_err(|e| read_err(path, e))?;
-            csv::read_csv_bytes(&bytes, &name)
+            csv::read_csv_bytes(&bytes, &name, positions)
         }
-        Format::Parquet => parquet::read_parquet_file(path, &name),
+        Format::Parquet => parquet::read_parquet_file(path, &name, positions),
     }
+}
+
+/// Reads a table of joint configurations from `path` (CSV or Parquet by extension): the measurement
+/// contract with `x, y, z` optional, for tools that only need the joint values (`robocal predict`).
+/// Without them the positions are zero; when present they are read and checked as by [`read`].
+/// Everything else is as [`read`].
+pub fn read_configurations(path: &Path) -> Result<MeasurementTable> {
+    read_with(path, Positions::Optional)
+}
+
+/// Whether a reader requires the `x, y, z` columns.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Positions {
+    /// The measurement contract: required.
+    Required,
+    /// Joint configurations: absent means zero.
+    Optional,
 }
 
 /// Writes `table` to `path` (CSV or Parquet by extension), atomically: the data goes to a temporary file
@@ -652,7 +674,7 @@ fn numbered(name: &str, prefix: &str) -> Option<std::result::Result<usize, ()>> 
 }
 
 /// Maps file column names to [`Role`]s and checks the contract's column rules.
-fn resolve_columns(names: &[String], file: &str) -> Result<Layout> {
+fn resolve_columns(names: &[String], file: &str, positions: Positions) -> Result<Layout> {
     // Names are quoted into messages: escaped and cut to one short line (a binary file's "header").
     let fail = |column: Option<&str>, message: String| {
         table_err(file, None, column.map(fragment).as_deref(), message)
@@ -758,8 +780,10 @@ fn resolve_columns(names: &[String], file: &str) -> Result<Layout> {
             ),
         );
     }
+    let has_position: Vec<bool> = (0..3).map(|k| roles.contains(&Role::Position(k))).collect();
+    let all_optional = positions == Positions::Optional && !has_position.iter().any(|&b| b);
     for (k, col) in ["x", "y", "z"].iter().enumerate() {
-        if !roles.contains(&Role::Position(k)) {
+        if !has_position[k] && !all_optional {
             return missing(col);
         }
     }

@@ -4,7 +4,6 @@ use super::paths::{Inputs, check_distinct};
 use super::shared::{CliError, CliResult, print_json};
 use calib::model_file::{CalibratedModel, Predictor, calibrated_urdf, urdf_deviation};
 use serde_json::json;
-use sim::SimError;
 use sim::measurement_table::{self, MeasurementTable};
 use std::path::{Path, PathBuf};
 
@@ -28,21 +27,10 @@ pub struct Args {
     json: bool,
 }
 
-/// A table of joint values: the measurement contract, or (CSV without x, y, z) just `pose, q1..qN`.
+/// A table of joint values: the measurement contract, `x, y, z` optional (CSV or Parquet).
 fn read_configs(path: &Path, robot: &sim::Model) -> Result<MeasurementTable, CliError> {
-    let table = match measurement_table::read(path) {
-        Ok(t) => t,
-        Err(SimError::Table {
-            column: Some(c), ..
-        }) if matches!(c.as_str(), "x" | "y" | "z")
-            && path
-                .extension()
-                .is_some_and(|e| e.eq_ignore_ascii_case("csv")) =>
-        {
-            calib::io::read_joint_csv(path)?
-        }
-        Err(e) => return Err(e.into()),
-    };
+    // x, y, z are not needed (and ignored when present).
+    let table = measurement_table::read_configurations(path)?;
     if table.n_joints != robot.nq() {
         return Err(CliError::Input(format!(
             "{}: {} joint columns, but the model's robot '{}' has {} joints",

@@ -1,12 +1,12 @@
 //! CSV reading and writing of the measurement table (see the parent module for the format).
 
-use super::{IN_MEMORY, Layout, MeasurementTable, Role, resolve_columns};
+use super::{IN_MEMORY, Layout, MeasurementTable, Positions, Role, resolve_columns};
 use crate::error::{Result, SimError, fragment, fragment_n};
 use std::io::Write;
 
 /// Parses a CSV measurement table from text; `file` is the name shown in errors.
 pub fn read_csv_str(text: &str, file: &str) -> Result<MeasurementTable> {
-    read_csv_bytes(text.as_bytes(), file)
+    read_csv_bytes(text.as_bytes(), file, Positions::Required)
 }
 
 /// The CSV text of `table` (see the parent module for the format). Fails if the table is invalid
@@ -225,9 +225,13 @@ fn line_of_row(bytes: &[u8], row: usize) -> Option<usize> {
 }
 
 /// Parses a CSV measurement table from bytes (UTF-8, optional BOM); `file` is the name shown in errors.
-pub(super) fn read_csv_bytes(bytes: &[u8], file: &str) -> Result<MeasurementTable> {
+pub(super) fn read_csv_bytes(
+    bytes: &[u8],
+    file: &str,
+    positions: Positions,
+) -> Result<MeasurementTable> {
     let bytes = bytes.strip_prefix(b"\xEF\xBB\xBF").unwrap_or(bytes);
-    let table = parse(bytes, file)?;
+    let table = parse(bytes, file, positions)?;
     table.validate_named(file).map_err(|e| match e {
         SimError::Table {
             file,
@@ -265,7 +269,7 @@ struct Chunk {
 /// Chunks bigger than this are worth parsing in parallel (bytes).
 const PARALLEL_CHUNK: usize = 1 << 20;
 
-fn parse(bytes: &[u8], file: &str) -> Result<MeasurementTable> {
+fn parse(bytes: &[u8], file: &str, positions: Positions) -> Result<MeasurementTable> {
     let mut rec = Records::new(bytes);
     let mut cells: Vec<Cell> = Vec::with_capacity(32);
     // Header: the first line that is not blank.
@@ -320,7 +324,7 @@ fn parse(bytes: &[u8], file: &str) -> Result<MeasurementTable> {
             }
         })
         .collect();
-    let layout = resolve_columns(&names, file)?;
+    let layout = resolve_columns(&names, file, positions)?;
     let data_start = rec.pos;
     let first_line = rec.line;
     let data = &bytes[data_start..];

@@ -1,6 +1,6 @@
 //! Parquet reading and writing of the measurement table (see the parent module for the format).
 
-use super::{IN_MEMORY, MeasurementTable, Role, resolve_columns, table_err};
+use super::{IN_MEMORY, MeasurementTable, Positions, Role, resolve_columns, table_err};
 use crate::error::{Result, SimError};
 use arrow_array::cast::AsArray;
 use arrow_array::types::{
@@ -237,7 +237,11 @@ fn directions(arr: &dyn Array) -> std::result::Result<Vec<i8>, ColumnProblem> {
 }
 
 /// Reads a Parquet measurement table; `file` is the name shown in errors.
-pub(super) fn read_parquet_file(path: &Path, file: &str) -> Result<MeasurementTable> {
+pub(super) fn read_parquet_file(
+    path: &Path,
+    file: &str,
+    positions: Positions,
+) -> Result<MeasurementTable> {
     let f = std::fs::File::open(path).map_err(|e| SimError::Read {
         path: path.to_path_buf(),
         source: e,
@@ -257,7 +261,7 @@ pub(super) fn read_parquet_file(path: &Path, file: &str) -> Result<MeasurementTa
         .iter()
         .map(|f| f.name().trim().to_string())
         .collect();
-    let layout = resolve_columns(&names, file)?;
+    let layout = resolve_columns(&names, file, positions)?;
     let used: Vec<usize> = (0..names.len())
         .filter(|&i| layout.roles[i] != Role::Ignore)
         .collect();
@@ -325,9 +329,9 @@ pub(super) fn read_parquet_file(path: &Path, file: &str) -> Result<MeasurementTa
         for col in &q_cols {
             table.q.push(col[r]);
         }
-        table
-            .position
-            .push([pos_cols[0][r], pos_cols[1][r], pos_cols[2][r]]);
+        // Without x, y, z (joint configurations only, `Positions::Optional`): zero.
+        let p = |k: usize| pos_cols[k].get(r).copied().unwrap_or(0.0);
+        table.position.push([p(0), p(1), p(2)]);
     }
     if let Some(o) = table.orientation.as_mut() {
         o.extend((0..n).map(|r| {
