@@ -270,6 +270,25 @@ struct Chunk {
 const PARALLEL_CHUNK: usize = 1 << 20;
 
 fn parse(bytes: &[u8], file: &str, positions: Positions) -> Result<MeasurementTable> {
+    // Control bytes other than tab and line ends in the first line: not text (a binary file); said so
+    // before its bytes are taken for cells. Bytes that are not UTF-8 (a Latin-1 name of an ignored
+    // column) are read as before.
+    let first = &bytes[..bytes.len().min(4096)];
+    let first = &first[..first.iter().position(|&b| b == b'\n').unwrap_or(first.len())];
+    if first
+        .iter()
+        .any(|&b| (b < 0x20 && !matches!(b, b'\t' | b'\r')) || b == 0x7f)
+    {
+        return Err(super::table_err(
+            file,
+            None,
+            None,
+            format!(
+                "not a CSV text file: its first line holds binary bytes ({})",
+                show(first)
+            ),
+        ));
+    }
     let mut rec = Records::new(bytes);
     let mut cells: Vec<Cell> = Vec::with_capacity(32);
     // Header: the first line that is not blank.
@@ -295,23 +314,6 @@ fn parse(bytes: &[u8], file: &str, positions: Positions) -> Result<MeasurementTa
             Ok(Some(_)) if is_blank(&cells) => continue,
             Ok(Some(_)) => break,
         }
-    }
-    let header = &bytes[cells.first().map_or(0, |c| c.start)..cells.last().map_or(0, |c| c.end)];
-    // Control bytes other than tab and line ends: not text (a binary file). Other bytes that are not
-    // UTF-8 (a Latin-1 name of an ignored column) are read as before.
-    if header
-        .iter()
-        .any(|&b| (b < 0x20 && !matches!(b, b'\t' | b'\r' | b'\n')) || b == 0x7f)
-    {
-        return Err(super::table_err(
-            file,
-            None,
-            None,
-            format!(
-                "not a CSV text file: the header holds binary bytes ({})",
-                show(header)
-            ),
-        ));
     }
     let names: Vec<String> = cells
         .iter()
