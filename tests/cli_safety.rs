@@ -45,7 +45,11 @@ fn robocal(args: &[&str]) -> (Option<i32>, String) {
 fn check_in(cwd: &Path, args: &[&str], code: i32, needles: &[&str]) -> String {
     let (c, e) = robocal_in(cwd, args);
     assert_eq!(c, Some(code), "{args:?}: {e}");
-    assert_eq!(e.trim_end().lines().count(), 1, "{args:?}: not one line: {e}");
+    assert_eq!(
+        e.trim_end().lines().count(),
+        1,
+        "{args:?}: not one line: {e}"
+    );
     assert!(e.starts_with("error: "), "{args:?}: {e}");
     assert!(!e.contains("panicked"), "{args:?}: {e}");
     for n in needles {
@@ -350,7 +354,12 @@ fn generate_replaces_its_set_as_a_whole_and_leaves_no_temporary_files() {
     for out in [&only, &mixed] {
         let old = snapshot(out);
         generate_limited(out, "3000", 1200, true);
-        assert_eq!(snapshot(out), old, "{}: the old set must be intact", out.display());
+        assert_eq!(
+            snapshot(out),
+            old,
+            "{}: the old set must be intact",
+            out.display()
+        );
         assert!(hidden(&d).is_empty(), "{:?}", hidden(&d));
         assert!(hidden(out).is_empty(), "{:?}", hidden(out));
         // Killed while writing (SIGXFSZ): the old set is intact; the staging folder it leaves is

@@ -320,9 +320,9 @@ impl StagedDir {
             .ok()
             .and_then(|c| std::fs::canonicalize(c).ok())
             .is_some_and(|c| c.starts_with(&target));
-        let all_ours = existing
-            .iter()
-            .all(|(n, is_dir)| is_ours(&n.to_string_lossy()) && (!*is_dir || staged.iter().any(|(s, d)| s == n && *d)));
+        let all_ours = existing.iter().all(|(n, is_dir)| {
+            is_ours(&n.to_string_lossy()) && (!*is_dir || staged.iter().any(|(s, d)| s == n && *d))
+        });
         if all_ours && !in_cwd {
             if let Ok(meta) = std::fs::metadata(&target) {
                 let _ = std::fs::set_permissions(&self.staging, meta.permissions());
@@ -474,6 +474,75 @@ mod tests {
             Err(SimError::Io { .. })
         ));
         std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn staged_folders_replace_the_set_and_keep_the_users_files() {
+        let dir = temp_dir("staged");
+        let out = dir.join("out");
+        let ours = |n: &str| n == "a" || n == "b";
+        let stage_with = |files: &[(&str, &str)]| {
+            let st = StagedDir::new(&out).unwrap();
+            for (n, t) in files {
+                write_atomic(&st.path().join(n), t.as_bytes()).unwrap();
+            }
+            st
+        };
+        let read = |n: &str| std::fs::read_to_string(out.join(n)).unwrap();
+        // A new folder.
+        stage_with(&[("a", "1"), ("b", "1")]).commit(&ours).unwrap();
+        assert_eq!((read("a"), read("b")), ("1".into(), "1".into()));
+        // Only our files in it: swapped as a whole.
+        stage_with(&[("a", "2"), ("b", "2")]).commit(&ours).unwrap();
+        assert_eq!((read("a"), read("b")), ("2".into(), "2".into()));
+        assert_eq!(names(&dir), vec!["out".to_string()]);
+        // A file of the user's: kept, ours replaced.
+        std::fs::write(out.join("mine"), "m").unwrap();
+        stage_with(&[("a", "3"), ("b", "3")]).commit(&ours).unwrap();
+        assert_eq!(names(&out), vec!["a", "b", "mine"]);
+        assert_eq!((read("a"), read("mine")), ("3".into(), "m".into()));
+        // Dropped without a commit (an error): nothing changes, nothing is left.
+        drop(stage_with(&[("a", "4")]));
+        assert_eq!(read("a"), "3");
+        assert_eq!(names(&dir), vec!["out".to_string()]);
+        // A folder where an output file goes: refused before anything moves.
+        std::fs::remove_file(out.join("b")).unwrap();
+        std::fs::create_dir_all(out.join("b/inside")).unwrap();
+        let e = stage_with(&[("a", "5"), ("b", "5")])
+            .commit(&ours)
+            .unwrap_err();
+        assert!(e.to_string().contains("out/b"), "{e}");
+        assert_eq!(read("a"), "3");
+        assert_eq!(names(&dir), vec!["out".to_string()]);
+        // Errors about staged files name the destination.
+        let st = StagedDir::new(&out).unwrap();
+        let e = st.user_error(SimError::Io {
+            path: st.path().join("a"),
+            source: std::io::Error::other("x"),
+        });
+        assert_eq!(
+            e.to_string(),
+            format!("{}: cannot write: x", out.join("a").display())
+        );
+        // A file where the folder should be.
+        let file = dir.join("file");
+        std::fs::write(&file, "x").unwrap();
+        assert!(matches!(StagedDir::new(&file), Err(SimError::Io { .. })));
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn stale_temporary_names_are_recognised() {
+        // PID 0 never names a user process; our own PID is alive.
+        assert!(!is_stale_temp(".out.tmp-0", "out"));
+        assert!(!is_stale_temp("out.tmp-1-2", "out"));
+        assert!(!is_stale_temp(".other.tmp-1-2", "out"));
+        let me = format!(".out.tmp-{}-3", std::process::id());
+        assert!(!is_stale_temp(&me, "out"));
+        if cfg!(target_os = "linux") {
+            // PIDs are below 2^22 on Linux: this one cannot be running.
+            assert!(is_stale_temp(".out.tmp-4294967295-0", "out"));
+        }
     }
 
     #[test]

@@ -77,7 +77,9 @@ pub fn run(args: Args) -> CliResult {
     };
     let robust = args.robust.map(Robust::loss);
     let mut inputs = Inputs::new();
-    inputs.add("--data", &args.data).add_robot(&args.robot.robot);
+    inputs
+        .add("--data", &args.data)
+        .add_robot(&args.robot.robot);
     if let Some(t) = &args.test_data {
         inputs.add("--test-data", t);
     }

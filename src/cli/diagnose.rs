@@ -178,7 +178,9 @@ pub fn run(args: Args) -> CliResult {
     }
     if let Some(dir) = &args.report {
         let mut inputs = Inputs::new();
-        inputs.add("--data", &args.data).add_robot(&args.robot.robot);
+        inputs
+            .add("--data", &args.data)
+            .add_robot(&args.robot.robot);
         // The files a report writes: the fixed ones and any plot of an old report it may replace.
         let mut names: Vec<String> = report::FIXED_FILES.iter().map(|n| n.to_string()).collect();
         if let Ok(entries) = std::fs::read_dir(dir) {

@@ -15,7 +15,8 @@ pub struct Args {
     /// Scenario file (TOML): robot, injected effects, tracker and campaign (see scenarios/).
     #[arg(long, value_name = "FILE.toml")]
     scenario: PathBuf,
-    /// Output folder (created if missing); existing files of the same names are replaced.
+    /// Output folder (created if missing); an earlier set of the three files is replaced as a whole,
+    /// other files in it are kept. It must not hold the scenario or its inputs.
     #[arg(long, value_name = "DIR")]
     out: PathBuf,
     /// Seed of every random draw (replaces the scenario's `seed`).
@@ -39,7 +40,8 @@ pub fn run(args: Args) -> CliResult {
         return Err(CliError::Input("--poses: 0: must be ≥ 1".into()));
     }
     if let Some(p) = args.poses {
-        sim::campaign::check_row_count(Some(p), &format!("--poses {p}")).map_err(CliError::Input)?;
+        sim::campaign::check_row_count(Some(p), &format!("--poses {p}"))
+            .map_err(CliError::Input)?;
     }
     if let Some(m) = args.noise
         && !(m.is_finite() && m >= 0.0)

@@ -217,7 +217,9 @@ mod tests {
         let mut inputs = Inputs::new();
         inputs.add("--data", &data);
         // The same name, through `..`.
-        let e = inputs.check("--out", &d.join("sub/../data.csv")).unwrap_err();
+        let e = inputs
+            .check("--out", &d.join("sub/../data.csv"))
+            .unwrap_err();
         assert_eq!(e.exit_code(), 2);
         assert!(e.to_string().contains("--data"), "{e}");
         // A hard link under another name.

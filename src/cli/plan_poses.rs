@@ -70,7 +70,9 @@ fn parse3(text: &str) -> Result<nalgebra::Vector3<f64>, CliError> {
 /// Runs `robocal plan-poses`.
 pub fn run(args: Args) -> CliResult {
     if let Some(out) = &args.out {
-        Inputs::new().add_robot(&args.robot.robot).check("--out", out)?;
+        Inputs::new()
+            .add_robot(&args.robot.robot)
+            .check("--out", out)?;
     }
     let model = args.robot.load()?;
     let mut options = PlanOptions::new(args.candidates, args.select, args.seed);

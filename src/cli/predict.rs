@@ -13,7 +13,8 @@ pub struct Args {
     /// Calibrated model written by `robocal calibrate`.
     #[arg(long, value_name = "MODEL.json")]
     model: PathBuf,
-    /// Joint configurations: a measurement table (its x, y, z are ignored), or a CSV with `pose, q1..qN`.
+    /// Joint configurations: a measurement table (CSV or Parquet) whose x, y, z may be absent (and are
+    /// ignored when present), e.g. `pose, q1..qN`.
     #[arg(long, value_name = "FILE")]
     data: PathBuf,
     /// Where to write `pose,x,y,z` (and `qw,qx,qy,qz` with orientation), tracker frame, m.

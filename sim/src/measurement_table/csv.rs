@@ -274,7 +274,10 @@ fn parse(bytes: &[u8], file: &str, positions: Positions) -> Result<MeasurementTa
     // before its bytes are taken for cells. Bytes that are not UTF-8 (a Latin-1 name of an ignored
     // column) are read as before.
     let first = &bytes[..bytes.len().min(4096)];
-    let first = &first[..first.iter().position(|&b| b == b'\n').unwrap_or(first.len())];
+    let first = &first[..first
+        .iter()
+        .position(|&b| b == b'\n')
+        .unwrap_or(first.len())];
     if first
         .iter()
         .any(|&b| (b < 0x20 && !matches!(b, b'\t' | b'\r')) || b == 0x7f)
