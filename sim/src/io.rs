@@ -194,6 +194,8 @@ pub struct StagedDir {
     resolved: PathBuf,
     /// The staging folder.
     staging: PathBuf,
+    /// The staging folder is inside the destination (its parent was not writable).
+    inside: bool,
     /// Set by a successful commit: nothing to clean up.
     committed: bool,
 }
@@ -238,13 +240,26 @@ impl StagedDir {
                 "the root folder cannot be replaced",
             )));
         };
-        remove_stale_temps(parent, &[&name.to_string_lossy()]);
+        let name_text = name.to_string_lossy();
+        remove_stale_temps(parent, &[&name_text]);
         let staging = parent.join(temp_name(name));
-        std::fs::create_dir(&staging).map_err(io_err)?;
+        let (staging, inside) = match std::fs::create_dir(&staging) {
+            Ok(()) => (staging, false),
+            // The folder exists but its parent is not writable (`--out ~`, say): stage inside it
+            // instead; the set is then replaced entry by entry (see `commit`).
+            Err(_) if resolved.is_dir() => {
+                remove_stale_temps(&resolved, &[&name_text]);
+                let inner = resolved.join(temp_name(name));
+                std::fs::create_dir(&inner).map_err(io_err)?;
+                (inner, true)
+            }
+            Err(e) => return Err(io_err(e)),
+        };
         Ok(StagedDir {
             target: target.to_path_buf(),
             resolved,
             staging,
+            inside,
             committed: false,
         })
     }
@@ -281,7 +296,8 @@ impl StagedDir {
     ///   staged entry replaces its namesake by a rename, one after the other once every output is
     ///   complete; only an interruption between these renames (microseconds) can mix the sets.
     ///   An entry whose namesake is a folder where the output is a file (or the reverse) is refused
-    ///   before anything moves.
+    ///   before anything moves. This is also how a set staged inside the destination is moved (when
+    ///   the destination's parent folder is not writable).
     ///
     /// # Errors
     /// [`SimError::Io`] naming the destination entry that cannot be replaced; the staging folder is
@@ -315,7 +331,11 @@ impl StagedDir {
             .collect();
         let name_refs: Vec<&str> = staged_names.iter().map(String::as_str).collect();
         remove_stale_temps(&target, &name_refs);
-        let existing = names_of(&target)?;
+        let staging_name = self.staging.file_name().map(|n| n.to_os_string());
+        let existing: Vec<_> = names_of(&target)?
+            .into_iter()
+            .filter(|(n, _)| Some(n) != staging_name.as_ref())
+            .collect();
         let in_cwd = std::env::current_dir()
             .ok()
             .and_then(|c| std::fs::canonicalize(c).ok())
@@ -323,7 +343,7 @@ impl StagedDir {
         let all_ours = existing.iter().all(|(n, is_dir)| {
             is_ours(&n.to_string_lossy()) && (!*is_dir || staged.iter().any(|(s, d)| s == n && *d))
         });
-        if all_ours && !in_cwd {
+        if all_ours && !in_cwd && !self.inside {
             if let Ok(meta) = std::fs::metadata(&target) {
                 let _ = std::fs::set_permissions(&self.staging, meta.permissions());
             }
