@@ -308,22 +308,12 @@ impl StagedDir {
             path: path.to_path_buf(),
             source,
         };
-        let shown = |name: &std::ffi::OsStr| self.target.join(name);
         if std::fs::symlink_metadata(&target).is_err() {
             std::fs::rename(&self.staging, &target).map_err(|e| io_err(&self.target, e))?;
             self.committed = true;
             return Ok(());
         }
-        let names_of = |dir: &Path| -> Result<Vec<(std::ffi::OsString, bool)>> {
-            let mut v = Vec::new();
-            for e in std::fs::read_dir(dir).map_err(|e| io_err(&self.target, e))? {
-                let e = e.map_err(|e| io_err(&self.target, e))?;
-                let is_dir = e.file_type().map(|t| t.is_dir()).unwrap_or(false);
-                v.push((e.file_name(), is_dir));
-            }
-            v.sort();
-            Ok(v)
-        };
+        let names_of = |dir: &Path| entries(dir).map_err(|e| io_err(&self.target, e));
         let staged = names_of(&self.staging)?;
         let staged_names: Vec<String> = staged
             .iter()
@@ -340,8 +330,10 @@ impl StagedDir {
             .ok()
             .and_then(|c| std::fs::canonicalize(c).ok())
             .is_some_and(|c| c.starts_with(&target));
+        // A folder of ours (a dataset's) counts as ours only if the new one has everything it holds.
         let all_ours = existing.iter().all(|(n, is_dir)| {
-            is_ours(&n.to_string_lossy()) && (!*is_dir || staged.iter().any(|(s, d)| s == n && *d))
+            is_ours(&n.to_string_lossy())
+                && (!*is_dir || covered(&target.join(n), &self.staging.join(n)))
         });
         if all_ours && !in_cwd && !self.inside {
             if let Ok(meta) = std::fs::metadata(&target) {
@@ -355,37 +347,91 @@ impl StagedDir {
             }
         }
         // One entry at a time: first check that every rename can succeed.
-        for (n, is_dir) in &staged {
-            if let Ok(m) = std::fs::symlink_metadata(target.join(n))
-                && m.is_dir() != *is_dir
-            {
-                let what = if *is_dir { "a file" } else { "a folder" };
-                return Err(io_err(
-                    &shown(n),
-                    std::io::Error::new(
-                        std::io::ErrorKind::AlreadyExists,
-                        format!("is {what} of the same name; move it away first"),
-                    ),
-                ));
-            }
-        }
-        for (n, is_dir) in &staged {
-            let (src, dst) = (self.staging.join(n), target.join(n));
-            if *is_dir && dst.exists() {
-                if exchange(&src, &dst).is_ok() {
-                    let _ = std::fs::remove_dir_all(&src);
-                    continue;
-                }
-                let aside = self.staging.join(temp_name(n));
-                std::fs::rename(&dst, &aside).map_err(|e| io_err(&shown(n), e))?;
-                std::fs::rename(&src, &dst).map_err(|e| io_err(&shown(n), e))?;
-            } else {
-                std::fs::rename(&src, &dst).map_err(|e| io_err(&shown(n), e))?;
-            }
-        }
-        // Only the old folders set aside are left in the staging folder; Drop removes it.
+        check_kinds(&self.staging, &target, &self.target)?;
+        merge(&self.staging, &target, &self.target, &self.staging)?;
+        // Only old folders set aside are left in the staging folder; Drop removes it.
         Ok(())
     }
+}
+
+/// Entries of `dir`: name and whether it is a folder (not following links), sorted.
+fn entries(dir: &Path) -> std::io::Result<Vec<(std::ffi::OsString, bool)>> {
+    let mut v = Vec::new();
+    for e in std::fs::read_dir(dir)? {
+        let e = e?;
+        let is_dir = e.file_type().map(|t| t.is_dir()).unwrap_or(false);
+        v.push((e.file_name(), is_dir));
+    }
+    v.sort();
+    Ok(v)
+}
+
+/// True when every entry below the folder `old` has a namesake of the same kind below `new`: replacing
+/// `old` by `new` loses nothing that `new` does not replace.
+fn covered(old: &Path, new: &Path) -> bool {
+    let (Ok(o), Ok(n)) = (entries(old), entries(new)) else {
+        return false;
+    };
+    o.iter().all(|(name, is_dir)| {
+        n.iter().any(|(m, d)| m == name && d == is_dir)
+            && (!is_dir || covered(&old.join(name), &new.join(name)))
+    })
+}
+
+/// Refuses (before anything moves) a staged entry of `src` whose namesake in `dst` is of the other
+/// kind (a folder where a file goes, or the reverse), recursively; `shown` is `dst` as the user named
+/// it.
+fn check_kinds(src: &Path, dst: &Path, shown: &Path) -> Result<()> {
+    let io_err = |path: PathBuf, source: std::io::Error| SimError::Io { path, source };
+    for (n, is_dir) in entries(src).map_err(|e| io_err(shown.to_path_buf(), e))? {
+        let Ok(m) = std::fs::symlink_metadata(dst.join(&n)) else {
+            continue;
+        };
+        if m.is_dir() != is_dir {
+            let what = if is_dir { "a file" } else { "a folder" };
+            return Err(io_err(
+                shown.join(&n),
+                std::io::Error::new(
+                    std::io::ErrorKind::AlreadyExists,
+                    format!("is {what} of the same name; move it away first"),
+                ),
+            ));
+        }
+        if is_dir {
+            check_kinds(&src.join(&n), &dst.join(&n), &shown.join(&n))?;
+        }
+    }
+    Ok(())
+}
+
+/// Moves every entry of `src` over its namesake in `dst`, one rename each; a folder whose old
+/// namesake holds nothing it does not replace is swapped as a whole, else merged entry by entry (so
+/// that files of the user's inside are kept). Old folders set aside go into `aside_dir`.
+fn merge(src: &Path, dst: &Path, shown: &Path, aside_dir: &Path) -> Result<()> {
+    let io_err = |name: &std::ffi::OsStr, source: std::io::Error| SimError::Io {
+        path: shown.join(name),
+        source,
+    };
+    for (n, is_dir) in entries(src).map_err(|e| SimError::Io {
+        path: shown.to_path_buf(),
+        source: e,
+    })? {
+        let (s, d) = (src.join(&n), dst.join(&n));
+        if is_dir && d.is_dir() {
+            if !covered(&d, &s) {
+                merge(&s, &d, &shown.join(&n), aside_dir)?;
+                continue;
+            }
+            if exchange(&s, &d).is_ok() {
+                let _ = std::fs::remove_dir_all(&s);
+                continue;
+            }
+            let aside = aside_dir.join(temp_name(&n));
+            std::fs::rename(&d, &aside).map_err(|e| io_err(&n, e))?;
+        }
+        std::fs::rename(&s, &d).map_err(|e| io_err(&n, e))?;
+    }
+    Ok(())
 }
 
 impl Drop for StagedDir {
@@ -544,6 +590,29 @@ mod tests {
             e.to_string(),
             format!("{}: cannot write: x", out.join("a").display())
         );
+        // Subfolders of ours (a suite's datasets): swapped, or merged when they hold a file of the
+        // user's, which is kept.
+        let suite = dir.join("suite");
+        let stage_sub = |t: &str| {
+            let st = StagedDir::new(&suite).unwrap();
+            std::fs::create_dir_all(st.path().join("d")).unwrap();
+            write_atomic(&st.path().join("d/f"), t.as_bytes()).unwrap();
+            st
+        };
+        let is_d = |n: &str| n == "d";
+        stage_sub("1").commit(&is_d).unwrap();
+        stage_sub("2").commit(&is_d).unwrap();
+        assert_eq!(std::fs::read_to_string(suite.join("d/f")).unwrap(), "2");
+        std::fs::write(suite.join("d/mine"), "m").unwrap();
+        stage_sub("3").commit(&is_d).unwrap();
+        assert_eq!(std::fs::read_to_string(suite.join("d/f")).unwrap(), "3");
+        assert_eq!(std::fs::read_to_string(suite.join("d/mine")).unwrap(), "m");
+        std::fs::write(suite.join("top"), "t").unwrap();
+        stage_sub("4").commit(&is_d).unwrap();
+        assert_eq!(names(&suite), vec!["d", "top"]);
+        assert_eq!(names(&suite.join("d")), vec!["f", "mine"]);
+        assert_eq!(std::fs::read_to_string(suite.join("d/f")).unwrap(), "4");
+        std::fs::remove_dir_all(&suite).unwrap();
         // A file where the folder should be.
         let file = dir.join("file");
         std::fs::write(&file, "x").unwrap();
