@@ -413,6 +413,26 @@ fn generate_replaces_its_set_as_a_whole_and_leaves_no_temporary_files() {
 }
 
 #[test]
+fn dataset_replaces_its_suite_and_keeps_the_users_files() {
+    let d = dir("dataset");
+    let out = d.join("suite");
+    let (c, e) = robocal(&["dataset", "--suite", "ur5-v1", "--out", s(&out)]);
+    assert_eq!(c, Some(0), "{e}");
+    let first = snapshot(&out);
+    std::fs::write(out.join("notes.txt"), "mine").unwrap();
+    std::fs::write(out.join("kinematic/mine.txt"), "mine too").unwrap();
+    let (c, e) = robocal(&["dataset", "--suite", "ur5-v1", "--out", s(&out)]);
+    assert_eq!(c, Some(0), "{e}");
+    let mut want = first;
+    want.push(("notes.txt".into(), digest(b"mine")));
+    want.push(("kinematic/mine.txt".into(), digest(b"mine too")));
+    want.sort();
+    assert_eq!(snapshot(&out), want);
+    assert!(hidden(&d).is_empty() && hidden(&out).is_empty());
+    let _ = std::fs::remove_dir_all(&d);
+}
+
+#[test]
 fn counts_beyond_the_campaign_limit_are_refused_up_front() {
     let d = dir("counts");
     let scenario = repo().join("scenarios/iiwa7_kinematic.toml");
