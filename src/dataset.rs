@@ -118,13 +118,36 @@ pub struct FileEntry {
     pub sha256: String,
 }
 
-/// Writes `suite` into `out` (created if missing; files of the same names replaced). Returns the files
-/// written (manifest files excluded), in sorted order.
+/// Writes `suite` into `out` (created if missing). The suite replaces an earlier one as a whole
+/// ([`sim::io::StagedDir`]: every file is written into a staging folder beside `out`, then the set is
+/// moved in; entries of `out` that are not the suite's dataset folders or manifest files are kept).
+/// Returns the files written (manifest files excluded), in sorted order.
 ///
 /// # Errors
 /// Bad input when a frozen scenario is refused; a runtime failure when a file cannot be written.
 pub fn write_suite(suite: &Suite, out: &Path) -> Result<Vec<FileEntry>, CliError> {
-    std::fs::create_dir_all(out).map_err(|e| io(out, e))?;
+    let stage = sim::io::StagedDir::new(out)?;
+    // Messages name the folder the user gave, not the staging folder.
+    let (staged, shown) = (
+        stage.path().display().to_string(),
+        out.display().to_string(),
+    );
+    let files = write_suite_into(suite, stage.path()).map_err(|e| match e {
+        CliError::Input(m) => CliError::Input(m.replace(&staged, &shown)),
+        CliError::Runtime(m) => CliError::Runtime(m.replace(&staged, &shown)),
+    })?;
+    let [m, s] = manifest_paths(Path::new(""));
+    let ours = |name: &str| {
+        suite.datasets.iter().any(|d| d.name == name)
+            || Path::new(name) == m
+            || Path::new(name) == s
+    };
+    stage.commit(&ours)?;
+    Ok(files)
+}
+
+/// Writes `suite` into the existing folder `out` (see [`write_suite`]).
+fn write_suite_into(suite: &Suite, out: &Path) -> Result<Vec<FileEntry>, CliError> {
     let mut rel: Vec<String> = Vec::new();
     let mut datasets = Vec::new();
     for d in suite.datasets {

@@ -18,7 +18,7 @@ fn main() -> ExitCode {
     let args = match cli::Cli::try_parse() {
         Ok(a) => a,
         Err(e) if e.kind() == ErrorKind::InvalidValue => {
-            eprintln!("error: {}", invalid_value_line(&e));
+            eprintln!("error: {}", sim::error::one_line(&invalid_value_line(&e)));
             return ExitCode::from(USAGE);
         }
         // Help, version and every other usage error: as clap prints them (usage errors exit 2).
@@ -27,7 +27,8 @@ fn main() -> ExitCode {
     match cli::run(args) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!("error: {e}");
+            // Whatever a message quotes (a file name, a library's text), it stays on one line.
+            eprintln!("error: {}", sim::error::one_line(&e.to_string()));
             ExitCode::from(e.exit_code())
         }
     }

@@ -141,8 +141,20 @@ pub fn summary_markdown(d: &Diagnosis, data_name: &str) -> String {
     s
 }
 
+/// The files of a report whose names do not depend on the diagnosis (the plots of the causes are
+/// `*.svg` besides).
+pub const FIXED_FILES: [&str; 4] = ["index.html", "summary.md", "diagnosis.json", "errors.svg"];
+
+/// True for a name the report writes (one of [`FIXED_FILES`] or a plot `*.svg`): what a new report
+/// replaces in an old report's folder.
+pub fn is_report_file(name: &str) -> bool {
+    FIXED_FILES.contains(&name) || name.ends_with(".svg")
+}
+
 /// Writes the report into `dir` (created): `index.html`, `summary.md`, `diagnosis.json`, one SVG per
-/// regressor plot and `errors.svg`. Returns the files written.
+/// regressor plot and `errors.svg`. The files replace an earlier report as a whole
+/// ([`sim::io::StagedDir`]: written into a staging folder beside `dir`, then moved in; files in `dir`
+/// that a report does not write are kept). Returns the files written.
 ///
 /// # Errors
 /// A runtime [`CliError`] naming the folder or file that cannot be created or written.
@@ -152,12 +164,44 @@ pub fn write(
     plots: &PlotData,
     data_name: &str,
 ) -> Result<Vec<String>, CliError> {
-    std::fs::create_dir_all(dir).map_err(|source| sim::SimError::Io {
-        path: dir.to_path_buf(),
-        source,
+    let stage = sim::io::StagedDir::new(dir)?;
+    let files = write_into(stage.path(), d, plots, data_name).map_err(|e| match e {
+        Staged::Sim(e) => CliError::from(stage.user_error(e)),
+        Staged::Cli(e) => e,
     })?;
+    stage.commit(&is_report_file)?;
+    Ok(files)
+}
+
+/// An error while writing into the staging folder.
+enum Staged {
+    /// A write that failed (its path is renamed to the user's folder).
+    Sim(sim::SimError),
+    /// Anything else.
+    Cli(CliError),
+}
+
+impl From<sim::SimError> for Staged {
+    fn from(e: sim::SimError) -> Self {
+        Staged::Sim(e)
+    }
+}
+
+impl From<CliError> for Staged {
+    fn from(e: CliError) -> Self {
+        Staged::Cli(e)
+    }
+}
+
+/// Writes the report's files into the existing folder `dir`.
+fn write_into(
+    dir: &Path,
+    d: &Diagnosis,
+    plots: &PlotData,
+    data_name: &str,
+) -> Result<Vec<String>, Staged> {
     let mut files = Vec::new();
-    let mut put = |name: &str, text: &str| -> Result<(), CliError> {
+    let mut put = |name: &str, text: &str| -> Result<(), Staged> {
         write_atomic(&dir.join(name), text.as_bytes())?;
         files.push(name.to_string());
         Ok(())

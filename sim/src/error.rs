@@ -208,3 +208,45 @@ pub(crate) fn scenario_err(file: &str, key: &str, message: String) -> SimError {
         message,
     }
 }
+
+/// Longest fragment of a file (a header name, a cell) that [`fragment`] quotes into a message, in
+/// characters.
+pub const FRAGMENT_CHARS: usize = 80;
+
+/// Text taken from a file, made fit for a one-line error message: control characters (line breaks,
+/// tabs, NUL, …) escaped as `\n`, `\t`, `\u{0}`, and cut with `…` where the result would exceed
+/// `max_chars` characters.
+///
+/// ```
+/// assert_eq!(sim::error::fragment_n("a\nb\u{0}", 80), "a\\nb\\u{0}");
+/// assert_eq!(sim::error::fragment_n("abcdef", 3), "abc…");
+/// ```
+pub fn fragment_n(text: &str, max_chars: usize) -> String {
+    let mut out = String::new();
+    let mut shown = 0usize;
+    for c in text.chars() {
+        let escaped: String = if c.is_control() {
+            c.escape_default().collect()
+        } else {
+            c.to_string()
+        };
+        let n = escaped.chars().count();
+        if shown.saturating_add(n) > max_chars {
+            out.push('…');
+            break;
+        }
+        shown += n;
+        out.push_str(&escaped);
+    }
+    out
+}
+
+/// [`fragment_n`] with [`FRAGMENT_CHARS`].
+pub fn fragment(text: &str) -> String {
+    fragment_n(text, FRAGMENT_CHARS)
+}
+
+/// A whole message on one line: control characters escaped as in [`fragment_n`], nothing cut.
+pub fn one_line(text: &str) -> String {
+    fragment_n(text, usize::MAX)
+}

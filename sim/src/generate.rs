@@ -11,8 +11,9 @@
 //!    independent and run in parallel (rayon); the tracker noise of pose `k`, repeat `r` comes from its
 //!    own generator seeded by `(seed, k, r)` ([`crate::campaign::derive_seed`]), so the output does not
 //!    depend on the number of threads or their scheduling.
-//! 3. [`write_dataset`]: three files in the output folder, each written atomically (temporary file in
-//!    the same folder, then renamed):
+//! 3. [`write_dataset`]: three files in the output folder, replaced as a set: written into a hidden
+//!    staging folder beside it, then moved in ([`crate::io::StagedDir`]), so that an interrupted run
+//!    leaves the old set or the new one:
 //!
 //! * `measurements.parquet`: the measurement contract (`shared/spec/measurements.md`) and nothing else:
 //!   `pose, q1..qN, x, y, z, [qw, qx, qy, qz], t, temp, [dir1..dirN], payload, [sigma]`. `qw..qz` only
@@ -84,6 +85,8 @@ pub const MEASUREMENTS_FILE: &str = "measurements.parquet";
 pub const TRUTH_PARQUET_FILE: &str = "truth.parquet";
 /// Parameters and provenance.
 pub const TRUTH_JSON_FILE: &str = "truth.json";
+/// Every file [`write_dataset`] writes into its output folder, in the order of [`Summary::files`].
+pub const OUTPUT_FILES: [&str; 3] = [MEASUREMENTS_FILE, TRUTH_PARQUET_FILE, TRUTH_JSON_FILE];
 
 /// The simulated truth and reading of one row.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -661,8 +664,9 @@ fn truth_json(res: &Resolved, plan: &Plan, summary: &Summary) -> TruthDoc {
     }
 }
 
-/// Plans, simulates and writes the dataset of `res` into `out_dir` (created if missing). Returns the
-/// summary. `progress` is called from worker threads with rows finished (the total is
+/// Plans, simulates and writes the dataset of `res` into `out_dir` (created if missing). The three
+/// files replace an earlier set as a whole ([`crate::io::StagedDir`]: written into a staging folder
+/// beside `out_dir`, then moved in; other files in `out_dir` are kept). Returns the summary. `progress` is called from worker threads with rows finished (the total is
 /// [`Plan::len`]; use [`plan_of`] first to know it).
 pub fn write_dataset(
     res: &Resolved,
@@ -681,30 +685,37 @@ pub fn write_dataset(
             other => other,
         },
     )?;
-    std::fs::create_dir_all(out_dir).map_err(|source| SimError::Io {
-        path: out_dir.to_path_buf(),
-        source,
-    })?;
-    let m_path = out_dir.join(MEASUREMENTS_FILE);
-    let t_path = out_dir.join(TRUTH_PARQUET_FILE);
-    let j_path = out_dir.join(TRUTH_JSON_FILE);
-    let table = measurement_table(plan, &sim, &res.tracker);
-    measurement_table::write(&m_path, &table)?;
-    let batch = truth_batch(plan, &sim, res.tracker.six_dof())?;
-    write_atomic(&t_path, &parquet_bytes(&batch, &t_path)?)?;
-    let files = [&m_path, &t_path, &j_path]
-        .iter()
-        .map(|p| p.display().to_string())
-        .collect();
-    let summary = summarize(res, plan, &sim, files);
-    let doc = truth_json(res, plan, &summary);
-    let mut text = serde_json::to_string_pretty(&doc).map_err(|e| SimError::Io {
-        path: j_path.clone(),
-        source: std::io::Error::other(e.to_string()),
-    })?;
-    text.push('\n');
-    write_atomic(&j_path, text.as_bytes())?;
-    Ok(summary)
+    // Every file goes into a staging folder beside `out_dir`; the set replaces the old one as a whole
+    // once all three are written (sim::io::StagedDir; files of the user's in `out_dir` are kept).
+    let stage = crate::io::StagedDir::new(out_dir)?;
+    let written = (|| -> Result<Summary> {
+        let dir = stage.path();
+        let (m_path, t_path, j_path) = (
+            dir.join(MEASUREMENTS_FILE),
+            dir.join(TRUTH_PARQUET_FILE),
+            dir.join(TRUTH_JSON_FILE),
+        );
+        let table = measurement_table(plan, &sim, &res.tracker);
+        measurement_table::write(&m_path, &table)?;
+        let batch = truth_batch(plan, &sim, res.tracker.six_dof())?;
+        write_atomic(&t_path, &parquet_bytes(&batch, &t_path)?)?;
+        let files = OUTPUT_FILES
+            .iter()
+            .map(|n| out_dir.join(n).display().to_string())
+            .collect();
+        let summary = summarize(res, plan, &sim, files);
+        let doc = truth_json(res, plan, &summary);
+        let mut text = serde_json::to_string_pretty(&doc).map_err(|e| SimError::Io {
+            path: j_path.clone(),
+            source: std::io::Error::other(e.to_string()),
+        })?;
+        text.push('\n');
+        write_atomic(&j_path, text.as_bytes())?;
+        Ok(summary)
+    })()
+    .map_err(|e| stage.user_error(e))?;
+    stage.commit(&|name| OUTPUT_FILES.contains(&name))?;
+    Ok(written)
 }
 
 /// The campaign rows of a resolved scenario (step 1 of the pipeline).

@@ -61,7 +61,7 @@ pub use check::{LIMIT_TOLERANCE, check_against_model, reach_bound};
 pub use csv::{read_csv_str, write_csv_string};
 pub use parquet::{PARQUET_MAX_ROW_GROUP_ROWS, write_parquet_bytes};
 
-use crate::error::{Result, SimError};
+use crate::error::{Result, SimError, fragment};
 use std::collections::HashMap;
 use std::path::Path;
 
@@ -194,15 +194,37 @@ impl Format {
 /// Reads a measurement table from `path` (CSV or Parquet by extension) and checks it
 /// ([`MeasurementTable::validate`]). Checks against a robot are separate ([`check_against_model`]).
 pub fn read(path: &Path) -> Result<MeasurementTable> {
+    read_with(path, Positions::Required)
+}
+
+/// [`read`] or [`read_configurations`].
+fn read_with(path: &Path, positions: Positions) -> Result<MeasurementTable> {
     let format = Format::from_path(path)?;
     let name = path.display().to_string();
     match format {
         Format::Csv => {
             let bytes = std::fs::read(path).map_err(|e| read_err(path, e))?;
-            csv::read_csv_bytes(&bytes, &name)
+            csv::read_csv_bytes(&bytes, &name, positions)
         }
-        Format::Parquet => parquet::read_parquet_file(path, &name),
+        Format::Parquet => parquet::read_parquet_file(path, &name, positions),
     }
+}
+
+/// Reads a table of joint configurations from `path` (CSV or Parquet by extension): the measurement
+/// contract with `x, y, z` optional, for tools that only need the joint values (`robocal predict`).
+/// Without them the positions are zero; when present they are read and checked as by [`read`].
+/// Everything else is as [`read`].
+pub fn read_configurations(path: &Path) -> Result<MeasurementTable> {
+    read_with(path, Positions::Optional)
+}
+
+/// Whether a reader requires the `x, y, z` columns.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Positions {
+    /// The measurement contract: required.
+    Required,
+    /// Joint configurations: absent means zero.
+    Optional,
 }
 
 /// Writes `table` to `path` (CSV or Parquet by extension), atomically: the data goes to a temporary file
@@ -652,8 +674,11 @@ fn numbered(name: &str, prefix: &str) -> Option<std::result::Result<usize, ()>> 
 }
 
 /// Maps file column names to [`Role`]s and checks the contract's column rules.
-fn resolve_columns(names: &[String], file: &str) -> Result<Layout> {
-    let fail = |column: Option<&str>, message: String| table_err(file, None, column, message);
+fn resolve_columns(names: &[String], file: &str, positions: Positions) -> Result<Layout> {
+    // Names are quoted into messages: escaped and cut to one short line (a binary file's "header").
+    let fail = |column: Option<&str>, message: String| {
+        table_err(file, None, column.map(fragment).as_deref(), message)
+    };
     let err = |column: Option<&str>, message: String| Err(fail(column, message));
     let mut seen: HashMap<&str, usize> = HashMap::new();
     for (i, name) in names.iter().enumerate() {
@@ -717,9 +742,9 @@ fn resolve_columns(names: &[String], file: &str) -> Result<Layout> {
         roles.push(role);
     }
     let found = || {
-        let mut list: Vec<&str> = names.iter().take(20).map(String::as_str).collect();
+        let mut list: Vec<String> = names.iter().take(20).map(|n| fragment(n)).collect();
         if names.len() > 20 {
-            list.push("…");
+            list.push("…".into());
         }
         list.join(", ")
     };
@@ -727,7 +752,7 @@ fn resolve_columns(names: &[String], file: &str) -> Result<Layout> {
         let hint = names
             .iter()
             .find(|n| n.eq_ignore_ascii_case(col))
-            .map(|n| format!("; there is '{n}', but names are case-sensitive"))
+            .map(|n| format!("; there is '{}', but names are case-sensitive", fragment(n)))
             .unwrap_or_default();
         err(
             Some(col),
@@ -755,8 +780,10 @@ fn resolve_columns(names: &[String], file: &str) -> Result<Layout> {
             ),
         );
     }
+    let has_position: Vec<bool> = (0..3).map(|k| roles.contains(&Role::Position(k))).collect();
+    let all_optional = positions == Positions::Optional && !has_position.iter().any(|&b| b);
     for (k, col) in ["x", "y", "z"].iter().enumerate() {
-        if !roles.contains(&Role::Position(k)) {
+        if !has_position[k] && !all_optional {
             return missing(col);
         }
     }

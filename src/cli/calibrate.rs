@@ -1,5 +1,6 @@
 //! `robocal calibrate`: identify the kinematic error model from a measurement table.
 
+use super::paths::{Inputs, check_distinct};
 use super::robot_arg::RobotArgs;
 use super::shared::{CliError, CliResult, print_json, read_table};
 use calib::CalibError;
@@ -75,6 +76,18 @@ pub fn run(args: Args) -> CliResult {
         ModelChoice::Model(m) => Some(m),
     };
     let robust = args.robust.map(Robust::loss);
+    let mut inputs = Inputs::new();
+    inputs
+        .add("--data", &args.data)
+        .add_robot(&args.robot.robot);
+    if let Some(t) = &args.test_data {
+        inputs.add("--test-data", t);
+    }
+    inputs.check("--out", &args.out)?;
+    if let Some(u) = &args.urdf_out {
+        inputs.check("--urdf-out", u)?;
+        check_distinct(("--out", &args.out), ("--urdf-out", u))?;
+    }
     if !(0.0..1.0).contains(&args.test_fraction) {
         return Err(CliError::Input(format!(
             "--test-fraction {}: must be in [0, 1)",

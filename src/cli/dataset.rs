@@ -10,7 +10,8 @@ pub struct Args {
     /// Suite to write, e.g. `iiwa7-v1` (see --list).
     #[arg(long, value_name = "NAME", required_unless_present = "list")]
     suite: Option<String>,
-    /// Output folder (created if missing); files of the same names are replaced.
+    /// Output folder (created if missing); an earlier suite in it is replaced as a whole, other
+    /// entries are kept.
     #[arg(long, value_name = "DIR", required_unless_present = "list")]
     out: Option<PathBuf>,
     /// List the suites and exit.

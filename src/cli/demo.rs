@@ -169,6 +169,8 @@ pub fn run(args: Args) -> CliResult {
             args.poses
         )));
     }
+    sim::campaign::check_row_count(Some(args.poses), &format!("--poses {}", args.poses))
+        .map_err(CliError::Input)?;
     let seed = args.seed.unwrap_or_else(clock_seed);
     let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
     let hidden = draw_hidden(&mut rng);

@@ -1,5 +1,6 @@
 //! `robocal diagnose`: what the kinematic model misses, its cause, and the gain on held-out poses.
 
+use super::paths::Inputs;
 use super::robot_arg::RobotArgs;
 use super::shared::{CliError, CliResult, print_json, read_table};
 use crate::report;
@@ -174,6 +175,24 @@ pub fn run(args: Args) -> CliResult {
             )));
         }
         options.noise_floor_m = Some(v);
+    }
+    if let Some(dir) = &args.report {
+        let mut inputs = Inputs::new();
+        inputs
+            .add("--data", &args.data)
+            .add_robot(&args.robot.robot);
+        // The files a report writes: the fixed ones and any plot of an old report it may replace.
+        let mut names: Vec<String> = report::FIXED_FILES.iter().map(|n| n.to_string()).collect();
+        if let Ok(entries) = std::fs::read_dir(dir) {
+            names.extend(
+                entries
+                    .flatten()
+                    .map(|e| e.file_name().to_string_lossy().into_owned())
+                    .filter(|n| report::is_report_file(n)),
+            );
+        }
+        let names: Vec<&str> = names.iter().map(String::as_str).collect();
+        inputs.check_dir("--report", dir, &names)?;
     }
     let spec = ChainSpec {
         base_link: args.robot.base_link.clone(),

@@ -3,6 +3,7 @@
 //! Writes `DIR/measurements.parquet` (the measurement contract), `DIR/truth.json` and
 //! `DIR/truth.parquet` (the ground truth); see `sim::generate` and `docs/generate.md`.
 
+use super::paths::Inputs;
 use super::shared::{CliError, CliResult, print_json};
 use sim::scenario::{Overrides, Scenario};
 use std::io::IsTerminal;
@@ -14,7 +15,8 @@ pub struct Args {
     /// Scenario file (TOML): robot, injected effects, tracker and campaign (see scenarios/).
     #[arg(long, value_name = "FILE.toml")]
     scenario: PathBuf,
-    /// Output folder (created if missing); existing files of the same names are replaced.
+    /// Output folder (created if missing); an earlier set of the three files is replaced as a whole,
+    /// other files in it are kept. It must not hold the scenario or its inputs.
     #[arg(long, value_name = "DIR")]
     out: PathBuf,
     /// Seed of every random draw (replaces the scenario's `seed`).
@@ -37,6 +39,10 @@ pub fn run(args: Args) -> CliResult {
     if args.poses == Some(0) {
         return Err(CliError::Input("--poses: 0: must be ≥ 1".into()));
     }
+    if let Some(p) = args.poses {
+        sim::campaign::check_row_count(Some(p), &format!("--poses {p}"))
+            .map_err(CliError::Input)?;
+    }
     if let Some(m) = args.noise
         && !(m.is_finite() && m >= 0.0)
     {
@@ -45,6 +51,9 @@ pub fn run(args: Args) -> CliResult {
         )));
     }
     let scenario = Scenario::load(&args.scenario)?;
+    Inputs::new()
+        .add_scenario("--scenario", &args.scenario, &scenario)
+        .check_dir("--out", &args.out, &sim::generate::OUTPUT_FILES)?;
     let overrides = Overrides {
         seed: args.seed,
         poses: args.poses,

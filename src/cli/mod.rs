@@ -8,6 +8,7 @@ mod diagnose;
 mod fk;
 mod generate;
 mod info;
+mod paths;
 mod plan_poses;
 mod predict;
 mod robot_arg;

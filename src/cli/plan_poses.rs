@@ -1,5 +1,6 @@
 //! `robocal plan-poses`: choose the measurement poses that determine the kinematic parameters best.
 
+use super::paths::Inputs;
 use super::robot_arg::RobotArgs;
 use super::shared::{CliError, CliResult, print_json};
 use calib::plan::{PlanOptions, plan_poses};
@@ -68,6 +69,11 @@ fn parse3(text: &str) -> Result<nalgebra::Vector3<f64>, CliError> {
 
 /// Runs `robocal plan-poses`.
 pub fn run(args: Args) -> CliResult {
+    if let Some(out) = &args.out {
+        Inputs::new()
+            .add_robot(&args.robot.robot)
+            .check("--out", out)?;
+    }
     let model = args.robot.load()?;
     let mut options = PlanOptions::new(args.candidates, args.select, args.seed);
     options.target_offset = parse3(&args.target_offset)?;

@@ -1,9 +1,9 @@
 //! `robocal predict`: where a calibrated model says the target is, for every row of a table.
 
+use super::paths::{Inputs, check_distinct};
 use super::shared::{CliError, CliResult, print_json};
 use calib::model_file::{CalibratedModel, Predictor, calibrated_urdf, urdf_deviation};
 use serde_json::json;
-use sim::SimError;
 use sim::measurement_table::{self, MeasurementTable};
 use std::path::{Path, PathBuf};
 
@@ -13,7 +13,8 @@ pub struct Args {
     /// Calibrated model written by `robocal calibrate`.
     #[arg(long, value_name = "MODEL.json")]
     model: PathBuf,
-    /// Joint configurations: a measurement table (its x, y, z are ignored), or a CSV with `pose, q1..qN`.
+    /// Joint configurations: a measurement table (CSV or Parquet) whose x, y, z may be absent (and are
+    /// ignored when present), e.g. `pose, q1..qN`.
     #[arg(long, value_name = "FILE")]
     data: PathBuf,
     /// Where to write `pose,x,y,z` (and `qw,qx,qy,qz` with orientation), tracker frame, m.
@@ -27,21 +28,10 @@ pub struct Args {
     json: bool,
 }
 
-/// A table of joint values: the measurement contract, or (CSV without x, y, z) just `pose, q1..qN`.
+/// A table of joint values: the measurement contract, `x, y, z` optional (CSV or Parquet).
 fn read_configs(path: &Path, robot: &sim::Model) -> Result<MeasurementTable, CliError> {
-    let table = match measurement_table::read(path) {
-        Ok(t) => t,
-        Err(SimError::Table {
-            column: Some(c), ..
-        }) if matches!(c.as_str(), "x" | "y" | "z")
-            && path
-                .extension()
-                .is_some_and(|e| e.eq_ignore_ascii_case("csv")) =>
-        {
-            calib::io::read_joint_csv(path)?
-        }
-        Err(e) => return Err(e.into()),
-    };
+    // x, y, z are not needed (and ignored when present).
+    let table = measurement_table::read_configurations(path)?;
     if table.n_joints != robot.nq() {
         return Err(CliError::Input(format!(
             "{}: {} joint columns, but the model's robot '{}' has {} joints",
@@ -59,6 +49,13 @@ fn read_configs(path: &Path, robot: &sim::Model) -> Result<MeasurementTable, Cli
 
 /// Runs `robocal predict`.
 pub fn run(args: Args) -> CliResult {
+    let mut inputs = Inputs::new();
+    inputs.add("--model", &args.model).add("--data", &args.data);
+    inputs.check("--out", &args.out)?;
+    if let Some(u) = &args.urdf_out {
+        inputs.check("--urdf-out", u)?;
+        check_distinct(("--out", &args.out), ("--urdf-out", u))?;
+    }
     let file = CalibratedModel::load(&args.model)?;
     let mut predictor = Predictor::from_file(&file)?;
     let table = read_configs(&args.data, &predictor.model)?;

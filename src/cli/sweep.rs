@@ -1,6 +1,7 @@
 //! `robocal sweep`: a sensitivity study over noise levels and pose counts (see `crate::sweep` and
 //! `docs/sweep.md`), and `robocal sweep-merge`, which joins the shards of one sweep.
 
+use super::paths::Inputs;
 use super::shared::{CliError, CliResult, print_json};
 use crate::sweep::table::{self, META_SUBSET, META_SWEEP, SweepRow};
 use crate::sweep::{self as sw, Context, Selection, Subset, SweepSpec};
@@ -114,9 +115,14 @@ pub(crate) fn parse_noise(text: &str) -> Result<Vec<f64>, CliError> {
 
 /// `--poses`: integers ≥ 1.
 pub(crate) fn parse_poses(text: &str) -> Result<Vec<usize>, CliError> {
-    parse_list("--poses", text, "a whole number ≥ 1", |s| {
+    let poses = parse_list("--poses", text, "a whole number ≥ 1", |s| {
         s.parse::<usize>().ok().filter(|v| *v >= 1)
-    })
+    })?;
+    for p in &poses {
+        sim::campaign::check_row_count(Some(*p), &format!("--poses {text}: item {p}"))
+            .map_err(CliError::Input)?;
+    }
+    Ok(poses)
 }
 
 /// `--shard K/N` with `0 ≤ K < N`.
@@ -145,6 +151,12 @@ pub(crate) fn parse_shard(text: &str) -> Result<Subset, CliError> {
 /// The plot's path beside `out`: `out` with the extension `svg`.
 fn plot_path(out: &Path) -> PathBuf {
     out.with_extension("svg")
+}
+
+/// Refuses an `--out` (or the plot beside it) that is one of `inputs`.
+fn check_outputs(inputs: &Inputs, out: &Path) -> CliResult {
+    inputs.check("--out", out)?;
+    inputs.check_as("--out", out, &plot_path(out))
 }
 
 fn write(path: &Path, bytes: &[u8]) -> CliResult {
@@ -274,10 +286,20 @@ pub fn run(args: Args) -> CliResult {
         ));
     }
     let scenario = Scenario::load(&args.scenario)?;
+    check_outputs(
+        Inputs::new().add_scenario("--scenario", &args.scenario, &scenario),
+        &args.out,
+    )?;
     // Check the scenario and the smallest pose count once, before any work.
     let probe = scenario.resolve(&Overrides {
         seed: Some(args.seed),
         poses: Some(poses[0]),
+        noise: Some(noise[0]),
+    })?;
+    // And the largest, so that a count beyond the campaign limit is refused before any work.
+    scenario.resolve(&Overrides {
+        seed: Some(args.seed),
+        poses: poses.iter().max().copied(),
         noise: Some(noise[0]),
     })?;
     let options = CalibrationOptions::default();
@@ -370,6 +392,11 @@ pub fn run(args: Args) -> CliResult {
 
 /// Runs `robocal sweep-merge`.
 pub fn run_merge(args: MergeArgs) -> CliResult {
+    let mut inputs = Inputs::new();
+    for s in &args.shards {
+        inputs.add("SHARD", s);
+    }
+    check_outputs(&inputs, &args.out)?;
     let mut spec_text: Option<(String, PathBuf)> = None;
     let mut owner: Vec<Option<usize>> = Vec::new();
     let mut rows: Vec<Option<SweepRow>> = Vec::new();

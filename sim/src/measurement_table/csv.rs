@@ -1,12 +1,12 @@
 //! CSV reading and writing of the measurement table (see the parent module for the format).
 
-use super::{IN_MEMORY, Layout, MeasurementTable, Role, resolve_columns};
-use crate::error::{Result, SimError};
+use super::{IN_MEMORY, Layout, MeasurementTable, Positions, Role, resolve_columns};
+use crate::error::{Result, SimError, fragment, fragment_n};
 use std::io::Write;
 
 /// Parses a CSV measurement table from text; `file` is the name shown in errors.
 pub fn read_csv_str(text: &str, file: &str) -> Result<MeasurementTable> {
-    read_csv_bytes(text.as_bytes(), file)
+    read_csv_bytes(text.as_bytes(), file, Positions::Required)
 }
 
 /// The CSV text of `table` (see the parent module for the format). Fails if the table is invalid
@@ -148,12 +148,7 @@ fn is_blank(cells: &[Cell]) -> bool {
 
 /// The text of a cell for an error message (quoted, shortened).
 fn show(bytes: &[u8]) -> String {
-    let s = String::from_utf8_lossy(bytes);
-    if s.chars().count() > 40 {
-        format!("'{}…'", s.chars().take(40).collect::<String>())
-    } else {
-        format!("'{s}'")
-    }
+    format!("'{}'", fragment_n(&String::from_utf8_lossy(bytes), 40))
 }
 
 /// The cell `start..end` as text: sliced from `text` (the whole buffer, when it is valid UTF-8), else
@@ -230,9 +225,13 @@ fn line_of_row(bytes: &[u8], row: usize) -> Option<usize> {
 }
 
 /// Parses a CSV measurement table from bytes (UTF-8, optional BOM); `file` is the name shown in errors.
-pub(super) fn read_csv_bytes(bytes: &[u8], file: &str) -> Result<MeasurementTable> {
+pub(super) fn read_csv_bytes(
+    bytes: &[u8],
+    file: &str,
+    positions: Positions,
+) -> Result<MeasurementTable> {
     let bytes = bytes.strip_prefix(b"\xEF\xBB\xBF").unwrap_or(bytes);
-    let table = parse(bytes, file)?;
+    let table = parse(bytes, file, positions)?;
     table.validate_named(file).map_err(|e| match e {
         SimError::Table {
             file,
@@ -270,7 +269,29 @@ struct Chunk {
 /// Chunks bigger than this are worth parsing in parallel (bytes).
 const PARALLEL_CHUNK: usize = 1 << 20;
 
-fn parse(bytes: &[u8], file: &str) -> Result<MeasurementTable> {
+fn parse(bytes: &[u8], file: &str, positions: Positions) -> Result<MeasurementTable> {
+    // Control bytes other than tab and line ends in the first line: not text (a binary file); said so
+    // before its bytes are taken for cells. Bytes that are not UTF-8 (a Latin-1 name of an ignored
+    // column) are read as before.
+    let first = &bytes[..bytes.len().min(4096)];
+    let first = &first[..first
+        .iter()
+        .position(|&b| b == b'\n')
+        .unwrap_or(first.len())];
+    if first
+        .iter()
+        .any(|&b| (b < 0x20 && !matches!(b, b'\t' | b'\r')) || b == 0x7f)
+    {
+        return Err(super::table_err(
+            file,
+            None,
+            None,
+            format!(
+                "not a CSV text file: its first line holds binary bytes ({})",
+                show(first)
+            ),
+        ));
+    }
     let mut rec = Records::new(bytes);
     let mut cells: Vec<Cell> = Vec::with_capacity(32);
     // Header: the first line that is not blank.
@@ -308,7 +329,7 @@ fn parse(bytes: &[u8], file: &str) -> Result<MeasurementTable> {
             }
         })
         .collect();
-    let layout = resolve_columns(&names, file)?;
+    let layout = resolve_columns(&names, file, positions)?;
     let data_start = rec.pos;
     let first_line = rec.line;
     let data = &bytes[data_start..];
@@ -348,7 +369,7 @@ fn parse(bytes: &[u8], file: &str) -> Result<MeasurementTable> {
                     file: file.to_string(),
                     row: e.row.map(|r| rows_before + r),
                     line: Some(line_before + e.line),
-                    column: e.column.map(|c| names[c].clone()),
+                    column: e.column.map(|c| fragment(&names[c])),
                     message: e.message,
                 });
             }

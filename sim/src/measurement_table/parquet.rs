@@ -1,6 +1,6 @@
 //! Parquet reading and writing of the measurement table (see the parent module for the format).
 
-use super::{IN_MEMORY, MeasurementTable, Role, resolve_columns, table_err};
+use super::{IN_MEMORY, MeasurementTable, Positions, Role, resolve_columns, table_err};
 use crate::error::{Result, SimError};
 use arrow_array::cast::AsArray;
 use arrow_array::types::{
@@ -243,37 +243,29 @@ const MAX_RESERVED_ROWS: usize = 1 << 20;
 /// Reads a Parquet measurement table; `file` is the name shown in errors. A panic of the Parquet
 /// decoder on a corrupt file becomes the same one-line error as a decoding failure
 /// ([`crate::decoder_guard`]).
-pub(super) fn read_parquet_file(path: &Path, file: &str) -> Result<MeasurementTable> {
+pub(super) fn read_parquet_file(
+    path: &Path,
+    file: &str,
+    positions: Positions,
+) -> Result<MeasurementTable> {
     let f = std::fs::File::open(path).map_err(|e| SimError::Read {
         path: path.to_path_buf(),
         source: e,
     })?;
-    crate::decoder_guard::contain(|| read_parquet(f, file)).unwrap_or_else(|message| {
+    crate::decoder_guard::contain(|| read_parquet(f, file, positions)).unwrap_or_else(|message| {
         Err(table_err(
             file,
             None,
             None,
             format!(
                 "not a readable Parquet file: the decoder failed ({}): is the file corrupt?",
-                one_line(&message)
+                crate::error::fragment_n(&message, 120)
             ),
         ))
     })
 }
 
-/// `message` on one line: control characters as spaces, at most 120 characters.
-fn one_line(message: &str) -> String {
-    let flat: String = message
-        .chars()
-        .map(|c| if c.is_control() { ' ' } else { c })
-        .collect();
-    match flat.char_indices().nth(120) {
-        Some((i, _)) => format!("{}…", &flat[..i]),
-        None => flat,
-    }
-}
-
-fn read_parquet(f: std::fs::File, file: &str) -> Result<MeasurementTable> {
+fn read_parquet(f: std::fs::File, file: &str, positions: Positions) -> Result<MeasurementTable> {
     let bad_file = |e: &dyn std::fmt::Display| {
         table_err(
             file,
@@ -289,7 +281,7 @@ fn read_parquet(f: std::fs::File, file: &str) -> Result<MeasurementTable> {
         .iter()
         .map(|f| f.name().trim().to_string())
         .collect();
-    let layout = resolve_columns(&names, file)?;
+    let layout = resolve_columns(&names, file, positions)?;
     let used: Vec<usize> = (0..names.len())
         .filter(|&i| layout.roles[i] != Role::Ignore)
         .collect();
@@ -355,7 +347,7 @@ fn read_parquet(f: std::fs::File, file: &str) -> Result<MeasurementTable> {
                 return Err(table_err(
                     file,
                     i.map(|i| row0 + i + 1),
-                    Some(name),
+                    Some(&crate::error::fragment(name)),
                     message,
                 ));
             }
@@ -370,9 +362,9 @@ fn read_parquet(f: std::fs::File, file: &str) -> Result<MeasurementTable> {
         for col in &q_cols {
             table.q.push(col[r]);
         }
-        table
-            .position
-            .push([pos_cols[0][r], pos_cols[1][r], pos_cols[2][r]]);
+        // Without x, y, z (joint configurations only, `Positions::Optional`): zero.
+        let p = |k: usize| pos_cols[k].get(r).copied().unwrap_or(0.0);
+        table.position.push([p(0), p(1), p(2)]);
     }
     if let Some(o) = table.orientation.as_mut() {
         o.extend((0..n).map(|r| {
