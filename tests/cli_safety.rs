@@ -665,3 +665,50 @@ fn predict_reads_tables_without_positions() {
     );
     let _ = std::fs::remove_dir_all(&d);
 }
+
+/// A table with one gross error (1 m) and the same table with an impossible value (2 km): the first
+/// calibrates (exit 0), the bad row excluded and named in a warning; the second is a one-line error
+/// naming row and column (exit 2). (One bad row used to end calibrate with "did not converge", exit 1,
+/// without naming the row.)
+#[test]
+fn one_gross_error_is_excluded_and_named_and_an_impossible_value_is_refused() {
+    let d = dir("gross");
+    generate(&d.join("data"), "120", "3");
+    let mut table = sim::measurement_table::read(&d.join("data/measurements.parquet")).unwrap();
+    table.position[40][1] += 1.0;
+    let bad = d.join("one_bad_row.csv");
+    sim::measurement_table::write(&bad, &table).unwrap();
+    let (c, e) = robocal(&[
+        "calibrate",
+        "--data",
+        s(&bad),
+        "--out",
+        s(&d.join("m.json")),
+    ]);
+    assert_eq!(c, Some(0), "{e}");
+    assert!(
+        e.contains("warning: row 41 (pose 40) excluded from the fit as a gross error: 1000."),
+        "{e}"
+    );
+    assert!(!e.contains("did not converge"), "{e}");
+    // The writer refuses such a table, so edit the text.
+    let text = std::fs::read_to_string(&bad).unwrap();
+    let mut lines: Vec<String> = text.lines().map(str::to_string).collect();
+    let y = lines[0].split(',').position(|c| c == "y").unwrap();
+    let mut cells: Vec<String> = lines[41].split(',').map(str::to_string).collect();
+    cells[y] = "2000.5".into();
+    lines[41] = cells.join(",");
+    std::fs::write(&bad, lines.join("\n") + "\n").unwrap();
+    check(
+        &[
+            "calibrate",
+            "--data",
+            s(&bad),
+            "--out",
+            s(&d.join("m.json")),
+        ],
+        2,
+        &["one_bad_row.csv", "row 41", "column y", "beyond 1000 m"],
+    );
+    let _ = std::fs::remove_dir_all(&d);
+}

@@ -211,13 +211,13 @@ fn gross_errors_are_reported_as_outliers_and_a_robust_loss_ignores_them() {
             .sum();
         (e2 / test_q.len() as f64).sqrt()
     };
-    let plain = calibrate(
-        &model,
-        &Dataset::all(&t, "t"),
-        None,
-        &CalibrationOptions::default(),
-    )
-    .unwrap();
+    // Plain least squares: every row kept (the default excludes gross errors, see the next test).
+    let keep_all = CalibrationOptions {
+        gross_error_threshold: f64::INFINITY,
+        ..Default::default()
+    };
+    let plain = calibrate(&model, &Dataset::all(&t, "t"), None, &keep_all).unwrap();
+    assert!(plain.report.excluded.is_empty());
     let rows: Vec<usize> = plain.report.outliers.iter().map(|o| o.row - 1).collect();
     let mut sorted = rows.clone();
     sorted.sort();
@@ -238,4 +238,79 @@ fn gross_errors_are_reported_as_outliers_and_a_robust_loss_ignores_them() {
         e_robust < 0.5 * e_plain && e_robust < 1e-5,
         "plain {e_plain:e}, robust {e_robust:e}"
     );
+}
+
+/// By default a gross error (far beyond any model error: 1 mm = 100 σ here) is excluded from the fit,
+/// named by row in the report and a warning, and the fit is as good as without it; a moderate error
+/// (5 σ to 25 σ of the robust scale) is only reported.
+#[test]
+fn gross_errors_are_excluded_by_default_and_named() {
+    let model = robots::load_builtin("iiwa7").unwrap();
+    let mut g = rng(305);
+    let truth = Truth::random(&model, false, &mut g);
+    let mut t = common::table_with(
+        &model,
+        &truth,
+        &random_configs(&model, 120, &mut g),
+        1e-5,
+        0.0,
+        Some(1e-5),
+        &mut g,
+    );
+    let gross = [12usize, 80];
+    for &r in &gross {
+        t.position[r][0] -= 1e-3; // 1 mm = 100 σ
+    }
+    let moderate = 33usize;
+    t.position[moderate][2] += 1.2e-4; // 12 σ
+    let test_q = random_configs(&model, 50, &mut g);
+    let held_out = |params: &calib::params::KinematicParams| {
+        let chain = calib::chain::Chain::new(&model, params);
+        let mut s = calib::chain::ChainScratch::new(7);
+        let e2: f64 = test_q
+            .iter()
+            .map(|q| {
+                chain.forward(&mut s, q);
+                (s.p_tracker - truth.target(&model, q).0).norm_squared()
+            })
+            .sum();
+        (e2 / test_q.len() as f64).sqrt()
+    };
+    let cal = calibrate(
+        &model,
+        &Dataset::all(&t, "t"),
+        None,
+        &CalibrationOptions::default(),
+    )
+    .unwrap();
+    assert!(cal.report.was_successful());
+    assert!(cal.report.health.is_clean(), "{}", cal.report.health);
+    let mut excluded: Vec<usize> = cal.report.excluded.iter().map(|o| o.row - 1).collect();
+    excluded.sort();
+    assert_eq!(excluded, gross.to_vec(), "{:?}", cal.report.excluded);
+    for o in &cal.report.excluded {
+        assert!(
+            o.normalised_residual > 25.0 && (0.9e-3..1.1e-3).contains(&o.error_m),
+            "{o:?}"
+        );
+        assert!(
+            cal.report
+                .warnings
+                .iter()
+                .any(|w| w.starts_with(&format!("row {} (pose {}) excluded", o.row, o.pose))),
+            "{:?}",
+            cal.report.warnings
+        );
+    }
+    let reported: Vec<usize> = cal.report.outliers.iter().map(|o| o.row - 1).collect();
+    assert_eq!(reported, vec![moderate], "{:?}", cal.report.outliers);
+    // Degrees of freedom count the rows kept: 118 rows × 3 minus the identifiable combinations.
+    assert_eq!(cal.report.dof, 118 * 3 - cal.subspace.rank);
+    assert!(
+        (0.6..1.5).contains(&cal.report.chi2_per_dof),
+        "{}",
+        cal.report.chi2_per_dof
+    );
+    let e = held_out(&cal.params);
+    assert!(e < 1e-5, "held-out RMS {e:e} m");
 }

@@ -68,6 +68,18 @@ use std::path::Path;
 /// An orientation whose quaternion norm differs from 1 by more than this is rejected on read and write.
 pub const QUATERNION_NORM_ERROR: f64 = 1e-3;
 
+/// A measured position farther than this from the tracker (m) is rejected: laser trackers measure to
+/// tens of metres, so such a value is a unit error or garbage.
+pub const MAX_POSITION_M: f64 = 1000.0;
+/// A payload heavier than this (kg) is rejected: ten times what the largest industrial arms carry.
+pub const MAX_PAYLOAD_KG: f64 = 1000.0;
+/// A `sigma` above this (m) is rejected: a tracker's uncertainty is micrometres to millimetres.
+pub const MAX_SIGMA_M: f64 = 1.0;
+/// Rows that share a pose id are repeated measurements of one pose: their joint values must agree
+/// with the pose's first row to within this (rad; m for prismatic joints). Encoder noise is
+/// micro-radians; a milliradian is a millimetre at a metre's reach, another configuration.
+pub const POSE_REPEAT_TOLERANCE: f64 = 1e-3;
+
 /// [`check_against_model`] warns about quaternion norms that differ from 1 by more than this.
 pub const QUATERNION_NORM_WARNING: f64 = 1e-6;
 
@@ -532,8 +544,11 @@ impl MeasurementTable {
 
     /// Checks everything that does not need the robot: shape ([`MeasurementTable::validate_shape`]), at
     /// least one joint and one row, every float finite, `dir` in {−1, 0, +1}, `payload` and `sigma` not
-    /// negative, quaternion norms within [`QUATERNION_NORM_ERROR`] of 1. Reports the first bad cell in
-    /// reading order (row by row, columns in file order); errors name `file`.
+    /// negative, quaternion norms within [`QUATERNION_NORM_ERROR`] of 1, physically possible magnitudes
+    /// (positions within [`MAX_POSITION_M`] of the tracker, `payload` up to [`MAX_PAYLOAD_KG`], `sigma`
+    /// up to [`MAX_SIGMA_M`]), and the rows of each pose id at one configuration (joint values within
+    /// [`POSE_REPEAT_TOLERANCE`]; the error names both rows). Reports the first bad cell in reading
+    /// order (row by row, columns in file order); errors name `file`.
     pub fn validate(&self, file: &Path) -> Result<()> {
         let file = file.display().to_string();
         self.validate_named(&file)
@@ -554,6 +569,36 @@ impl MeasurementTable {
         }
         for r in 0..self.len() {
             self.validate_row(r, file)?;
+        }
+        self.check_pose_repeats(file)
+    }
+
+    /// Every row of a pose id at the joint values of its first row, within [`POSE_REPEAT_TOLERANCE`].
+    fn check_pose_repeats(&self, file: &str) -> Result<()> {
+        let mut first: HashMap<i64, usize> = HashMap::with_capacity(self.len());
+        for r in 0..self.len() {
+            let f = *first.entry(self.pose[r]).or_insert(r);
+            if f == r {
+                continue;
+            }
+            let (a, b) = (self.q_row(f), self.q_row(r));
+            if let Some(j) = (0..a.len()).find(|&j| (a[j] - b[j]).abs() > POSE_REPEAT_TOLERANCE) {
+                return Err(table_err(
+                    file,
+                    Some(r + 1),
+                    Some("pose"),
+                    format!(
+                        "pose {} is reused with other joint values: q{} is {:?} here but {:?} in row {} \
+                         (rows sharing a pose id are repeated measurements of one pose, within {:e})",
+                        self.pose[r],
+                        j + 1,
+                        b[j],
+                        a[j],
+                        f + 1,
+                        POSE_REPEAT_TOLERANCE
+                    ),
+                ));
+            }
         }
         Ok(())
     }
@@ -576,6 +621,26 @@ impl MeasurementTable {
         }
         for (name, &v) in ["x", "y", "z"].iter().zip(&self.position[r]) {
             finite(name, v)?;
+        }
+        let p = self.position[r];
+        // Scaled by the largest coordinate, so that 1e300 m gives its distance, not infinity.
+        let largest = p.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        let distance = if largest > 0.0 {
+            largest * p.iter().map(|v| (v / largest).powi(2)).sum::<f64>().sqrt()
+        } else {
+            0.0
+        };
+        if distance > MAX_POSITION_M {
+            let axis = (0..3)
+                .max_by(|&a, &b| p[a].abs().total_cmp(&p[b].abs()))
+                .unwrap_or(0);
+            return bad(
+                ["x", "y", "z"][axis],
+                format!(
+                    "the position is {distance:.3e} m from the tracker, beyond {MAX_POSITION_M} m: not a \
+                     laser-tracker measurement (metres are expected)"
+                ),
+            );
         }
         if let Some(o) = &self.orientation {
             let q = o[r];
@@ -610,15 +675,33 @@ impl MeasurementTable {
                 }
             }
         }
-        for (name, col, unit) in [
-            ("payload", &self.payload, "kg"),
-            ("sigma", &self.sigma, "m"),
+        for (name, col, unit, limit, beyond) in [
+            (
+                "payload",
+                &self.payload,
+                "kg",
+                MAX_PAYLOAD_KG,
+                "not a robot payload (kilograms are expected)",
+            ),
+            (
+                "sigma",
+                &self.sigma,
+                "m",
+                MAX_SIGMA_M,
+                "not a tracker's uncertainty (metres are expected)",
+            ),
         ] {
             if let Some(v) = col {
                 let v = v[r];
                 finite(name, v)?;
                 if v < 0.0 {
                     return bad(name, format!("{v:?} {unit} is negative"));
+                }
+                if v > limit {
+                    return bad(
+                        name,
+                        format!("{v:e} {unit} is beyond {limit} {unit}: {beyond}"),
+                    );
                 }
             }
         }

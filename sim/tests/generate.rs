@@ -660,14 +660,29 @@ fn grid_and_file_campaigns_use_the_stated_joint_positions() {
             assert!(q[i].abs() < 1e-15);
         }
     }
-    // File: the q of the first row of each pose id, in order of appearance, cycled to 5 poses.
-    let csv = "pose,q1,q2,q3,q4,q5,q6,q7,x,y,z\n\
-               7,0.1,0.2,0.3,0.4,0.5,0.6,0.7,1,2,3\n\
-               7,9,9,9,9,9,9,9,1,2,3\n\
-               3,-0.1,-0.2,-0.3,-0.4,-0.5,-0.6,-0.7,1,2,3\n";
-    std::fs::write(dir.join("poses.csv"), csv).unwrap();
+    // File: a pose id reused at other joint values is refused, naming both rows.
     let text = "[robot]\nname = \"iiwa7\"\n[campaign]\nposes = 5\nrepeats = 2\n[campaign.file]\npath = \"poses.csv\"\n";
     std::fs::write(dir.join("file.toml"), text).unwrap();
+    let reused = "pose,q1,q2,q3,q4,q5,q6,q7,x,y,z\n\
+                  7,0.1,0.2,0.3,0.4,0.5,0.6,0.7,1,2,3\n\
+                  7,9,9,9,9,9,9,9,1,2,3\n";
+    std::fs::write(dir.join("poses.csv"), reused).unwrap();
+    let reused_res = Scenario::load(&dir.join("file.toml"))
+        .unwrap()
+        .resolve(&Overrides::default())
+        .unwrap();
+    let err = generate::plan_of(&reused_res).unwrap_err().to_string();
+    assert!(
+        err.contains("poses.csv") && err.contains("row 2") && err.contains("in row 1"),
+        "{err}"
+    );
+    // The q of the first row of each pose id (repeats share it), in order of appearance, cycled to
+    // 5 poses.
+    let csv = "pose,q1,q2,q3,q4,q5,q6,q7,x,y,z\n\
+               7,0.1,0.2,0.3,0.4,0.5,0.6,0.7,1,2,3\n\
+               7,0.1,0.2,0.3,0.4,0.5,0.6,0.7,1,2,3\n\
+               3,-0.1,-0.2,-0.3,-0.4,-0.5,-0.6,-0.7,1,2,3\n";
+    std::fs::write(dir.join("poses.csv"), csv).unwrap();
     let res = Scenario::load(&dir.join("file.toml"))
         .unwrap()
         .resolve(&Overrides::default())

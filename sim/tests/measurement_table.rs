@@ -55,9 +55,14 @@ fn any_f64(rng: &mut StdRng) -> f64 {
     }
 }
 
-fn nonneg_f64(rng: &mut StdRng) -> f64 {
-    let v = any_f64(rng);
-    if v < 0.0 { -v } else { v } // keeps -0.0, which is not negative
+/// [`any_f64`] within `±bound` (the contract's physical limits): a value beyond is scaled by 2⁻⁶⁴
+/// until it fits, which keeps its random mantissa bits.
+fn bounded_f64(rng: &mut StdRng, bound: f64) -> f64 {
+    let mut v = any_f64(rng);
+    while v.abs() > bound {
+        v *= 0.5f64.powi(64);
+    }
+    v
 }
 
 /// A random table with the given optional columns (`None`: each drawn at random).
@@ -73,13 +78,16 @@ fn random_table(rng: &mut StdRng, cols: Option<OptionalColumns>) -> MeasurementT
         sigma: rng.random_bool(0.5),
     });
     let mut t = MeasurementTable::new(nq, cols);
+    // Rows sharing a pose id are repeats of one pose: the same joint values.
+    let mut q_of_pose: std::collections::HashMap<i64, Vec<f64>> = Default::default();
     for _ in 0..rows {
         let pose = match rng.random_range(0..4) {
             0 => i64::MIN,
             1 => i64::MAX,
             _ => rng.random_range(-5..1000),
         };
-        let q: Vec<f64> = (0..nq).map(|_| any_f64(rng)).collect();
+        let fresh: Vec<f64> = (0..nq).map(|_| any_f64(rng)).collect();
+        let q = q_of_pose.entry(pose).or_insert(fresh).clone();
         let dir: Vec<i8> = (0..nq).map(|_| rng.random_range(-1..=1)).collect();
         let quat = {
             let v: [f64; 4] = std::array::from_fn(|_| rng.random::<f64>() - 0.5);
@@ -89,13 +97,17 @@ fn random_table(rng: &mut StdRng, cols: Option<OptionalColumns>) -> MeasurementT
         t.push_row(&Row {
             pose,
             q: &q,
-            position: [any_f64(rng), any_f64(rng), any_f64(rng)],
+            position: [
+                bounded_f64(rng, 500.0),
+                bounded_f64(rng, 500.0),
+                bounded_f64(rng, 500.0),
+            ],
             orientation: cols.orientation.then_some(quat),
             t: cols.t.then(|| any_f64(rng)),
             temp: cols.temp.then(|| any_f64(rng)),
             dir: cols.dir.then_some(&dir[..]),
-            payload: cols.payload.then(|| nonneg_f64(rng)),
-            sigma: cols.sigma.then(|| nonneg_f64(rng)),
+            payload: cols.payload.then(|| bounded_f64(rng, 1000.0).abs()),
+            sigma: cols.sigma.then(|| bounded_f64(rng, 1.0).abs()),
         })
         .unwrap();
     }
@@ -187,8 +199,8 @@ fn csv_text_is_as_specified() {
     );
     t.push_row(&Row {
         pose: -3,
-        q: &[1.0, -0.0],
-        position: [0.1, 1e300, 5e-324],
+        q: &[1e300, -0.0],
+        position: [0.1, 1.0, 5e-324],
         dir: Some(&[-1, 1]),
         sigma: Some(1e-5),
         ..Default::default()
@@ -196,16 +208,16 @@ fn csv_text_is_as_specified() {
     .unwrap();
     t.push_row(&Row {
         pose: 7,
-        q: &[0.30000000000000004, 2.5],
-        position: [-123.456, 1e16, 1e15],
+        q: &[1e16, 1e15],
+        position: [-123.456, 0.30000000000000004, 2.5],
         dir: Some(&[0, 0]),
         sigma: Some(0.0),
         ..Default::default()
     })
     .unwrap();
     let expected = "pose,q1,q2,x,y,z,dir1,dir2,sigma\n\
-                    -3,1.0,-0.0,0.1,1e300,5e-324,-1,1,1e-5\n\
-                    7,0.30000000000000004,2.5,-123.456,1e16,1000000000000000.0,0,0,0.0\n";
+                    -3,1e300,-0.0,0.1,1.0,5e-324,-1,1,1e-5\n\
+                    7,1e16,1000000000000000.0,-123.456,0.30000000000000004,2.5,0,0,0.0\n";
     assert_eq!(write_csv_string(&t).unwrap(), expected);
 }
 
@@ -566,18 +578,19 @@ fn parquet_reader_accepts_exact_conversions_and_names_bad_cells() {
             ),
             ("x", Arc::new(Float32Array::from(vec![0.1f32, -2.5]))),
             ("pose", Arc::new(Int32Array::from(vec![3, -4]))),
-            ("q1", Arc::new(UInt8Array::from(vec![1u8, 2]))),
-            ("y", Arc::new(Int64Array::from(vec![-7i64, 1 << 53]))),
+            // A large exact integer in a joint column (positions are bounded to 1 km).
+            ("q1", Arc::new(Int64Array::from(vec![-7i64, 1 << 53]))),
+            ("y", Arc::new(UInt8Array::from(vec![1u8, 2]))),
             ("z", f64a(vec![Some(0.25), Some(-0.0)])),
             ("dir1", Arc::new(Float64Array::from(vec![-1.0, 1.0]))),
         ],
     );
     let t = mt::read(&p).unwrap();
     assert_eq!(t.pose, vec![3, -4]);
-    assert_eq!(t.q, vec![1.0, 2.0]);
+    assert_eq!(t.q, vec![-7.0, 9007199254740992.0]);
     // 0.1f32 widened exactly is 0.100000001490116119384765625, whose shortest f64 form is this:
-    assert_eq!(t.position[0], [0.10000000149011612, -7.0, 0.25]);
-    assert_eq!(t.position[1][1], 9007199254740992.0);
+    assert_eq!(t.position[0], [0.10000000149011612, 1.0, 0.25]);
+    assert_eq!(t.position[1][1], 2.0);
     assert_eq!(t.position[1][2].to_bits(), (-0.0f64).to_bits());
     assert_eq!(t.dir, Some(vec![-1, 1]));
 
@@ -1056,7 +1069,7 @@ fn big_csv(rows: usize, bad_row: Option<usize>) -> (String, MeasurementTable, Ve
             line += 1;
         }
         let q = [rng.random::<f64>(), -rng.random::<f64>()];
-        let p = [rng.random::<f64>(), 1.0, rng.random_range(-1e6..1e6)];
+        let p = [rng.random::<f64>(), 1.0, rng.random_range(-5e2..5e2)];
         let q2 = if bad_row == Some(r) {
             "0.5.5".to_string()
         } else {
@@ -1064,16 +1077,12 @@ fn big_csv(rows: usize, bad_row: Option<usize>) -> (String, MeasurementTable, Ve
         };
         text += &format!(
             "{},{:?},{q2},{:?},{:?},{:?},note {r}\r\n",
-            r / 2,
-            q[0],
-            p[0],
-            p[1],
-            p[2]
+            r, q[0], p[0], p[1], p[2]
         );
         lines.push(line);
         line += 1;
         t.push_row(&Row {
-            pose: (r / 2) as i64,
+            pose: r as i64,
             q: &q,
             position: p,
             ..Default::default()
@@ -1297,4 +1306,49 @@ fn parquet_written_by_pandas_polars_and_duckdb_reads_back() {
         }
         assert_bit_equal(&expected, &back, name);
     }
+}
+
+/// Physically impossible magnitudes and a pose id reused at another configuration are one-line
+/// errors naming the row and the column (issue 15); the bounds themselves pass.
+#[test]
+fn impossible_magnitudes_and_reused_pose_ids_are_errors() {
+    csv_error(
+        &csv_with(3, Some((2, "y", "1e300"))),
+        &["data.csv", "row 2", "column y", "beyond 1000 m"],
+    );
+    csv_error(
+        &csv_with(3, Some((3, "x", "-1200"))),
+        &["row 3", "column x", "1.200e3 m"],
+    );
+    let with = |col: &str, v: &str| {
+        format!("pose,q1,x,y,z,{col}\n0,0.1,0.5,0.5,0.5,{v}\n1,0.2,0.5,0.5,0.5,0\n")
+    };
+    csv_error(
+        &with("payload", "1e6"),
+        &["row 1", "column payload", "1e6 kg", "beyond 1000 kg"],
+    );
+    csv_error(
+        &with("sigma", "1e3"),
+        &["row 1", "column sigma", "1e3 m", "beyond 1 m"],
+    );
+    // At the bounds: accepted.
+    assert!(read_csv_str(&with("payload", "1000"), "data.csv").is_ok());
+    assert!(read_csv_str(&with("sigma", "1"), "data.csv").is_ok());
+    assert!(read_csv_str(&csv_with(3, Some((2, "x", "999.9"))), "data.csv").is_ok());
+    // A pose id reused: fine at the same joint values (repeats, with encoder noise), an error naming
+    // both rows at other ones.
+    let repeats = "pose,q1,q2,x,y,z\n7,0.1,0.2,0.5,0.5,0.5\n8,0.3,0.4,0.5,0.5,0.5\n7,0.1000004,0.2,0.5,0.5,0.5\n";
+    assert_eq!(read_csv_str(repeats, "data.csv").unwrap().len(), 3);
+    let reused =
+        "pose,q1,q2,x,y,z\n7,0.1,0.2,0.5,0.5,0.5\n8,0.3,0.4,0.5,0.5,0.5\n7,0.1,0.25,0.5,0.5,0.5\n";
+    csv_error(
+        reused,
+        &[
+            "row 3",
+            "column pose",
+            "pose 7 is reused",
+            "q2 is 0.25",
+            "0.2 in row 1",
+        ],
+    );
 }

@@ -122,6 +122,11 @@ pub struct CalibrationReport {
     pub unidentifiable: NullSpaceReport,
     /// Rows beyond the outlier threshold (after calibration).
     pub outliers: Vec<Outlier>,
+    /// Gross errors excluded from the fit (weight 0; see
+    /// [`super::CalibrationOptions::gross_error_threshold`]): the normalised residual when found, the
+    /// position error against the final fit of the other rows.
+    #[serde(default)]
+    pub excluded: Vec<Outlier>,
     /// IRLS summary when a robust loss was used.
     pub robust: Option<RobustSummary>,
     /// The learned residual correction on top of the physical model, with a `learned:` model.

@@ -178,9 +178,8 @@ impl RidgeSystem {
         let y_mean = mean_of(residual_m, rows);
         let mut fc = DMatrix::zeros(n, p);
         let mut yc = DMatrix::zeros(n, 3);
-        for k in 0..p {
+        for (k, &mean) in feature_mean.iter().enumerate() {
             let src = f.column(k);
-            let mean = feature_mean[k];
             for (dst, &r) in fc.column_mut(k).iter_mut().zip(rows) {
                 *dst = src[r] - mean;
             }
