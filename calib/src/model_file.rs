@@ -56,7 +56,34 @@ pub struct EmbeddedRobot {
     pub tip_link: String,
     /// The URDF text.
     pub urdf: String,
+    /// FNV-1a 64-bit hash of `urdf` (16 hex digits), written with the file and checked on load: a
+    /// model whose URDF text was replaced or edited is refused. Absent in older files (not checked).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub urdf_fnv1a64: Option<String>,
 }
+
+/// FNV-1a 64-bit hash of `text`, as 16 hex digits ([`EmbeddedRobot::urdf_fnv1a64`]).
+pub fn urdf_checksum(text: &str) -> String {
+    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+    for b in text.bytes() {
+        h ^= u64::from(b);
+        h = h.wrapping_mul(0x0000_0100_0000_01b3);
+    }
+    format!("{h:016x}")
+}
+
+/// Largest magnitude a joint error twist component may have on load (rad, or m): no calibrated joint
+/// is off by a radian or a metre.
+pub const MAX_JOINT_ERROR: f64 = 1.0;
+/// Largest zero offset on load (rad, or m for prismatic joints).
+pub const MAX_ZERO_OFFSET: f64 = std::f64::consts::TAU;
+/// Largest tracker-to-base distance on load (m), as for measured positions.
+pub const MAX_TRACKER_DISTANCE_M: f64 = 1000.0;
+/// Largest target offset from the flange on load (m).
+pub const MAX_TARGET_OFFSET_M: f64 = 10.0;
+/// Largest magnitude of an extension value on load (in its own unit: rad/(N m), rad, 1/K, …): far
+/// beyond any physical value, it catches garbage such as 1e308.
+pub const MAX_EXTENSION_VALUE: f64 = 1e6;
 
 /// A pose as translation (m) and rotation matrix rows.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -165,6 +192,7 @@ impl CalibratedModel {
                 base_link: robot.model.base_link.clone(),
                 tip_link: robot.model.tip_link.clone(),
                 urdf: robot.urdf.clone(),
+                urdf_fnv1a64: Some(urdf_checksum(&robot.urdf)),
             },
             parameters: ModelParameters {
                 joint_error_twists: (0..n)
@@ -311,6 +339,59 @@ impl CalibratedModel {
         if let Some(r) = &p.r_flange_target {
             finite("parameters.r_flange_target", r.as_flattened())?;
             orthonormal("parameters.r_flange_target", r)?;
+        }
+        let plausible = |key: &str, vals: &[f64], limit: f64, unit: &str| -> Result<()> {
+            match vals.iter().position(|v| v.abs() > limit) {
+                Some(i) => Err(bad(format!(
+                    "key '{key}'[{i}] is {:e} {unit}, beyond the plausible {limit:e} {unit}",
+                    vals[i]
+                ))),
+                None => Ok(()),
+            }
+        };
+        for (i, t) in p.joint_error_twists.iter().enumerate() {
+            plausible(
+                &format!("parameters.joint_error_twists[{i}]"),
+                t,
+                MAX_JOINT_ERROR,
+                "(rad or m)",
+            )?;
+        }
+        plausible(
+            "parameters.zero_offsets",
+            &p.zero_offsets,
+            MAX_ZERO_OFFSET,
+            "(rad or m)",
+        )?;
+        let distance = |v: &[f64; 3]| (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+        plausible(
+            "parameters.t_tracker_base.translation_m",
+            &[distance(&p.t_tracker_base.translation_m)],
+            MAX_TRACKER_DISTANCE_M,
+            "m",
+        )?;
+        plausible(
+            "parameters.p_flange_target_m",
+            &[distance(&p.p_flange_target_m)],
+            MAX_TARGET_OFFSET_M,
+            "m",
+        )?;
+        if let Some(e) = &m.extensions {
+            plausible(
+                "extensions.values",
+                &e.values,
+                MAX_EXTENSION_VALUE,
+                "(own unit)",
+            )?;
+        }
+        if let Some(stored) = &m.robot.urdf_fnv1a64 {
+            let actual = urdf_checksum(&m.robot.urdf);
+            if *stored != actual {
+                return Err(bad(format!(
+                    "key 'robot.urdf' does not match 'robot.urdf_fnv1a64' ({actual} against {stored}): \
+                     the embedded robot was changed after calibration"
+                )));
+            }
         }
         let n = p.joint_error_twists.len();
         if p.zero_offsets.len() != n {

@@ -148,4 +148,15 @@ impl Observations {
         ids.dedup();
         ids.len()
     }
+
+    /// Number of distinct joint configurations (rows with bit-identical joint values count once,
+    /// whatever their pose ids): what determines the parameters.
+    pub fn n_configurations(&self) -> usize {
+        let mut rows: Vec<Vec<u64>> = (0..self.len())
+            .map(|r| self.q_row(r).iter().map(|v| v.to_bits()).collect())
+            .collect();
+        rows.sort_unstable();
+        rows.dedup();
+        rows.len()
+    }
 }

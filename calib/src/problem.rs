@@ -264,15 +264,21 @@ impl<'a> KinematicProblem<'a> {
         let d = self.obs.dim();
         let mut out = vec![0.0; self.obs.len()];
         let this = &*self;
-        out.par_chunks_mut(CHUNK_ROWS)
-            .enumerate()
-            .for_each(|(c, dst)| {
-                let mut ws = this.scratch();
-                for (k, v) in dst.iter_mut().enumerate() {
-                    let res = this.row_block(c * CHUNK_ROWS + k, false, &mut ws);
-                    *v = res[..d].iter().map(|v| v * v).sum::<f64>().sqrt();
-                }
-            });
+        let work = |c: usize, dst: &mut [f64]| {
+            let mut ws = this.scratch();
+            for (k, v) in dst.iter_mut().enumerate() {
+                let res = this.row_block(c * CHUNK_ROWS + k, false, &mut ws);
+                *v = res[..d].iter().map(|v| v * v).sum::<f64>().sqrt();
+            }
+        };
+        // One chunk runs on this thread: handing it to the pool costs more than small problems.
+        if out.len() <= CHUNK_ROWS {
+            work(0, &mut out);
+        } else {
+            out.par_chunks_mut(CHUNK_ROWS)
+                .enumerate()
+                .for_each(|(c, dst)| work(c, dst));
+        }
         out
     }
 
@@ -352,6 +358,15 @@ impl LeastSquaresProblem for KinematicProblem<'_> {
 
     fn residuals(&mut self, out: &mut [f64]) {
         let d = self.obs.dim();
+        if self.obs.len() <= CHUNK_ROWS {
+            let mut ws = std::mem::replace(&mut self.ws, RowScratch::new(0, 0, 0, 0));
+            for (r, v) in out.chunks_exact_mut(d).enumerate() {
+                let res = self.row_block(r, false, &mut ws);
+                v.copy_from_slice(&res[..d]);
+            }
+            self.ws = ws;
+            return;
+        }
         let this = &*self;
         out.par_chunks_mut(CHUNK_ROWS * d)
             .enumerate()
@@ -369,6 +384,19 @@ impl LeastSquaresProblem for KinematicProblem<'_> {
         let np = self.layout.len();
         let p = self.active.len();
         let n = self.obs.len();
+        if n <= CHUNK_ROWS {
+            let mut ws = std::mem::replace(&mut self.ws, RowScratch::new(0, 0, 0, 0));
+            for r in 0..n {
+                self.row_block(r, true, &mut ws);
+                for row in 0..d {
+                    for (a, &col) in self.active.iter().enumerate() {
+                        out[(r * d + row, a)] = ws.block[row * np + col];
+                    }
+                }
+            }
+            self.ws = ws;
+            return;
+        }
         // Row-major blocks per chunk in parallel, then scattered into the column-major `out`.
         let this = &*self;
         let blocks: Vec<Vec<f64>> = (0..n.div_ceil(CHUNK_ROWS))

@@ -7,6 +7,7 @@ mod common;
 use calib::CalibError;
 use calib::calibrate::{CalibrationOptions, Dataset, RobustLoss, calibrate};
 use common::{Truth, random_configs, rng, table};
+use sim::measurement_table::MeasurementTable;
 use sim::robots;
 
 #[test]
@@ -160,6 +161,29 @@ fn too_few_poses_is_an_error_naming_the_count_needed() {
         ),
         Err(CalibError::TooFewPoses { poses: 8, .. })
     ));
+    // Nor do new pose ids at the same joint values: 40 ids at one configuration are one pose.
+    let mut same = MeasurementTable::new(t.n_joints, t.columns());
+    for k in 0..40 {
+        let mut row = t.row(0);
+        row.pose = 1000 + k;
+        same.push_row(&row).unwrap();
+    }
+    let err = calibrate(
+        &model,
+        &Dataset::all(&same, "same.csv"),
+        None,
+        &CalibrationOptions::default(),
+    )
+    .unwrap_err();
+    assert!(
+        matches!(err, CalibError::TooFewPoses { poses: 1, .. }),
+        "{err}"
+    );
+    assert!(
+        err.to_string()
+            .contains("1 distinct poses give 3 equations"),
+        "{err}"
+    );
     // Exactly enough is accepted.
     let t = table(
         &model,

@@ -114,6 +114,55 @@ fn model_file_errors_name_the_key() {
         .unwrap_err()
         .to_string();
     assert!(e.contains("m.json") && e.contains("not JSON"), "{e}");
+    // Finite but implausible values (issue 15: a parameter of 1e308 loaded silently).
+    for (path, value, key) in [
+        (
+            &["parameters", "joint_error_twists"][..],
+            3usize,
+            "joint_error_twists[1]",
+        ),
+        (&["parameters", "zero_offsets"][..], 2, "zero_offsets"),
+    ] {
+        let mut v: serde_json::Value = serde_json::from_str(&text).unwrap();
+        let mut at = &mut v;
+        for p in path {
+            at = &mut at[*p];
+        }
+        if key.starts_with("joint") {
+            at[1][value] = serde_json::json!(1e308);
+        } else {
+            at[value] = serde_json::json!(1e308);
+        }
+        let e = CalibratedModel::from_json(&v.to_string(), "m.json")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains(key) && e.contains("1e308") && e.contains("plausible"),
+            "{e}"
+        );
+    }
+    let mut v: serde_json::Value = serde_json::from_str(&text).unwrap();
+    v["parameters"]["t_tracker_base"]["translation_m"][2] = serde_json::json!(-5e3);
+    let e = CalibratedModel::from_json(&v.to_string(), "m.json")
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("t_tracker_base.translation_m"), "{e}");
+    // The embedded robot swapped for another is refused by its checksum; a file without the
+    // checksum (older files) still loads.
+    assert!(text.contains("urdf_fnv1a64"));
+    let other = sim::robots::builtin_urdf("ur10").expect("built-in ur10");
+    let mut v: serde_json::Value = serde_json::from_str(&text).unwrap();
+    v["robot"]["urdf"] = serde_json::json!(other);
+    let e = CalibratedModel::from_json(&v.to_string(), "m.json")
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("robot.urdf") && e.contains("changed after calibration"),
+        "{e}"
+    );
+    let mut v: serde_json::Value = serde_json::from_str(&text).unwrap();
+    v["robot"].as_object_mut().unwrap().remove("urdf_fnv1a64");
+    assert!(CalibratedModel::from_json(&v.to_string(), "m.json").is_ok());
 }
 
 /// The exported URDF, loaded by the URDF reader and evaluated by sim's forward kinematics, with the

@@ -254,7 +254,9 @@ fn calibrate_with(
     let p = layout.len();
     let dim = obs.dim();
     let n_poses = obs.n_poses();
-    let equations = n_poses * dim;
+    // Poses count by configuration: ids at identical joint values add no equations.
+    let n_configurations = obs.n_configurations();
+    let equations = n_configurations * dim;
     if equations <= p {
         let r = generic_rank(model, orientation, options);
         if equations < r + 1 {
@@ -262,7 +264,7 @@ fn calibrate_with(
                 context: train.name.clone(),
                 robot: model.name.clone(),
                 joints: model.nq(),
-                poses: n_poses,
+                poses: n_configurations,
                 equations,
                 identifiable: r,
                 needed: (r + 1).div_ceil(dim),
