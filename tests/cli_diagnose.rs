@@ -356,3 +356,66 @@ fn the_readme_session_runs_and_every_fit_converges() {
     assert!(o.status.success(), "{}", stderr(&o));
     let _ = std::fs::remove_dir_all(&d);
 }
+
+/// A robot without `<inertial>` cannot be checked for joint compliance: diagnose says so in its text
+/// and JSON (`not_tried`, with the reason naming the links) instead of dropping the candidate
+/// silently (issue 15); so for thermal drift on a table without `temp` or `t`.
+#[test]
+fn candidates_that_cannot_be_tried_are_named_with_the_reason() {
+    let d = dir("not_tried");
+    let data = generate("iiwa7_kinematic.toml", &d.join("data"));
+    let urdf = sim::robots::builtin_urdf("iiwa7").unwrap();
+    let mut stripped = String::new();
+    let mut rest = urdf;
+    while let Some(a) = rest.find("<inertial>") {
+        stripped.push_str(&rest[..a]);
+        let b = rest[a..].find("</inertial>").unwrap() + a + "</inertial>".len();
+        rest = &rest[b..];
+    }
+    stripped.push_str(rest);
+    let robot = d.join("no_inertials.urdf");
+    std::fs::write(&robot, stripped).unwrap();
+    let o = robocal(&[
+        "diagnose",
+        "--robot",
+        robot.to_str().unwrap(),
+        "--data",
+        data.to_str().unwrap(),
+        "--json",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let v: Value = serde_json::from_slice(&o.stdout).unwrap();
+    let not_tried = v["not_tried"].as_array().unwrap();
+    let reason = |cause: &str| {
+        not_tried
+            .iter()
+            .find(|n| n["cause"] == cause)
+            .map(|n| n["reason"].as_str().unwrap().to_string())
+    };
+    let compliance = reason("joint_compliance").expect("joint_compliance not tried");
+    assert!(
+        compliance.contains("inertial") && compliance.contains("iiwa7_link_1"),
+        "{compliance}"
+    );
+    assert!(
+        v["trials"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .all(|t| t["cause"] != "joint_compliance")
+    );
+    // The generated table has `t` and `temp`: thermal drift was tried.
+    assert!(reason("thermal_drift").is_none(), "{not_tried:?}");
+    let text = stderr(&robocal(&[
+        "diagnose",
+        "--robot",
+        robot.to_str().unwrap(),
+        "--data",
+        data.to_str().unwrap(),
+    ]));
+    assert!(
+        text.contains("not tried: joint_compliance: the gravity torques"),
+        "{text}"
+    );
+    let _ = std::fs::remove_dir_all(&d);
+}

@@ -48,11 +48,82 @@ pub fn load_str(text: &str, source_name: &str, spec: &ChainSpec) -> Result<Model
             message: "no <robot> element".into(),
         });
     }
+    if let Some((depth, line)) = nesting_beyond(text, MAX_XML_DEPTH) {
+        return Err(SimError::Parse {
+            source_name: src(),
+            message: format!(
+                "XML elements nested {depth} deep at line {line}, more than the {MAX_XML_DEPTH} a URDF \
+                 could need: not a robot description"
+            ),
+        });
+    }
     let robot = urdf_rs::read_from_string(text).map_err(|e| SimError::Parse {
         source_name: src(),
         message: one_line(&e.to_string()),
     })?;
     Builder::new(&robot, source_name)?.build(spec)
+}
+
+/// Deepest element nesting accepted in a URDF. A robot description nests about six deep
+/// (`robot/link/visual/geometry/mesh`, `gazebo/plugin/...`); the XML parser recurses per level, so a
+/// file nested tens of thousands deep would overflow the stack, and is refused before parsing.
+pub const MAX_XML_DEPTH: usize = 256;
+
+/// The first place where `text` nests elements deeper than `limit`: (depth, 1-based line). One pass,
+/// without parsing: comments, CDATA sections, processing instructions and declarations are skipped,
+/// quoted attribute values may hold `>`, and `<x/>` does not nest.
+fn nesting_beyond(text: &str, limit: usize) -> Option<(usize, usize)> {
+    let b = text.as_bytes();
+    let (mut i, mut depth) = (0usize, 0usize);
+    let skip_to = |from: usize, end: &[u8]| -> usize {
+        b[from..]
+            .windows(end.len())
+            .position(|w| w == end)
+            .map_or(b.len(), |k| from + k + end.len())
+    };
+    while i < b.len() {
+        if b[i] != b'<' {
+            i += 1;
+            continue;
+        }
+        let rest = &b[i..];
+        if rest.starts_with(b"<!--") {
+            i = skip_to(i + 4, b"-->");
+        } else if rest.starts_with(b"<![CDATA[") {
+            i = skip_to(i + 9, b"]]>");
+        } else if rest.starts_with(b"<?") {
+            i = skip_to(i + 2, b"?>");
+        } else if rest.starts_with(b"<!") {
+            i = skip_to(i + 2, b">");
+        } else if rest.starts_with(b"</") {
+            depth = depth.saturating_sub(1);
+            i = skip_to(i + 2, b">");
+        } else {
+            // An opening tag: find its end outside quoted attribute values.
+            let start = i;
+            let mut quote = None;
+            i += 1;
+            while i < b.len() {
+                match (quote, b[i]) {
+                    (None, b'"' | b'\'') => quote = Some(b[i]),
+                    (Some(q), c) if c == q => quote = None,
+                    (None, b'>') => break,
+                    _ => {}
+                }
+                i += 1;
+            }
+            let self_closing = i > start && b[i - 1] == b'/';
+            i += 1;
+            if !self_closing {
+                depth += 1;
+                if depth > limit {
+                    let line = 1 + b[..start].iter().filter(|&&c| c == b'\n').count();
+                    return Some((depth, line));
+                }
+            }
+        }
+    }
+    None
 }
 
 fn one_line(s: &str) -> String {
@@ -86,7 +157,17 @@ impl<'a> Builder<'a> {
                 return Err(b.structure(format!("link '{}' is defined twice", l.name)));
             }
         }
+        let mut joint_names = std::collections::HashSet::new();
         for j in &robot.joints {
+            if !joint_names.insert(j.name.as_str()) {
+                return Err(b.structure(format!("joint '{}' is defined twice", j.name)));
+            }
+            if j.parent.link == j.child.link {
+                return Err(b.structure(format!(
+                    "joint '{}' connects link '{}' to itself: not a tree",
+                    j.name, j.parent.link
+                )));
+            }
             for end in [&j.parent.link, &j.child.link] {
                 if !b.links.contains_key(end.as_str()) {
                     return Err(b.structure(format!(

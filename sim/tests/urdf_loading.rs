@@ -263,3 +263,67 @@ fn fixed_links_are_merged_with_parallel_axis_theorem() {
     assert_eq!(model.tip_link, "c");
     assert!((model.flange_offset.translation.vector - Vector3::new(0.2, 0.0, 0.0)).norm() < 1e-15);
 }
+
+/// A duplicated joint name and a joint from a link to itself are structure errors naming the joint
+/// (issue 15: `info` picked a chain without a word).
+#[test]
+fn duplicate_joint_names_and_self_loops_are_refused() {
+    let text = format!(
+        r#"<robot name="r">{}{}{}{}{}</robot>"#,
+        link("base"),
+        link("a"),
+        link("b"),
+        revolute("j1", "base", "a", "0 0 1"),
+        revolute("j1", "a", "b", "0 0 1"),
+    );
+    let m = msg(load(&text));
+    assert!(
+        m.contains("test.urdf") && m.contains("joint 'j1' is defined twice"),
+        "{m}"
+    );
+    let text = format!(
+        r#"<robot name="r">{}{}{}{}</robot>"#,
+        link("base"),
+        link("a"),
+        revolute("j1", "base", "a", "0 0 1"),
+        revolute("j2", "a", "a", "0 0 1"),
+    );
+    let m = msg(load(&text));
+    assert!(m.contains("joint 'j2' connects link 'a' to itself"), "{m}");
+}
+
+/// Deep element nesting is refused before the XML parser recurses into it: in bounded time, with a
+/// one-line error naming the depth and line (20,000 levels overflowed the stack, 200,000 hung).
+#[test]
+fn deeply_nested_xml_is_refused_in_bounded_time() {
+    for levels in [300usize, 20_000, 200_000] {
+        let text = format!(
+            "<robot name=\"r\">\n{}{}{}</robot>",
+            link("base"),
+            "<a>".repeat(levels),
+            "</a>".repeat(levels)
+        );
+        let start = std::time::Instant::now();
+        let m = msg(load(&text));
+        assert!(
+            m.contains("nested 257 deep at line 2") && !m.contains('\n'),
+            "{levels}: {m}"
+        );
+        // A hang guard, not a speed target (the issue's bound: no input may take 10 s); the scan
+        // stops at the first level beyond the limit, in well under a millisecond.
+        assert!(
+            start.elapsed().as_secs_f64() < 10.0,
+            "{levels}: {:?}",
+            start.elapsed()
+        );
+    }
+    // Comments, CDATA, declarations, self-closing tags and quoted '>' do not count.
+    let text = format!(
+        "<?xml version=\"1.0\"?>\n<!DOCTYPE robot>\n<robot name=\"r\"><!-- <a><a><a> -->\
+         <![CDATA[<a><a>]]>{}{}{}<x attr=\"a>b\"/></robot>",
+        link("base"),
+        link("tip"),
+        revolute("j", "base", "tip", "0 0 1")
+    );
+    assert_eq!(load(&text).unwrap().nq(), 1);
+}

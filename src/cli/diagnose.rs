@@ -103,6 +103,9 @@ pub(crate) fn text(d: &Diagnosis, data: &str) -> String {
             f.evidence
         ));
     }
+    for n in &d.not_tried {
+        s.push_str(&format!("not tried: {}: {}\n", n.cause, n.reason));
+    }
     s.push_str(&format!(
         "unexplained: {}: {}\nmodel for `calibrate --model auto`: {}\n",
         if d.unexplained.present {

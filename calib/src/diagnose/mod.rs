@@ -175,6 +175,15 @@ pub struct Trial {
     pub beaten_by: Option<String>,
 }
 
+/// A candidate cause diagnose could not try.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct NotTried {
+    /// The cause.
+    pub cause: Cause,
+    /// Why not, in one sentence.
+    pub reason: String,
+}
+
 /// The full result; its JSON form is the `diagnose --json` contract.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Diagnosis {
@@ -206,6 +215,11 @@ pub struct Diagnosis {
     /// counted: empty when all were clean.
     #[serde(default)]
     pub health: Health,
+    /// Candidate causes this robot and table cannot feed (never tried), with the reason: a robot
+    /// without inertials cannot be checked for joint compliance, a table without `temp` or `t` for
+    /// thermal drift.
+    #[serde(default)]
+    pub not_tried: Vec<NotTried>,
     /// What `--report` draws (not part of the JSON).
     #[serde(skip)]
     pub plots: report::PlotData,
@@ -581,12 +595,14 @@ pub fn diagnose_with_progress(
             name: format!("{name} (test set)"),
         },
     };
-    let usable: Vec<Cause> = options
-        .candidates
-        .iter()
-        .copied()
-        .filter(|c| c.model().usable(model, table))
-        .collect();
+    let mut usable: Vec<Cause> = Vec::new();
+    let mut not_tried: Vec<NotTried> = Vec::new();
+    for &c in &options.candidates {
+        match c.model().usable(model, table) {
+            Ok(()) => usable.push(c),
+            Err(reason) => not_tried.push(NotTried { cause: c, reason }),
+        }
+    }
     progress("kinematic");
     let mut current = evaluate(model, &split, &ModelSpec::kinematic(), options)?;
     let mut health = current.cal.report.health;
@@ -747,6 +763,7 @@ pub fn diagnose_with_progress(
         unexplained,
         model: current.spec.clone(),
         trials,
+        not_tried,
         alpha: options.alpha,
         seed: options.seed,
         health,

@@ -25,8 +25,16 @@ impl CauseModel for GearBacklash {
         Cause::GearBacklash
     }
 
-    fn usable(&self, model: &Model, table: &MeasurementTable) -> bool {
-        table.dir.is_some() || model.require_inertials().is_ok()
+    fn usable(&self, model: &Model, table: &MeasurementTable) -> std::result::Result<(), String> {
+        if table.dir.is_some() {
+            return Ok(());
+        }
+        model.require_inertials().map_err(|e| {
+            format!(
+                "the table has no dir1..dirN columns, and the gravity torques that would sign the \
+                 lost motion instead cannot be computed: {e}"
+            )
+        })
     }
 
     fn needs_gravity_torque(&self, settings: &ExtensionSettings) -> bool {

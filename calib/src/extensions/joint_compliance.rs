@@ -25,8 +25,10 @@ impl CauseModel for JointCompliance {
         Cause::JointCompliance
     }
 
-    fn usable(&self, model: &Model, _table: &MeasurementTable) -> bool {
-        model.require_inertials().is_ok()
+    fn usable(&self, model: &Model, _table: &MeasurementTable) -> std::result::Result<(), String> {
+        model
+            .require_inertials()
+            .map_err(|e| format!("the gravity torques it needs cannot be computed: {e}"))
     }
 
     fn needs_gravity_torque(&self, _settings: &ExtensionSettings) -> bool {

@@ -47,9 +47,10 @@ pub trait CauseModel: Sync {
     /// The cause's typed identity.
     fn cause(&self) -> Cause;
 
-    /// Whether `model` and `table` can feed this cause at all (diagnose tries only those): e.g.
-    /// thermal drift needs a `temp` or `t` column, compliance needs the robot's inertials.
-    fn usable(&self, model: &Model, table: &MeasurementTable) -> bool;
+    /// Whether `model` and `table` can feed this cause at all (diagnose tries only those, and reports
+    /// the others with the reason): e.g. thermal drift needs a `temp` or `t` column, compliance needs
+    /// the robot's inertials. `Err` says why not, in one sentence.
+    fn usable(&self, model: &Model, table: &MeasurementTable) -> std::result::Result<(), String>;
 
     /// Fills this cause's part of `settings` from the training rows `rows` of `table` (`source` names
     /// the table in errors). Default: nothing to set.

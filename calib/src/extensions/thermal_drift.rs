@@ -74,8 +74,12 @@ impl CauseModel for ThermalDrift {
         Cause::ThermalDrift
     }
 
-    fn usable(&self, _model: &Model, table: &MeasurementTable) -> bool {
-        table.temp.is_some() || table.t.is_some()
+    fn usable(&self, _model: &Model, table: &MeasurementTable) -> std::result::Result<(), String> {
+        if table.temp.is_some() || table.t.is_some() {
+            Ok(())
+        } else {
+            Err("the table has neither a temp nor a t column".into())
+        }
     }
 
     /// `ΔT` from the temperature column, else a warm-up with the default time constant from `t`.
