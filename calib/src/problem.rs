@@ -192,6 +192,47 @@ impl<'a> KinematicProblem<'a> {
         )
     }
 
+    /// `work(self, chunk, scratch)` for every chunk of [`CHUNK_ROWS`] rows, results in chunk order: a
+    /// problem of one chunk runs on this thread with the problem's own scratch (handing it to the
+    /// pool costs more than small problems take), a larger one in parallel with a scratch per chunk.
+    fn map_chunks<T: Send>(
+        &mut self,
+        work: impl Fn(&Self, usize, &mut RowScratch) -> T + Sync,
+    ) -> Vec<T> {
+        let chunks = self.obs.len().div_ceil(CHUNK_ROWS);
+        if chunks <= 1 {
+            let mut ws = std::mem::replace(&mut self.ws, RowScratch::new(0, 0, 0, 0));
+            let out = (0..chunks).map(|c| work(self, c, &mut ws)).collect();
+            self.ws = ws;
+            return out;
+        }
+        let this = &*self;
+        (0..chunks)
+            .into_par_iter()
+            .map(|c| work(this, c, &mut this.scratch()))
+            .collect()
+    }
+
+    /// `work(self, chunk, dst, scratch)` for every chunk of rows, `dst` the chunk's part of `out`
+    /// (`width` values per row); on this thread or in parallel as in [`Self::map_chunks`].
+    fn fill_chunks(
+        &mut self,
+        out: &mut [f64],
+        width: usize,
+        work: impl Fn(&Self, usize, &mut [f64], &mut RowScratch) + Sync,
+    ) {
+        if self.obs.len() <= CHUNK_ROWS {
+            let mut ws = std::mem::replace(&mut self.ws, RowScratch::new(0, 0, 0, 0));
+            work(self, 0, out, &mut ws);
+            self.ws = ws;
+            return;
+        }
+        let this = &*self;
+        out.par_chunks_mut(CHUNK_ROWS * width)
+            .enumerate()
+            .for_each(|(c, dst)| work(this, c, dst, &mut this.scratch()));
+    }
+
     /// Fills `ws.block` with the weighted residuals' Jacobian of row `r` and returns the weighted
     /// residuals (first `dim` entries used) at the trial point.
     fn row_block(&self, r: usize, with_jacobian: bool, ws: &mut RowScratch) -> [f64; 6] {
@@ -263,22 +304,12 @@ impl<'a> KinematicProblem<'a> {
         self.set_params(&zero);
         let d = self.obs.dim();
         let mut out = vec![0.0; self.obs.len()];
-        let this = &*self;
-        let work = |c: usize, dst: &mut [f64]| {
-            let mut ws = this.scratch();
+        self.fill_chunks(&mut out, 1, |this, c, dst, ws| {
             for (k, v) in dst.iter_mut().enumerate() {
-                let res = this.row_block(c * CHUNK_ROWS + k, false, &mut ws);
+                let res = this.row_block(c * CHUNK_ROWS + k, false, ws);
                 *v = res[..d].iter().map(|v| v * v).sum::<f64>().sqrt();
             }
-        };
-        // One chunk runs on this thread: handing it to the pool costs more than small problems.
-        if out.len() <= CHUNK_ROWS {
-            work(0, &mut out);
-        } else {
-            out.par_chunks_mut(CHUNK_ROWS)
-                .enumerate()
-                .for_each(|(c, dst)| work(c, dst));
-        }
+        });
         out
     }
 
@@ -358,25 +389,12 @@ impl LeastSquaresProblem for KinematicProblem<'_> {
 
     fn residuals(&mut self, out: &mut [f64]) {
         let d = self.obs.dim();
-        if self.obs.len() <= CHUNK_ROWS {
-            let mut ws = std::mem::replace(&mut self.ws, RowScratch::new(0, 0, 0, 0));
-            for (r, v) in out.chunks_exact_mut(d).enumerate() {
-                let res = self.row_block(r, false, &mut ws);
+        self.fill_chunks(out, d, |this, c, dst, ws| {
+            for (k, v) in dst.chunks_exact_mut(d).enumerate() {
+                let res = this.row_block(c * CHUNK_ROWS + k, false, ws);
                 v.copy_from_slice(&res[..d]);
             }
-            self.ws = ws;
-            return;
-        }
-        let this = &*self;
-        out.par_chunks_mut(CHUNK_ROWS * d)
-            .enumerate()
-            .for_each(|(c, dst)| {
-                let mut ws = this.scratch();
-                for (k, v) in dst.chunks_exact_mut(d).enumerate() {
-                    let res = this.row_block(c * CHUNK_ROWS + k, false, &mut ws);
-                    v.copy_from_slice(&res[..d]);
-                }
-            });
+        });
     }
 
     fn jacobian(&mut self, out: &mut DMatrix<f64>) {
@@ -384,38 +402,20 @@ impl LeastSquaresProblem for KinematicProblem<'_> {
         let np = self.layout.len();
         let p = self.active.len();
         let n = self.obs.len();
-        if n <= CHUNK_ROWS {
-            let mut ws = std::mem::replace(&mut self.ws, RowScratch::new(0, 0, 0, 0));
-            for r in 0..n {
-                self.row_block(r, true, &mut ws);
+        // Row-major blocks per chunk, then scattered into the column-major `out`.
+        let blocks = self.map_chunks(|this, c, ws| {
+            let rows = c * CHUNK_ROWS..((c + 1) * CHUNK_ROWS).min(n);
+            let mut dst = vec![0.0; rows.len() * d * p];
+            for (k, r) in rows.enumerate() {
+                this.row_block(r, true, ws);
                 for row in 0..d {
-                    for (a, &col) in self.active.iter().enumerate() {
-                        out[(r * d + row, a)] = ws.block[row * np + col];
+                    for (a, &col) in this.active.iter().enumerate() {
+                        dst[(k * d + row) * p + a] = ws.block[row * np + col];
                     }
                 }
             }
-            self.ws = ws;
-            return;
-        }
-        // Row-major blocks per chunk in parallel, then scattered into the column-major `out`.
-        let this = &*self;
-        let blocks: Vec<Vec<f64>> = (0..n.div_ceil(CHUNK_ROWS))
-            .into_par_iter()
-            .map(|c| {
-                let mut ws = this.scratch();
-                let rows = c * CHUNK_ROWS..((c + 1) * CHUNK_ROWS).min(n);
-                let mut dst = vec![0.0; rows.len() * d * p];
-                for (k, r) in rows.enumerate() {
-                    this.row_block(r, true, &mut ws);
-                    for row in 0..d {
-                        for (a, &col) in this.active.iter().enumerate() {
-                            dst[(k * d + row) * p + a] = ws.block[row * np + col];
-                        }
-                    }
-                }
-                dst
-            })
-            .collect();
+            dst
+        });
         for (c, block) in blocks.iter().enumerate() {
             let first = c * CHUNK_ROWS * d;
             for (i, row) in block.chunks_exact(p).enumerate() {
@@ -433,45 +433,28 @@ impl LeastSquaresProblem for KinematicProblem<'_> {
         gradient: &mut [f64],
     ) -> f64 {
         let p = self.active.len();
-        let chunks = self.obs.len().div_ceil(CHUNK_ROWS);
         let empty = || NormalPart {
             cost: 0.0,
             gradient: vec![0.0; p],
             gram: vec![0.0; p * p],
         };
-        let total = if chunks <= 1 {
-            let mut ws = std::mem::replace(&mut self.ws, RowScratch::new(0, 0, 0, 0));
+        let parts = self.map_chunks(|this, c, ws| {
             let mut part = empty();
-            if chunks == 1 {
-                self.normal_part(0, scales, &mut ws, &mut part);
-            }
-            self.ws = ws;
+            this.normal_part(c, scales, ws, &mut part);
             part
-        } else {
-            let this = &*self;
-            let parts: Vec<NormalPart> = (0..chunks)
-                .into_par_iter()
-                .map(|c| {
-                    let mut ws = this.scratch();
-                    let mut part = empty();
-                    this.normal_part(c, scales, &mut ws, &mut part);
-                    part
-                })
-                .collect();
-            // Added in chunk order: the same sums on any number of threads.
-            let mut parts = parts.into_iter();
-            let mut total = parts.next().expect("at least two chunks");
-            for part in parts {
-                total.cost += part.cost;
-                for (t, v) in total.gradient.iter_mut().zip(&part.gradient) {
-                    *t += v;
-                }
-                for (t, v) in total.gram.iter_mut().zip(&part.gram) {
-                    *t += v;
-                }
+        });
+        // Added in chunk order: the same sums on any number of threads (one chunk: row order).
+        let mut parts = parts.into_iter();
+        let mut total = parts.next().unwrap_or_else(empty);
+        for part in parts {
+            total.cost += part.cost;
+            for (t, v) in total.gradient.iter_mut().zip(&part.gradient) {
+                *t += v;
             }
-            total
-        };
+            for (t, v) in total.gram.iter_mut().zip(&part.gram) {
+                *t += v;
+            }
+        }
         gram.as_mut_slice().copy_from_slice(&total.gram);
         gradient.copy_from_slice(&total.gradient);
         // Mirror the lower triangle.
