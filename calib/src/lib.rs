@@ -108,6 +108,7 @@ pub mod problem;
 pub mod robot;
 pub mod stats;
 pub mod units;
+pub mod urdf_export;
 
 pub use calibrate::{Calibration, CalibrationOptions, CalibrationReport, Dataset, calibrate};
 pub use error::{CalibError, Result};

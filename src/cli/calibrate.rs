@@ -6,7 +6,7 @@ use super::shared::{CliError, CliResult, print_json, read_table};
 use calib::CalibError;
 use calib::calibrate::{CalibrationOptions, Dataset, RobustLoss, calibrate_model};
 use calib::extensions::ModelChoice;
-use calib::model_file::{CalibratedModel, calibrated_urdf, urdf_deviation};
+use calib::model_file::CalibratedModel;
 use calib::robot::Robot;
 use calib::stats::split_by_pose;
 use serde_json::json;
@@ -42,7 +42,8 @@ pub struct Args {
     /// Robust loss against outliers (iteratively reweighted).
     #[arg(long, value_name = "LOSS", value_enum)]
     robust: Option<Robust>,
-    /// Also write a URDF of the calibrated robot (joint origins adjusted).
+    /// Also write the calibrated URDF: the --robot URDF with the chain's joint origins moved to the
+    /// calibrated robot, everything else kept, base and target transforms in a comment.
     #[arg(long, value_name = "FILE.urdf")]
     urdf_out: Option<PathBuf>,
     /// Print one JSON document on stdout instead of text on stderr.
@@ -183,21 +184,7 @@ pub fn run(args: Args) -> CliResult {
     let file = CalibratedModel::new(&robot, &cal);
     sim::io::write_atomic(&args.out, file.to_json().as_bytes())?;
     if let Some(path) = &args.urdf_out {
-        let urdf = calibrated_urdf(model, &cal.params);
-        let configs: Vec<Vec<f64>> = train
-            .rows
-            .iter()
-            .take(200)
-            .map(|&r| table.q_row(r).to_vec())
-            .collect();
-        let dev = urdf_deviation(model, &cal.params, &urdf, &configs)?;
-        if dev > 1e-9 {
-            return Err(CliError::Runtime(format!(
-                "{}: the calibrated URDF deviates from the model by {dev:.1e} (m or rotation entry); not written",
-                path.display()
-            )));
-        }
-        sim::io::write_atomic(path, urdf.as_bytes())?;
+        super::urdf_out::write(path, &file, &table, &data_name)?;
     }
     if args.json {
         print_json(&json!({

@@ -14,6 +14,7 @@ mod predict;
 mod robot_arg;
 mod shared;
 mod sweep;
+mod urdf_out;
 
 use crate::error::CliResult;
 use clap::{Parser, Subcommand};
