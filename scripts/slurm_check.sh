@@ -51,7 +51,8 @@ mkdir -p "$work/state" "$work/spool" "$work/logs" "$work/parts"
 status=1
 cleanup() {
   local rc=$?
-  trap - EXIT INT TERM
+  set +e # a failing write (closed stderr) must not stop the cleanup
+  trap - EXIT INT TERM HUP
   if [ "$status" != 0 ]; then
     say "exit $rc; the Slurm logs:"
     for f in "$work"/slurmctld.log "$work"/slurmd.log "$work"/munged.log "$work"/logs/*; do
@@ -61,21 +62,23 @@ cleanup() {
     done
     [ -n "${SLURM_CONF:-}" ] && command -v squeue >/dev/null && squeue 2>/dev/null >&2 || true
   fi
-  # Stop the daemons this script started (pid files), newest first, and wait for them to go.
+  # Stop the daemons this script started (by the pids in their pid files) and wait for them to go.
+  local pids=() d pid
   for d in slurmd slurmctld munged; do
-    local pidfile="$work/$d.pid"
-    [ -s "$pidfile" ] || continue
-    local pid
-    pid=$(cat "$pidfile")
-    kill "$pid" 2>/dev/null || continue
-    for _ in $(seq 50); do kill -0 "$pid" 2>/dev/null || break; sleep 0.1; done
+    [ -s "$work/$d.pid" ] || continue
+    pid=$(cat "$work/$d.pid")
+    kill "$pid" 2>/dev/null && pids+=("$pid")
+  done
+  for pid in "${pids[@]}"; do
+    for _ in $(seq 100); do kill -0 "$pid" 2>/dev/null || break; sleep 0.05; done
     kill -9 "$pid" 2>/dev/null || true
   done
   rm -rf "$work"
   exit "$rc"
 }
 trap cleanup EXIT
-trap 'exit 1' INT TERM
+trap 'exit 1' INT TERM HUP
+trap '' PIPE # a closed stderr (| head) must not kill the script before its cleanup
 
 # Two free TCP ports on 127.0.0.1 for slurmctld and slurmd (a cluster already on this machine keeps
 # its own).
