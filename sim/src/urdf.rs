@@ -4,6 +4,25 @@
 //! folded into the neighbouring joint origins and their links' inertials merged into the moving body
 //! they are attached to. Meshes, `package://` paths, `<gazebo>`, `<transmission>` and `<ros2_control>`
 //! blocks are never read.
+//!
+//! # Which chain
+//! Without `--base-link`, the base is the one root link (several roots: an error listing them). Without
+//! `--tip-link`, the chain must be clear from the tree, and nothing is chosen between alternatives:
+//! every movable joint below the base must lie on one path, and one leaf link must hang off its last
+//! movable joint (through fixed joints only: `flange`, `tool0`); that leaf is the tip. Leaves hanging
+//! off earlier links through fixed joints only (a ROS-Industrial `base` frame off the root, a camera on
+//! link 3) are frames on the chain, not branches of it: their masses are welded to the body they hang
+//! from. Two cases are errors that list the leaf links to choose from:
+//! * movable joints on two branches (gripper fingers, a second arm): the chain's joints are ambiguous,
+//!   whatever the joint counts (an earlier rule took the branch with the most movable joints);
+//! * several leaves below the last movable joint (`tool0` and `ft_frame` off the last link): the joints
+//!   are clear, but the tip frame is not, and the flange pose (`fk`), the target offset of a scenario
+//!   and the calibrated URDF's flange joint depend on it. Their deepest common link is named, as is
+//!   the last joint's own frame.
+//!
+//! The shipped robots and the two third-party iiwa 7 exports have one leaf each (their fixed `world`,
+//! floating and flange frames lie on the chain), so none depends on a rule. Loops of joints, a link
+//! with two parent joints, a joint from a link to itself and duplicated names are refused first.
 
 use crate::error::{Result, SimError};
 use crate::lie::{Pose, pose_from, rotation_from_rpy};
@@ -359,9 +378,10 @@ impl<'a> Builder<'a> {
             [one] => Ok(one),
             [] => Err(self.structure("no root link: the joints form a cycle".into())),
             many => Err(self.structure(format!(
-                "the links form {} separate trees (roots: {}); join them or give --base-link",
+                "the links form {} separate trees (root links {}); join them or choose one with \
+                 --base-link",
                 many.len(),
-                many.join(", ")
+                name_list(many)
             ))),
         }
     }

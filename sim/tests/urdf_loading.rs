@@ -488,7 +488,8 @@ fn several_roots_need_a_base_link_and_the_rule_applies_below_it() {
     let m = msg(load(&text));
     assert_eq!(
         m,
-        "test.urdf: the links form 2 separate trees (roots: r1, r2); join them or give --base-link"
+        "test.urdf: the links form 2 separate trees (root links 'r1', 'r2'); join them or choose one \
+         with --base-link"
     );
     let spec = ChainSpec {
         base_link: Some("r2".into()),
