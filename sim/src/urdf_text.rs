@@ -176,6 +176,7 @@ fn origin_patches(
         let rest = &text[joint.span.end..];
         let ws = &rest[..rest.len() - rest.trim_start().len()];
         let lead = match ws.rfind('\n') {
+            Some(k) if k > 0 && ws.as_bytes()[k - 1] == b'\r' => &ws[k - 1..],
             Some(k) => &ws[k..],
             None => "",
         };
@@ -221,6 +222,8 @@ fn comment_text(text: &str, at: usize, c: &CommentBlock) -> String {
         Some(k) => ws[k + 1..].to_string(),
         None => String::new(),
     };
+    // The file's own line break (CRLF files stay CRLF).
+    let nl = if text.contains("\r\n") { "\r\n" } else { "\n" };
     let clean = |s: &str| {
         let mut s = s.to_string();
         while s.contains("--") {
@@ -228,14 +231,14 @@ fn comment_text(text: &str, at: usize, c: &CommentBlock) -> String {
         }
         s
     };
-    let mut out = format!("\n{indent}<!-- {}", clean(c.marker));
+    let mut out = format!("{nl}{indent}<!-- {}", clean(c.marker));
     for l in c.lines {
-        out.push('\n');
+        out.push_str(nl);
         if !l.is_empty() {
             out.push_str(&format!("{indent}     {}", clean(l.trim_end_matches('-'))));
         }
     }
-    out.push_str(&format!("\n{indent}-->"));
+    out.push_str(&format!("{nl}{indent}-->"));
     out
 }
 
@@ -557,6 +560,20 @@ mod tests {
             "{out}"
         );
         assert!(out.contains("<origin xyz=\"0 0 0\"/>"), "{out}");
+    }
+
+    /// A CRLF file stays CRLF: the comment block and an added <origin> use its line break.
+    #[test]
+    fn crlf_files_keep_their_line_breaks() {
+        let text = "<robot name=\"r\">\r\n  <joint name=\"j\" type=\"fixed\">\r\n    <parent link=\"a\"/>\r\n  </joint>\r\n</robot>\r\n";
+        let out = run(text, &[edit("j", [1.0, 0.0, 0.0], [0.0; 3])]).unwrap();
+        assert!(!out.replace("\r\n", "").contains('\n'), "{out:?}");
+        assert!(out.contains(
+            "type=\"fixed\">\r\n    <origin xyz=\"1 0 0\" rpy=\"0 0 0\"/>\r\n    <parent"
+        ));
+        assert!(
+            out.starts_with("<robot name=\"r\">\r\n  <!-- robocal-test\r\n       line one\r\n")
+        );
     }
 
     #[test]
