@@ -32,6 +32,24 @@ fn s(p: &Path) -> &str {
     p.to_str().unwrap()
 }
 
+/// `robocal generate` of a shipped scenario into `d/gen`; the measurement file.
+fn generate(d: &Path, scenario: &str, poses: &str) -> PathBuf {
+    let gen_dir = d.join("gen");
+    let scenario = repo().join("scenarios").join(scenario);
+    let args = [
+        "generate",
+        "--scenario",
+        s(&scenario),
+        "--out",
+        s(&gen_dir),
+        "--poses",
+        poses,
+    ];
+    let (c, e) = robocal(&args);
+    assert_eq!(c, Some(0), "{e}");
+    gen_dir.join("measurements.parquet")
+}
+
 const INERTIAL: &str = r#"<inertial><mass value="1"/><inertia ixx="0.01" ixy="0" ixz="0" iyy="0.01" iyz="0" izz="0.01"/></inertial>"#;
 
 /// A two-joint arm with `tool0` and `ft_frame` both off the last link.
@@ -99,19 +117,7 @@ fn an_ambiguous_tip_is_one_line_listing_the_leaves_until_tip_link_chooses() {
 #[test]
 fn calibrate_and_predict_write_the_same_calibrated_urdf() {
     let d = dir("same");
-    let gen_dir = d.join("gen");
-    let scenario = repo().join("scenarios/ur5_kinematic.toml");
-    let (c, e) = robocal(&[
-        "generate",
-        "--scenario",
-        s(&scenario),
-        "--out",
-        s(&gen_dir),
-        "--poses",
-        "40",
-    ]);
-    assert_eq!(c, Some(0), "{e}");
-    let data = gen_dir.join("measurements.parquet");
+    let data = generate(&d, "ur5_kinematic.toml", "40");
     let (model, from_cal, from_pred, pred) = (
         d.join("model.json"),
         d.join("cal.urdf"),
@@ -161,19 +167,7 @@ fn calibrate_and_predict_write_the_same_calibrated_urdf() {
 #[test]
 fn a_compliance_model_warns_with_the_gap_on_the_table() {
     let d = dir("compliance");
-    let gen_dir = d.join("gen");
-    let scenario = repo().join("scenarios/iiwa7_compliance.toml");
-    let (c, e) = robocal(&[
-        "generate",
-        "--scenario",
-        s(&scenario),
-        "--out",
-        s(&gen_dir),
-        "--poses",
-        "80",
-    ]);
-    assert_eq!(c, Some(0), "{e}");
-    let data = gen_dir.join("measurements.parquet");
+    let data = generate(&d, "iiwa7_compliance.toml", "80");
     let (model, urdf) = (d.join("model.json"), d.join("cal.urdf"));
     let (c, e) = robocal(&[
         "calibrate",
