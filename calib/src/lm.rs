@@ -140,6 +140,8 @@ pub enum TerminationReason {
     /// A residual or Jacobian entry was NaN or infinite at the start (or `χ²` overflowed); the
     /// report's [`MinimizationReport::health`] names the rows.
     NonFinite,
+    /// The caller asked the work to stop ([`crate::cancel`]); the point is where the solve stopped.
+    Cancelled,
 }
 
 impl std::fmt::Display for TerminationReason {
@@ -151,6 +153,7 @@ impl std::fmt::Display for TerminationReason {
             TerminationReason::MaxIterations => "iteration limit reached before convergence",
             TerminationReason::DampingLimit => "no decreasing step found",
             TerminationReason::NonFinite => "non-finite residuals",
+            TerminationReason::Cancelled => "cancelled",
         })
     }
 }
@@ -590,6 +593,10 @@ fn iterate<P: LeastSquaresProblem>(
         if report.iterations - start_iterations >= cap {
             report.termination = TerminationReason::MaxIterations;
             *damping = Damping { mu, nu };
+            return;
+        }
+        if crate::cancel::checkpoint().is_err() {
+            report.termination = TerminationReason::Cancelled;
             return;
         }
         report.iterations += 1;

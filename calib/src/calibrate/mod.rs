@@ -185,6 +185,7 @@ pub fn calibrate_model(
     };
     cal.report.model = spec.name();
     if let Some(kind) = spec.learned {
+        crate::cancel::checkpoint()?;
         learned_stage::add_learned(model, &mut cal, kind, train, test, options)?;
     }
     Ok(cal)
@@ -373,6 +374,8 @@ fn calibrate_with(
             (fit.report, fit.subspace)
         }
     };
+    // A solve stopped by the caller (Ctrl-C in Python) ends the calibration here.
+    crate::cancel::checkpoint()?;
     if !report.was_successful() {
         warnings.push(format!(
             "the kinematic fit did not converge: {}",
