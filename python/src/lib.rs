@@ -96,15 +96,16 @@ fn quick<T>(py: Python<'_>, r: Result<T, CliError>) -> PyResult<T> {
     r.map_err(|e| raise(py, e))
 }
 
-/// `warnings.warn(message, robocal.DataWarning)` for each message.
-fn warn(py: Python<'_>, messages: &[String]) -> PyResult<()> {
+/// `warnings.warn(message, robocal.DataWarning)` for each message, attributed to the caller's line:
+/// `depth` 1 for a method the user calls directly, 2 for one called through `robocal/__init__.py`.
+fn warn(py: Python<'_>, messages: &[String], depth: usize) -> PyResult<()> {
     if messages.is_empty() {
         return Ok(());
     }
     let category = py.import("robocal._errors")?.getattr("DataWarning")?;
     let warnings = py.import("warnings")?;
     for m in messages {
-        warnings.call_method1("warn", (m.as_str(), &category, 2))?;
+        warnings.call_method1("warn", (m.as_str(), &category, depth))?;
     }
     Ok(())
 }
@@ -329,7 +330,7 @@ impl Robot {
             )));
         }
         warnings.truncate(20);
-        warn(py, &warnings)?;
+        warn(py, &warnings, 1)?;
         Ok((values, single))
     }
 }
@@ -588,7 +589,7 @@ impl CalibratedModel {
             let preds = predictor.predict_table(&table.table, &table.source)?;
             Ok((preds, warnings))
         })?;
-        warn(py, &warnings)?;
+        warn(py, &warnings, 2)?;
         let f = |v: Vec<f64>| PyArray1::from_vec(py, v).into_any();
         let mut out = vec![(
             "pose".to_string(),
@@ -661,7 +662,7 @@ fn calibrate(
         )?;
         Ok((outcome, warnings))
     })?;
-    warn(py, &warnings)?;
+    warn(py, &warnings, 2)?;
     let report = outcome.json(robot, &data.source, None, None);
     let failure = outcome.failure();
     let model = failure.is_none().then(|| CalibratedModel {
@@ -686,7 +687,7 @@ fn diagnose(py: Python<'_>, robot: &Robot, data: &Table, args: Vec<String>) -> P
         )?;
         Ok((diag_cli::json(&d)?.to_string(), warnings))
     })?;
-    warn(py, &warnings)?;
+    warn(py, &warnings, 2)?;
     Ok(text)
 }
 

@@ -51,8 +51,9 @@ pub fn keywords<T: Args>(name: &'static str) -> Vec<String> {
 /// Parses `args` (`["--test-fraction", "0.2", "--robust", "huber"]`) as the flags of subcommand
 /// `name`'s options `T`. Every error is bad input ([`CliError::Input`], exit 2) on one line: a value
 /// that is not one of the flag's values as the command line says it (`--robust tukey: not one of
-/// huber, cauchy`), an unknown flag naming the known ones, a value that does not parse with the
-/// parser's own message.
+/// huber, cauchy`), an unknown flag naming the known ones, a value that does not parse as the first
+/// line of the command line's message (`invalid value 'abc' for '--seed <N>': invalid digit found in
+/// string`).
 pub fn parse<T: Args + FromArgMatches>(name: &'static str, args: &[String]) -> Result<T, CliError> {
     let matches = command::<T>(name)
         .try_get_matches_from(args)
@@ -77,20 +78,12 @@ fn error_line(name: &str, e: &clap::Error, known: &[String]) -> String {
                 .replace('-', "_"),
             known.join(", ")
         ),
-        ErrorKind::ValueValidation => {
-            let flag = text(ContextKind::InvalidArg);
-            let flag = flag.split_whitespace().next().unwrap_or_default();
-            let value = text(ContextKind::InvalidValue);
-            let why = std::error::Error::source(e)
-                .map(|s| s.to_string())
-                .unwrap_or_else(|| "invalid value".into());
-            format!("{flag} {value}: {why}")
-        }
-        // Anything else (a flag given twice, a missing value): clap's own first line.
+        // Anything else (a value that does not parse, a flag given twice): clap's own first line, as
+        // the command line prints it.
         _ => {
             let rendered = e.to_string();
             let first = rendered.lines().next().unwrap_or_default();
-            format!("{name}: {}", first.trim_start_matches("error: "))
+            first.trim_start_matches("error: ").to_string()
         }
     }
 }
@@ -102,7 +95,7 @@ mod tests {
     #[derive(clap::Args, Debug)]
     struct Example {
         /// A fraction.
-        #[arg(long, default_value_t = 0.3)]
+        #[arg(long, value_name = "F", default_value_t = 0.3)]
         test_fraction: f64,
         /// A loss.
         #[arg(long, value_parser = ["huber", "cauchy"])]
@@ -151,7 +144,11 @@ mod tests {
         );
         let e = parse::<Example>("example", &args(&["--test-fraction", "abc"])).unwrap_err();
         assert_eq!(e.exit_code(), 2);
-        assert!(e.to_string().starts_with("--test-fraction abc: "), "{e}");
+        assert!(
+            e.to_string()
+                .starts_with("invalid value 'abc' for '--test-fraction <F>': "),
+            "{e}"
+        );
         assert_eq!(e.to_string().lines().count(), 1);
     }
 }

@@ -233,6 +233,7 @@ fn calibrate_with(
             problem: "no rows to calibrate on".into(),
         });
     }
+    crate::cancel::checkpoint()?;
     let mut obs = observations(model, train, options, extensions, at)?;
     let test_obs = match test {
         Some(t) if !t.rows.is_empty() => Some(observations(model, t, options, extensions, at)?),
@@ -284,6 +285,7 @@ fn calibrate_with(
     let mut prob = KinematicProblem::new(model, &obs, start, bt);
     let (before_report, _) = minimize(&mut prob, &bt_scales, &options.lm, &mut ws);
     let before_params = prob.into_params();
+    crate::cancel::checkpoint()?;
     if !before_report.was_successful() {
         warnings.push(format!(
             "the base-and-target fit did not converge ({})",
@@ -396,6 +398,7 @@ fn calibrate_with(
         (1.0, "noise model (no degrees of freedom left)")
     };
     let covariance = sub.covariance(variance_factor);
+    crate::cancel::checkpoint()?;
     let observability = Observability::from_subspace(&sub);
     let null = describe_null_space(model, &params, ws.gram(), &sub, &obs);
     for line in &null.data_specific {
@@ -417,6 +420,7 @@ fn calibrate_with(
         ));
     }
 
+    crate::cancel::checkpoint()?;
     let outliers = outliers::find(model, &obs, &params, &all, options.outlier_threshold);
 
     let sigma_rms = (obs.sigma.iter().map(|s| s * s).sum::<f64>() / obs.len() as f64).sqrt();
