@@ -68,7 +68,7 @@ def test_ctrl_c_interrupts_a_calibration(big):
 
 
 def test_ctrl_c_interrupts_a_diagnosis(big):
-    data = big.head(3000)
+    data = big.head(600)
     timer = threading.Timer(0.3, _thread.interrupt_main)
     start = time.perf_counter()
     timer.start()
