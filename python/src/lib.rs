@@ -477,17 +477,7 @@ impl Table {
                 f((0..n).map(|r| t.q[r * nq + j]).collect()),
             ));
         }
-        for (k, name) in ["x", "y", "z"].iter().enumerate() {
-            out.push((
-                name.to_string(),
-                f(t.position.iter().map(|p| p[k]).collect()),
-            ));
-        }
-        if let Some(o) = &t.orientation {
-            for (k, name) in ["qw", "qx", "qy", "qz"].iter().enumerate() {
-                out.push((name.to_string(), f(o.iter().map(|q| q[k]).collect())));
-            }
-        }
+        target_columns(py, &t.position, t.orientation.as_deref(), &mut out);
         for (name, col) in [("t", &t.t), ("temp", &t.temp)] {
             if let Some(v) = col {
                 out.push((name.into(), f(v.clone())));
@@ -542,6 +532,24 @@ impl Table {
     }
 }
 
+/// The columns `x, y, z` (m, tracker frame) and, with an orientation, `qw, qx, qy, qz`, appended to `out`.
+fn target_columns<'py>(
+    py: Python<'py>,
+    position: &[[f64; 3]],
+    orientation: Option<&[[f64; 4]]>,
+    out: &mut Vec<(String, Bound<'py, PyAny>)>,
+) {
+    let f = |v: Vec<f64>| PyArray1::from_vec(py, v).into_any();
+    for (k, name) in ["x", "y", "z"].iter().enumerate() {
+        out.push((name.to_string(), f(position.iter().map(|p| p[k]).collect())));
+    }
+    if let Some(o) = orientation {
+        for (k, name) in ["qw", "qx", "qy", "qz"].iter().enumerate() {
+            out.push((name.to_string(), f(o.iter().map(|q| q[k]).collect())));
+        }
+    }
+}
+
 /// A calibrated model: the same content as the command line's MODEL.json.
 #[pyclass(frozen, module = "robocal._robocal")]
 struct CalibratedModel {
@@ -590,22 +598,11 @@ impl CalibratedModel {
             Ok((preds, warnings))
         })?;
         warn(py, &warnings, 2)?;
-        let f = |v: Vec<f64>| PyArray1::from_vec(py, v).into_any();
         let mut out = vec![(
             "pose".to_string(),
             PyArray1::from_vec(py, preds.pose).into_any(),
         )];
-        for (k, name) in ["x", "y", "z"].iter().enumerate() {
-            out.push((
-                name.to_string(),
-                f(preds.position.iter().map(|p| p[k]).collect()),
-            ));
-        }
-        if let Some(o) = &preds.orientation {
-            for (k, name) in ["qw", "qx", "qy", "qz"].iter().enumerate() {
-                out.push((name.to_string(), f(o.iter().map(|q| q[k]).collect())));
-            }
-        }
+        target_columns(py, &preds.position, preds.orientation.as_deref(), &mut out);
         Ok(out)
     }
 
