@@ -47,7 +47,10 @@ def main() -> None:
     if not data.exists():
         subprocess.run([binary, "generate", "--scenario", args.scenario, "--out", str(work), "--seed", "1",
                         "--poses", str(args.poses)], check=True, capture_output=True)
-    frame = pd.read_parquet(data)  # pandas' own reader (pyarrow): the user's DataFrame
+    try:
+        frame = pd.read_parquet(data)  # pandas' own reader (pyarrow): the user's DataFrame
+    except ImportError:  # no pyarrow: robocal's reader gives the same DataFrame
+        frame = robocal.read_table(data)
     print(f"{len(frame)} rows x {len(frame.columns)} columns, model {args.model}; robocal {robocal.__version__}")
 
     cli_times, py_times, convert_times = [], [], []
