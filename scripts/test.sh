@@ -43,6 +43,20 @@ fi
 echo "== cargo test" >&2
 cargo test --workspace --no-fail-fast
 
+echo "== the Python package (python/): built on the test build's dependencies, checked against the CLI" >&2
+pyvenv="target/python-venv"
+if [ ! -x "$pyvenv/bin/python" ] || ! cmp -s python/requirements-test.txt "$pyvenv/.requirements"; then
+  rm -rf "$pyvenv"
+  python3 -m venv "$pyvenv"
+  "$pyvenv/bin/pip" install --quiet --disable-pip-version-check -r python/requirements-test.txt
+  # numpy, pandas and polars come from the main venv (a .pth line), which stays as it is.
+  site=$("$pyvenv/bin/python" -c 'import sysconfig; print(sysconfig.get_paths()["purelib"])')
+  "$py" -c 'import sysconfig; print(sysconfig.get_paths()["purelib"])' > "$site/robocal_main_venv.pth"
+  cp python/requirements-test.txt "$pyvenv/.requirements"
+fi
+pkg=$(./scripts/python_package.sh)
+PYTHONPATH="$pkg" ROBOCAL_BIN="$PWD/target/debug/robocal" "$pyvenv/bin/python" -m pytest -q python/tests
+
 echo "== pandas, polars and DuckDB read robocal's own tables identically" >&2
 cargo test --workspace --quiet --test measurement_table -- --ignored write_files_for_check_readers
 tmp="${TMPDIR:-/tmp}"

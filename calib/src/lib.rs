@@ -88,6 +88,7 @@
 #![warn(missing_docs)]
 
 pub mod calibrate;
+pub mod cancel;
 pub mod chain;
 pub mod diagnose;
 pub mod error;

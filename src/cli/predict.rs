@@ -33,19 +33,32 @@ pub struct Args {
 fn read_configs(path: &Path, robot: &sim::Model) -> Result<MeasurementTable, CliError> {
     // x, y, z are not needed (and ignored when present).
     let table = measurement_table::read_configurations(path)?;
+    for w in check_configurations(&table, robot, &path.display().to_string())? {
+        eprintln!("warning: {w}");
+    }
+    Ok(table)
+}
+
+/// Checks a table of joint configurations against the model's robot (joint count, limits, units);
+/// `name` names it in messages. Returns the warnings, one line each.
+pub fn check_configurations(
+    table: &MeasurementTable,
+    robot: &sim::Model,
+    name: &str,
+) -> Result<Vec<String>, CliError> {
     if table.n_joints != robot.nq() {
         return Err(CliError::Input(format!(
-            "{}: {} joint columns, but the model's robot '{}' has {} joints",
-            path.display(),
+            "{name}: {} joint columns, but the model's robot '{}' has {} joints",
             table.n_joints,
             robot.name,
             robot.nq()
         )));
     }
-    for w in measurement_table::check_against_model(&table, robot, path)? {
-        eprintln!("warning: {w}");
-    }
-    Ok(table)
+    Ok(measurement_table::check_against_model(
+        table,
+        robot,
+        Path::new(name),
+    )?)
 }
 
 /// Runs `robocal predict`.
