@@ -64,7 +64,7 @@
 use super::chain::{Chain, ChainJoint};
 use super::effect::{ComplianceSolver, Effect, Moved, Needs, Prepare, ResolveCx, State};
 use super::gravity::GravityWork;
-use super::joint_compliance::Equilibrium;
+use super::joint_compliance::{Equilibrium, NewtonSchedule};
 use crate::error::{Result, SimError};
 use crate::lie::Pose;
 use crate::model::Joint;
@@ -74,6 +74,13 @@ use nalgebra::{Matrix3, Vector3};
 /// Largest accepted compliance (rad/(N m)): 10⁻³ is already a bearing a few N m bend by a
 /// milliradian; more is almost surely a stiffness (N m/rad) given where a compliance is expected.
 pub const MAX_COMPLIANCE_RAD_PER_NM: f64 = 1e-3;
+
+/// Steps larger than this (rad) refresh the Newton matrix of the joint + deflection solve. It starts
+/// from the joint sag alone, so its first step is the deflection itself (≈ 10⁻⁴ rad) and the matrix
+/// changes by `C ∂H/∂x Δx` (≈ 10⁻⁴ · 10² · 10⁻⁴ = 10⁻⁶ of itself): the first factorization serves
+/// every later (chord) step, which converge at that rate. Only a soft arm, whose steps exceed this,
+/// pays for more factorizations.
+pub const REFRESH_STEP_RAD: f64 = 1e-2;
 
 const EFFECT: &str = "link_deflection";
 
@@ -212,6 +219,16 @@ pub struct DeflectionScratch {
 
 /// A hinge about `axis` (unit, in the frame before it) at the origin of that frame.
 fn hinge(axis: Vector3<f64>) -> ChainJoint {
+    let coordinate_hinge = (0..3).find_map(|k| {
+        let e = Vector3::ith(k, 1.0);
+        if axis == e {
+            Some((k, 1.0))
+        } else if axis == -e {
+            Some((k, -1.0))
+        } else {
+            None
+        }
+    });
     ChainJoint {
         rotational: true,
         axis,
@@ -219,6 +236,7 @@ fn hinge(axis: Vector3<f64>) -> ChainJoint {
         origin_rot: Matrix3::identity(),
         p0: Vector3::zeros(),
         dp: Vector3::zeros(),
+        coordinate_hinge,
     }
 }
 
@@ -352,7 +370,23 @@ impl Effect for LinkDeflection {
                 }
             }
         }
-        let flange = sc.chain.eval(&sc.x, st.dt, &mut sc.poses);
+        // The long chain at zero deflection is the chain the state was last evaluated on (at these
+        // angles, by the stage before): its frames are the state's, each hinge frame that of its
+        // joint. Copying them saves an evaluation.
+        debug_assert_eq!(
+            st.geom
+                .eval(st.angles, st.dt, &mut sc.poses[..st.angles.len()]),
+            st.flange,
+            "stage bookkeeping: the state must hold the chain evaluated at its angles"
+        );
+        let mut joint = 0;
+        for (e, pose) in sc.poses.iter_mut().enumerate() {
+            if joint + 1 < stage.joint_index.len() && stage.joint_index[joint + 1] == e {
+                joint += 1;
+            }
+            *pose = st.poses[joint];
+        }
+        let flange = st.flange;
         let eq = Equilibrium {
             chain: &sc.chain,
             dt: st.dt,
@@ -369,6 +403,10 @@ impl Effect for LinkDeflection {
                 &mut sc.poses,
                 flange,
                 &mut sc.work,
+                NewtonSchedule {
+                    refresh_step: REFRESH_STEP_RAD,
+                    first_order_finish: true,
+                },
             )
             .map_err(|e| match e {
                 SimError::ComplianceDiverged { reason } => SimError::ComplianceDiverged {
@@ -415,6 +453,33 @@ mod tests {
         let (u, v) = deflection_axes(&a);
         assert!(u.dot(&a).abs() < 1e-15 && v.dot(&a).abs() < 1e-15 && u.dot(&v).abs() < 1e-15);
         assert!((u.cross(&v) - a).amax() < 1e-15);
+    }
+
+    #[test]
+    fn coordinate_hinges_evaluate_as_the_general_rotation() {
+        let m = crate::robots::load_builtin("iiwa7").unwrap();
+        let real = Chain::grown(&m, None);
+        let mut fast = real.clone();
+        for (k, j) in fast.joints.iter_mut().enumerate() {
+            *j = hinge(j.axis);
+            assert_eq!(
+                j.coordinate_hinge.map(|h| h.0),
+                Some([2, 1, 2, 1, 2, 1, 2][k])
+            );
+        }
+        fast.joints
+            .extend([hinge(Vector3::x()), hinge(-Vector3::z())]);
+        let mut slow = fast.clone();
+        for j in &mut slow.joints {
+            j.coordinate_hinge = None;
+        }
+        let x = [0.3, -1.2, 2.0, 0.7, -0.4, 1.1, -2.5, 3e-4, -2e-4];
+        let (mut pf, mut ps) = (vec![Pose::identity(); 9], vec![Pose::identity(); 9]);
+        let (ff, fs) = (fast.eval(&x, 0.0, &mut pf), slow.eval(&x, 0.0, &mut ps));
+        for (a, b) in pf.iter().zip(&ps).chain([(&ff, &fs)]) {
+            assert!((a.rotation.matrix() - b.rotation.matrix()).amax() < 1e-15);
+            assert!((a.translation.vector - b.translation.vector).amax() < 1e-15);
+        }
     }
 
     #[test]
