@@ -2,7 +2,8 @@
 //! tracker reading), without planning or file I/O, on the shipped `iiwa7_all` scenario (thermal
 //! warm-up, kinematic offsets, direction backlash, joint compliance with a varying payload), and on the
 //! same scenario with the effects of issue 12 added from code (`iiwa7_all_issue12`: transmission error
-//! and link deflection as in `iiwa7_transmission.toml` and `iiwa7_deflection.toml`, a joint coupling).
+//! and link deflection as in `iiwa7_transmission.toml` and `iiwa7_deflection.toml`, a joint coupling
+//! and a coupled transmission error).
 //! Target (issue 3): ≥ 200,000 measured poses per second on one core, and near-linear scaling on two
 //! (the `threads_2` throughput about twice `threads_1`).
 
@@ -23,6 +24,11 @@ fn scenarios() -> [(&'static str, Scenario); 2] {
         .effect::<sim::effects::transmission_error::TransmissionError>(transmission)
         .effect::<sim::effects::link_deflection::LinkDeflection>(deflection)
         .joint_coupling(vec![[6, 4]], Magnitude::Number(2e-4))
+        .coupled_transmission(
+            vec![[6, 5]],
+            Magnitude::Number(5e-5),
+            Magnitude::Number(0.3),
+        )
         .build()
         .unwrap();
     [
