@@ -87,7 +87,12 @@ fn read(path: &Path) -> Vec<Row> {
     rows
 }
 
-fn check_file(path: &Path) {
+/// Per row: the flange displacement by link deflection (the truth's `deflection` contribution, m) and
+/// the distance of the sim's flange from MuJoCo's (m), grouped by case label.
+type Agreement = BTreeMap<String, Vec<(f64, f64)>>;
+
+fn check_file(path: &Path) -> Agreement {
+    let mut agreement = Agreement::new();
     let model = sim::robots::load_builtin("iiwa7").unwrap();
     let rows = read(path);
     assert!(rows.len() >= 800, "{}: {} rows", path.display(), rows.len());
@@ -122,6 +127,16 @@ fn check_file(path: &Path) {
         };
         let truth = Truth::new(&model, &effects).unwrap();
         let mut s = truth.scratch();
+        let label = format!(
+            "{}, {} kg",
+            if effects.compliance.is_some() {
+                "joint springs + deflection at 2, 4, 6"
+            } else {
+                "rigid joints, deflection everywhere"
+            },
+            first.payload.mass
+        );
+        let points = agreement.entry(label).or_default();
         for r in group {
             let cond = Conditions {
                 q: &r.q,
@@ -143,6 +158,7 @@ fn check_file(path: &Path) {
                 path.display(),
                 r.line
             );
+            points.push((Vector3::from(t.contribution.deflection).norm(), dp));
             if dp > worst_p {
                 worst_line = r.line;
             }
@@ -157,16 +173,55 @@ fn check_file(path: &Path) {
         path.display(),
         rows.len()
     );
+    agreement
 }
 
 #[test]
 fn joint_and_deflection_settle_agrees_with_mujoco_on_every_row() {
     check_file(&common::repo_root().join("golden/settle_deflection_iiwa7.csv"));
     match std::env::var_os("ROBOCAL_GOLDEN_LIVE") {
-        Some(dir) => check_file(&Path::new(&dir).join("settle_deflection_iiwa7.csv")),
+        Some(dir) => {
+            check_file(&Path::new(&dir).join("settle_deflection_iiwa7.csv"));
+        }
         None if std::env::var_os("CI").is_some() => {
             panic!("CI must re-run scripts/mujoco_reference.py and set ROBOCAL_GOLDEN_LIVE")
         }
         None => eprintln!("ROBOCAL_GOLDEN_LIVE not set: only the stored reference was checked"),
     }
+}
+
+/// Writes `docs/figures/deflection_mujoco.svg` (the figure of docs/physics_truth.md) from the stored
+/// reference: `cargo test -p sim --test mujoco_deflection -- --ignored write_figure`.
+#[test]
+#[ignore = "writes the documentation figure"]
+fn write_figure() {
+    let agreement = check_file(&common::repo_root().join("golden/settle_deflection_iiwa7.csv"));
+    // Exact agreement (0 m) cannot sit on a log axis: drawn at 1e-17 m, below every nonzero value.
+    let floor = 1e-17;
+    let mut series: Vec<plot::Series> = agreement
+        .into_iter()
+        .map(|(label, points)| plot::Series {
+            label,
+            points: points.into_iter().map(|(x, d)| (x, d.max(floor))).collect(),
+            style: plot::Style::Markers,
+        })
+        .collect();
+    series.push(plot::Series {
+        label: "required (issue 12): 1 µm".into(),
+        points: vec![(1e-6, 1e-6), (1e-3, 1e-6)],
+        style: plot::Style::Dashed,
+    });
+    let fig = plot::Plot {
+        title: "Link deflection with joint springs: sim vs MuJoCo 4.0, 800 settled iiwa 7 poses"
+            .into(),
+        x_label: "flange displacement by link deflection (m)".into(),
+        y_label: "|flange(sim) − flange(MuJoCo)| (m); 0 drawn at 1e-17".into(),
+        log_x: true,
+        log_y: true,
+        series,
+    };
+    let out = common::repo_root().join("docs/figures/deflection_mujoco.svg");
+    std::fs::create_dir_all(out.parent().unwrap()).unwrap();
+    sim::io::write_atomic(&out, fig.to_svg(760, 460).as_bytes()).unwrap();
+    eprintln!("wrote {}", out.display());
 }
