@@ -6,7 +6,9 @@
 //!
 //! Required (issue 12): the flange within 1 µm of MuJoCo's for every row (200 configurations × two
 //! compliance sets, one with joint springs, × payloads of 0 and 3 kg). Both sides solve the same
-//! equilibrium to rounding, so the agreement is far better; the worst is printed.
+//! equilibrium to rounding, so the agreement is far better; the worst is printed. The rapier truth's
+//! multibody with the same hinges (`RapierArm::with_deflection`) is held to the same bounds, its hinge
+//! angles against MuJoCo's too.
 
 mod common;
 
@@ -14,6 +16,7 @@ use nalgebra::{Matrix3, Vector3};
 use sim::effects::joint_compliance::JointCompliance;
 use sim::effects::link_deflection::LinkDeflection;
 use sim::effects::{Conditions, Effects, Truth};
+use sim::rapier_truth::{RapierArm, SettleOptions};
 use sim::statics::{DEFAULT_GRAVITY, Payload};
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -33,6 +36,8 @@ struct Row {
     payload: Payload,
     q: Vec<f64>,
     theta: Vec<f64>,
+    /// MuJoCo's hinge angles `[α, β]` per joint (rad).
+    defl: Vec<[f64; 2]>,
     p: Vector3<f64>,
     r: Matrix3<f64>,
 }
@@ -80,6 +85,11 @@ fn read(path: &Path) -> Vec<Row> {
             },
             q: many("q"),
             theta: many("theta"),
+            defl: many("alpha")
+                .into_iter()
+                .zip(many("beta"))
+                .map(|(a, b)| [a, b])
+                .collect(),
             p: Vector3::new(col("px"), col("py"), col("pz")),
             r: Matrix3::from_fn(|i, j| col(&format!("r{}{}", i + 1, j + 1))),
         });
@@ -112,6 +122,7 @@ fn check_file(path: &Path) -> Agreement {
     let g = Vector3::from(DEFAULT_GRAVITY);
     let (mut worst_p, mut worst_r, mut worst_th) = (0.0f64, 0.0f64, 0.0f64);
     let mut worst_line = 0;
+    let (mut worst_rapier, mut rapier_steps) = ((0.0f64, 0.0f64), 0usize);
     for group in cases.values() {
         let first = group[0];
         // Rigid joints: no compliance effect at all (the deflection stage holds them at q).
@@ -127,6 +138,16 @@ fn check_file(path: &Path) -> Agreement {
         };
         let truth = Truth::new(&model, &effects).unwrap();
         let mut s = truth.scratch();
+        let arm = RapierArm::with_deflection(
+            &model,
+            &first.k,
+            &first.c,
+            Some(&first.payload),
+            &g,
+            SettleOptions::default(),
+        )
+        .unwrap();
+        let mut ws = arm.workspace();
         let label = format!(
             "{}, {} kg",
             if effects.compliance.is_some() {
@@ -159,6 +180,28 @@ fn check_file(path: &Path) -> Agreement {
                 r.line
             );
             points.push((Vector3::from(t.contribution.deflection).norm(), dp));
+            // The rapier multibody with the same hinges, settled from rest.
+            let sr = arm.settle(&mut ws, &r.q).unwrap();
+            let rp = (sr.flange.translation.vector - r.p).norm();
+            let rth = sr
+                .q_link
+                .iter()
+                .zip(&r.theta)
+                .chain(
+                    sr.deflection_rad
+                        .iter()
+                        .flatten()
+                        .zip(r.defl.iter().flatten()),
+                )
+                .fold(0.0f64, |m, (a, b)| m.max((a - b).abs()));
+            assert!(
+                rp < POSITION_TOL_M && rth < ANGLE_TOL_RAD,
+                "{}:{}: rapier flange off MuJoCo by {rp:e} m, joints or hinges by {rth:e} rad",
+                path.display(),
+                r.line
+            );
+            worst_rapier = (worst_rapier.0.max(rp), worst_rapier.1.max(rth));
+            rapier_steps += sr.steps;
             if dp > worst_p {
                 worst_line = r.line;
             }
@@ -169,9 +212,13 @@ fn check_file(path: &Path) -> Agreement {
     }
     eprintln!(
         "{}: {} rows; worst difference to MuJoCo: flange {worst_p:.2e} m (line {worst_line}), \
-         rotation {worst_r:.2e}, joints {worst_th:.2e} rad",
+         rotation {worst_r:.2e}, joints {worst_th:.2e} rad; rapier (mean {:.1} steps): flange {:.2e} m, \
+         joints and hinges {:.2e} rad",
         path.display(),
-        rows.len()
+        rows.len(),
+        rapier_steps as f64 / rows.len() as f64,
+        worst_rapier.0,
+        worst_rapier.1
     );
     agreement
 }

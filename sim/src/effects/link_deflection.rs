@@ -50,8 +50,12 @@
 //! last stage: the geometry it settles is not a chain of the model's joints, and a stage after it
 //! would re-evaluate the chain without it.
 //!
-//! With `[truth] model = "rapier"` the deflection is refused (the rapier multibody has no deflection
-//! hinges).
+//! With `[truth] model = "rapier"` the engine settles it instead: the multibody gets the two hinges
+//! after each deflecting joint, with springs `1/cᵤ`, `1/cᵥ` toward zero
+//! ([`crate::rapier_truth::RapierArm::with_deflection`]), and settles joints and hinges together
+//! from rest at the joint springs' anchors, on the real geometry of the measurement (as the compliance
+//! stage does, [`super::rapier_compliance`]). The joint frames in the state then stay those of the
+//! stage before (no stage follows).
 //!
 //! # Magnitudes
 //!
@@ -65,6 +69,7 @@ use super::chain::{Chain, ChainJoint};
 use super::effect::{ComplianceSolver, Effect, Moved, Needs, Prepare, ResolveCx, State};
 use super::gravity::GravityWork;
 use super::joint_compliance::{Equilibrium, NewtonSchedule};
+use super::rapier_compliance::{RapierCache, RapierCompliance};
 use crate::error::{Result, SimError};
 use crate::lie::Pose;
 use crate::model::Joint;
@@ -204,11 +209,15 @@ pub struct DeflectionStage {
     compliance: Vec<f64>,
     /// Mass (kg) and centre of mass (m, in the frame it hangs on) per joint of the long chain.
     bodies: Vec<(f64, Vector3<f64>)>,
+    /// With [`ComplianceSolver::Rapier`]: the rapier arms with deflection hinges.
+    rapier: Option<RapierCompliance>,
 }
 
 /// Per-thread workspace of the deflection stage.
 #[derive(Clone, Debug)]
 pub struct DeflectionScratch {
+    /// Prepared rapier arms (rapier truth only).
+    rapier: RapierCache,
     chain: Chain,
     compliance: Vec<f64>,
     anchor: Vec<f64>,
@@ -273,13 +282,24 @@ impl Effect for LinkDeflection {
     }
 
     fn prepare(&self, cx: &Prepare<'_>) -> Result<DeflectionStage> {
-        if matches!(cx.solver, ComplianceSolver::Rapier(_)) {
-            return Err(bad(
-                "compliance_rad_per_nm",
-                "given",
-                "not modelled by the rapier truth (its multibody has no deflection hinges); use [truth] model = \"analytic\"",
-            ));
-        }
+        let rapier = match (cx.solver, cx.joint_stiffness) {
+            (ComplianceSolver::Analytic, _) => None,
+            (ComplianceSolver::Rapier(options), Some(k)) => {
+                Some(RapierCompliance::with_deflection(
+                    cx.model,
+                    k,
+                    &self.compliance_rad_per_nm,
+                    options,
+                )?)
+            }
+            (ComplianceSolver::Rapier(_), None) => {
+                return Err(bad(
+                    "compliance_rad_per_nm",
+                    "given",
+                    "the rapier truth settles joints and deflection together: give [effects.compliance] too",
+                ));
+            }
+        };
         let model = cx.model;
         let mut joints = Vec::new();
         let mut compliance = Vec::new();
@@ -323,12 +343,14 @@ impl Effect for LinkDeflection {
             template,
             compliance,
             bodies,
+            rapier,
         })
     }
 
     fn scratch(stage: &DeflectionStage, _nq: usize) -> DeflectionScratch {
         let m = stage.template.nq();
         DeflectionScratch {
+            rapier: RapierCache::default(),
             chain: stage.template.clone(),
             compliance: stage.compliance.clone(),
             anchor: vec![0.0; m],
@@ -348,6 +370,27 @@ impl Effect for LinkDeflection {
         if stage.template.nq() == stage.joint_index.len() {
             // No hinge (every compliance 0): the joints are settled already.
             return Ok(Moved::Unchanged);
+        }
+        if let Some(r) = &stage.rapier {
+            // The engine settles joints and hinges from rest at the joint springs' anchors (set by
+            // the compliance stage, which a rapier truth always has).
+            let theta = &mut sc.x[..st.angles.len()];
+            let (steps, flange) = r.settle(
+                st.geom,
+                st.dt,
+                st.cond.payload.as_ref(),
+                st.gravity,
+                st.anchor,
+                theta,
+                &mut sc.rapier,
+            )?;
+            for (i, &th) in theta.iter().enumerate() {
+                st.q_link[i] -= st.angles[i] - th;
+                st.angles[i] = th;
+            }
+            st.flange = flange;
+            st.iterations += steps;
+            return Ok(Moved::Evaluated);
         }
         let g = st.geom;
         sc.chain.base = g.base;
@@ -522,6 +565,7 @@ mod tests {
             model: &m,
             growth: None,
             solver: ComplianceSolver::Analytic,
+            joint_stiffness: None,
         };
         let stage = d.prepare(&cx).unwrap();
         let mut sc = LinkDeflection::scratch(&stage, 7);

@@ -12,7 +12,9 @@
 //!    solved analytically or, with [`ComplianceSolver::Rapier`], by the rapier physics engine on the
 //!    same real geometry ([`rapier_compliance`]),
 //! 8. link deflection (the child side of each joint tilts about two axes across the joint axis under
-//!    the moment it carries), settled in one equilibrium with the joint springs ([`link_deflection`]).
+//!    the moment it carries), settled in one equilibrium with the joint springs ([`link_deflection`]),
+//!    by Newton or, with [`ComplianceSolver::Rapier`], by the engine with two spring hinges per
+//!    deflecting joint.
 //!
 //! The contributions are successive increments, so they add up to the total deviation from nominal:
 //! with `p₀` the nominal target position and `pₖ` the position with effects 1 … k applied,
@@ -481,6 +483,10 @@ impl Truth {
             model,
             growth,
             solver,
+            joint_stiffness: effects
+                .compliance
+                .as_ref()
+                .map(joint_compliance::JointCompliance::stiffness_nm_per_rad),
         };
         let stages = Stages::prepare(effects, &cx)?;
         Ok(Truth {
