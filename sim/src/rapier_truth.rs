@@ -77,7 +77,7 @@
 //! assert!(s.residual < 1e-6);
 //! ```
 
-use crate::effects::stiffness;
+use crate::effects::{deflection_compliance, stiffness};
 use crate::error::{Result, SimError};
 use crate::lie::{Pose, pose_from};
 use crate::model::{JointKind, Model};
@@ -366,8 +366,8 @@ impl RapierArm {
         let n = model.nq();
         stiffness::check_values(stiffness_nm_per_rad)?;
         stiffness::check_len(stiffness_nm_per_rad, n)?;
-        crate::effects::link_deflection::LinkDeflection::new(deflection_rad_per_nm.to_vec())?
-            .check_fits(n)?;
+        deflection_compliance::check_values(deflection_rad_per_nm)?;
+        deflection_compliance::check_len(deflection_rad_per_nm, n)?;
         model.require_inertials()?;
         options.check()?;
         let cond = |field: String, value: String, problem: &str| SimError::BadCondition {
@@ -426,7 +426,7 @@ impl RapierArm {
             arm.stiffness.push(stiffness_nm_per_rad[i]);
             arm.frames.push((j.origin * f2, f2));
             arm.bodies.push(massless.clone());
-            let (u, v) = crate::effects::link_deflection::deflection_axes(&j.axis);
+            let (u, v) = deflection_compliance::deflection_axes(&j.axis);
             let mut hinges = [None; 2];
             for ((axis, &c), h) in [u, v]
                 .iter()

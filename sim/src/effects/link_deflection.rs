@@ -76,10 +76,6 @@ use crate::model::Joint;
 use crate::scenario::magnitude::Magnitude;
 use nalgebra::{Matrix3, Vector3};
 
-/// Largest accepted compliance (rad/(N m)): 10⁻³ is already a bearing a few N m bend by a
-/// milliradian; more is almost surely a stiffness (N m/rad) given where a compliance is expected.
-pub const MAX_COMPLIANCE_RAD_PER_NM: f64 = 1e-3;
-
 /// Steps larger than this (rad) refresh the Newton matrix of the joint + deflection solve. It starts
 /// from the joint sag alone, so its first step is the deflection itself (≈ 10⁻⁴ rad) and the matrix
 /// changes by `C ∂H/∂x Δx` (≈ 10⁻⁴ · 10² · 10⁻⁴ = 10⁻⁶ of itself): the first factorization serves
@@ -87,30 +83,8 @@ pub const MAX_COMPLIANCE_RAD_PER_NM: f64 = 1e-3;
 /// pays for more factorizations.
 pub const REFRESH_STEP_RAD: f64 = 1e-2;
 
-const EFFECT: &str = "link_deflection";
-
-fn bad(field: impl Into<String>, value: impl ToString, problem: impl Into<String>) -> SimError {
-    SimError::BadEffect {
-        effect: EFFECT,
-        field: field.into(),
-        value: value.to_string(),
-        problem: problem.into(),
-    }
-}
-
-/// The deflection axes `(u, v)` of a joint with unit axis `a` (joint frame): see the module docs.
-pub fn deflection_axes(a: &Vector3<f64>) -> (Vector3<f64>, Vector3<f64>) {
-    let a = a.normalize();
-    let mut k = 0;
-    for j in 1..3 {
-        if a[j].abs() < a[k].abs() {
-            k = j;
-        }
-    }
-    let e = Vector3::ith(k, 1.0);
-    let u = (e - a * a.dot(&e)).normalize();
-    (u, a.cross(&u))
-}
+pub use super::deflection_compliance::{MAX_COMPLIANCE_RAD_PER_NM, deflection_axes};
+use super::deflection_compliance::{EFFECT, bad, check_len, check_values};
 
 /// Per-joint compliance across the joint axis (see the module docs for the model).
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -137,26 +111,7 @@ impl LinkDeflection {
     /// Deflection with compliances `[cᵤ, cᵥ]` per joint (rad/(N m)). Refuses negative, non-finite
     /// and values above [`MAX_COMPLIANCE_RAD_PER_NM`].
     pub fn new(compliance_rad_per_nm: Vec<[f64; 2]>) -> Result<Self> {
-        for (i, c) in compliance_rad_per_nm.iter().enumerate() {
-            for (k, &v) in c.iter().enumerate() {
-                if !(v.is_finite() && v >= 0.0) {
-                    return Err(bad(
-                        format!("compliance_rad_per_nm[{i}][{k}]"),
-                        v,
-                        "must be finite and ≥ 0 rad/(N m) (0 = rigid)",
-                    ));
-                }
-                if v > MAX_COMPLIANCE_RAD_PER_NM {
-                    return Err(bad(
-                        format!("compliance_rad_per_nm[{i}][{k}]"),
-                        v,
-                        format!(
-                            "compliance above {MAX_COMPLIANCE_RAD_PER_NM} rad/(N m); give a compliance, not a stiffness"
-                        ),
-                    ));
-                }
-            }
-        }
+        check_values(&compliance_rad_per_nm)?;
         Ok(LinkDeflection {
             compliance_rad_per_nm,
         })
@@ -174,14 +129,7 @@ impl LinkDeflection {
 
     /// Checks that the length fits a robot with `nq` joints.
     pub fn check_fits(&self, nq: usize) -> Result<()> {
-        if self.compliance_rad_per_nm.len() != nq {
-            return Err(bad(
-                "compliance_rad_per_nm",
-                format!("{} entries", self.compliance_rad_per_nm.len()),
-                format!("the robot has {nq} joints"),
-            ));
-        }
-        Ok(())
+        check_len(&self.compliance_rad_per_nm, nq)
     }
 }
 

@@ -86,6 +86,7 @@ use nalgebra::{Point3, Vector3};
 
 pub mod chain;
 pub mod coupled_transmission;
+pub(crate) mod deflection_compliance;
 pub mod effect;
 pub mod gear_backlash;
 pub(crate) mod gravity;
