@@ -59,7 +59,7 @@ mod parquet;
 
 pub use check::{LIMIT_TOLERANCE, check_against_model, reach_bound};
 pub use csv::{read_csv_str, write_csv_string};
-pub use parquet::{PARQUET_MAX_ROW_GROUP_ROWS, write_parquet_bytes};
+pub use parquet::{PARQUET_MAX_ROW_GROUP_ROWS, ParquetTableWriter, write_parquet_bytes};
 
 use crate::error::{Result, SimError, fragment};
 use std::collections::HashMap;

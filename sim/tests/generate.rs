@@ -736,3 +736,109 @@ fn six_dof_probe_adds_orientation_close_to_the_truth() {
     );
     let _ = std::fs::remove_dir_all(dir);
 }
+
+/// Streaming (issue 15): the files do not depend on how the rows are chunked, on the number of
+/// threads, or on how the summary's median is selected (in memory, or by the radix selection that
+/// reads `truth.parquet` back); and they are those of the in-memory path, row for row. A campaign
+/// with repeats that straddle chunks (the `move` direction state and the payload draw carry over),
+/// outliers and a 6-DoF probe.
+#[test]
+fn streamed_files_do_not_depend_on_chunks_threads_or_the_median_method() {
+    use generate::StreamOptions;
+    let text = std::fs::read_to_string(scenario_path("iiwa7_all.toml"))
+        .unwrap()
+        .replace("repeats = 1\n", "repeats = 3\n")
+        .replace("outlier_rate = 0.0", "outlier_rate = 0.1\nsix_dof = true");
+    let res = Scenario::parse(
+        &text,
+        "streamed.toml",
+        &common::repo_root().join("scenarios"),
+    )
+    .unwrap()
+    .resolve(&Overrides {
+        poses: Some(157),
+        ..Overrides::default()
+    })
+    .unwrap();
+    let dir = temp_dir("streamed");
+    let run = |threads: usize, options: StreamOptions, name: &str| {
+        let out = dir.join(name);
+        let ticks = std::sync::atomic::AtomicU64::new(0);
+        let tick = |k: u64| {
+            ticks.fetch_add(k, std::sync::atomic::Ordering::Relaxed);
+        };
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap()
+            .install(|| {
+                let planner = generate::planner_of(&res).unwrap();
+                generate::write_dataset_with(&res, &out, planner, Some(&tick), &options).unwrap()
+            });
+        // The progress callbacks count every row once.
+        assert_eq!(ticks.into_inner(), 471, "{name}");
+        files(&out)
+    };
+    let reference = run(2, StreamOptions::default(), "default");
+    for (threads, chunk_rows, median_in_memory_rows) in [
+        (1, 1, 0),
+        (2, 2, usize::MAX),
+        (2, 5, 0),
+        (1, 64, 100),
+        (2, 470, 0),
+    ] {
+        let options = StreamOptions {
+            chunk_rows,
+            median_in_memory_rows,
+        };
+        let name = format!("t{threads}_c{chunk_rows}_m{median_in_memory_rows}");
+        assert!(
+            run(threads, options, &name) == reference,
+            "{name}: other bytes than the default run"
+        );
+    }
+    // The in-memory path (plan, simulate, table) gives the same measurement rows.
+    let plan = generate::plan_of(&res).unwrap();
+    assert_eq!(plan.len(), 471);
+    let truth = sim::effects::Truth::new(&res.model, &res.effects).unwrap();
+    let sim_rows =
+        generate::simulate(&truth, &res.tracker, &res.gravity, &plan, res.seed, None).unwrap();
+    let table = generate::measurement_table(&plan, &sim_rows, &res.tracker);
+    let in_memory = dir.join("in_memory.parquet");
+    sim::measurement_table::write(&in_memory, &table).unwrap();
+    assert!(std::fs::read(&in_memory).unwrap() == reference[0]);
+    // The summary's median is the middle of the sorted target distances, computed here from the
+    // truth file's p_tracker columns.
+    let doc: serde_json::Value = serde_json::from_slice(&reference[2]).unwrap();
+    let f = std::fs::File::open(dir.join("default/truth.parquet")).unwrap();
+    let batch = parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(f)
+        .unwrap()
+        .build()
+        .unwrap()
+        .next()
+        .unwrap()
+        .unwrap();
+    let col = |n: &str| -> Vec<f64> {
+        use arrow_array::cast::AsArray;
+        batch
+            .column_by_name(n)
+            .unwrap()
+            .as_primitive::<arrow_array::types::Float64Type>()
+            .values()
+            .to_vec()
+    };
+    let (x, y, z) = (col("p_tracker_x"), col("p_tracker_y"), col("p_tracker_z"));
+    let mut d: Vec<f64> = (0..x.len())
+        .map(|i| Vector3::new(x[i], y[i], z[i]).norm())
+        .collect();
+    d.sort_by(f64::total_cmp);
+    let median = doc["summary"]["median_distance_m"].as_f64().unwrap();
+    assert!(
+        (median - d[d.len() / 2]).abs() < 1e-15,
+        "{median} {}",
+        d[d.len() / 2]
+    );
+    assert_eq!(doc["summary"]["rows"], 471);
+    assert_eq!(doc["campaign"]["repeats"], 3);
+    let _ = std::fs::remove_dir_all(&dir);
+}

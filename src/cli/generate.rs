@@ -39,9 +39,13 @@ pub fn run(args: Args) -> CliResult {
     if args.poses == Some(0) {
         return Err(CliError::Input("--poses: 0: must be ≥ 1".into()));
     }
-    if let Some(p) = args.poses {
-        sim::campaign::check_row_count(Some(p), &format!("--poses {p}"))
-            .map_err(CliError::Input)?;
+    if let Some(p) = args.poses
+        && p as u64 > sim::campaign::MAX_FORMAT_ROWS
+    {
+        return Err(CliError::Input(format!(
+            "--poses {p}: more than the {} rows a Parquet file can count (signed 64-bit)",
+            sim::campaign::MAX_FORMAT_ROWS
+        )));
     }
     if let Some(m) = args.noise
         && !(m.is_finite() && m >= 0.0)
@@ -60,22 +64,14 @@ pub fn run(args: Args) -> CliResult {
         noise: args.noise,
     };
     let resolved = scenario.resolve(&overrides)?;
-    let plan = sim::generate::plan_of(&resolved)?;
-    let bar = std::io::stderr().is_terminal().then(|| {
-        let b = indicatif::ProgressBar::new(plan.len() as u64);
-        if let Ok(style) = indicatif::ProgressStyle::with_template(
-            "{spinner} simulating {pos}/{len} measurements [{bar:40}] {eta}",
-        ) {
-            b.set_style(style.progress_chars("=> "));
-        }
-        b
-    });
+    let planner = sim::generate::planner_of(&resolved)?;
+    let bar = progress_bar(planner.rows() as u64, "simulating");
     let tick = |k: u64| {
         if let Some(b) = &bar {
             b.inc(k);
         }
     };
-    let summary = sim::generate::write_dataset(&resolved, &args.out, &plan, Some(&tick));
+    let summary = sim::generate::write_dataset(&resolved, &args.out, planner, Some(&tick));
     if let Some(b) = &bar {
         b.finish_and_clear();
     }
@@ -88,4 +84,19 @@ pub fn run(args: Args) -> CliResult {
         return print_json(&v);
     }
     Ok(())
+}
+
+/// A progress bar of `len` measurements on stderr, only when stderr is a terminal and not in CI (the
+/// `CI` variable set): never in logs or pipes.
+pub(super) fn progress_bar(len: u64, what: &str) -> Option<indicatif::ProgressBar> {
+    let show = std::io::stderr().is_terminal() && std::env::var_os("CI").is_none();
+    show.then(|| {
+        let b = indicatif::ProgressBar::new(len);
+        if let Ok(style) = indicatif::ProgressStyle::with_template(&format!(
+            "{{spinner}} {what} {{human_pos}}/{{human_len}} measurements [{{bar:24}}] {{percent}} %, {{eta}} left"
+        )) {
+            b.set_style(style.progress_chars("=> "));
+        }
+        b
+    })
 }
