@@ -3,7 +3,8 @@
 //!
 //! # Pipeline
 //!
-//! 1. [`crate::campaign::plan`]: the rows (pose, q, t, temp, dir, payload).
+//! 1. [`crate::campaign::Planner`]: the rows (pose, q, t, temp, dir, payload), a chunk at a time
+//!    ([`crate::campaign::plan`]: all at once, for campaigns held in memory).
 //! 2. [`simulate`]: per row, the real robot's flange pose from the truth ([`crate::effects::Truth`],
 //!    made by [`truth_of`]: with `[truth] model = "rapier"` its joint-compliance stage is settled by
 //!    the rapier physics engine on the same real geometry, see [`crate::effects::rapier_compliance`])
@@ -13,7 +14,11 @@
 //!    depend on the number of threads or their scheduling.
 //! 3. [`write_dataset`]: three files in the output folder, replaced as a set: written into a hidden
 //!    staging folder beside it, then moved in ([`crate::io::StagedDir`]), so that an interrupted run
-//!    leaves the old set or the new one:
+//!    leaves the old set or the new one. Steps 1–3 stream: chunk `k` is written (on a thread of its
+//!    own, through [`crate::io::ParquetStream`], whose bytes do not depend on the chunking) while
+//!    chunk `k + 1` is planned and simulated, and the summary accumulates in row order, so memory
+//!    stays bounded (two chunks and one row group per file) and the bytes do not depend on the chunk
+//!    size ([`StreamOptions`]) or the threads:
 //!
 //! * `measurements.parquet`: the measurement contract (`shared/spec/measurements.md`) and nothing else:
 //!   `pose, q1..qN, x, y, z, [qw, qx, qy, qz], t, temp, [dir1..dirN], payload, [sigma]`. `qw..qz` only
@@ -655,7 +660,7 @@ impl Default for StreamOptions {
 
 /// Bytes `rows` rows of a campaign of `nq` joints take on disk, estimated from the columns of the two
 /// Parquet files: 8 bytes per 64-bit value, 1 per direction and flag (Snappy hardly compresses the
-/// noisy values; measured: 101 and 325 bytes a row for `iiwa7_all.toml`, against 128 and 345
+/// noisy values; measured: 101 and 325 bytes a row for `iiwa7_all.toml`, against 127 and 345
 /// estimated), plus 1 MB of metadata.
 pub fn estimated_bytes(res: &Resolved, nq: usize, has_dir: bool, rows: usize) -> u64 {
     let m = measurement_columns(has_dir, &res.tracker);
