@@ -187,7 +187,52 @@ impl<'a> Builder<'a> {
                 .or_default()
                 .push(j);
         }
+        b.check_no_cycle()?;
         Ok(b)
+    }
+
+    /// Refuses joints that form a cycle, also one apart from the root's tree (which no chain from a
+    /// root reaches, so it would otherwise be dropped without a word; found by the fuzzing suite):
+    /// every link, followed up through its parent joints, must reach a link without a parent. Each
+    /// link is walked once (O(links)).
+    fn check_no_cycle(&self) -> Result<()> {
+        // 1: on the walk in progress; 2: reaches a root.
+        let mut state: HashMap<&str, u8> = HashMap::with_capacity(self.links.len());
+        for l in &self.robot.links {
+            let mut walk = Vec::new();
+            let mut link = l.name.as_str();
+            loop {
+                match state.get(link) {
+                    Some(2) => break,
+                    Some(_) => {
+                        let start = walk.iter().position(|&w| w == link).unwrap_or(0);
+                        let cycle = &walk[start..];
+                        let joints: Vec<String> = cycle
+                            .iter()
+                            .filter_map(|c| self.parent_joint.get(c))
+                            .map(|j| format!("'{}'", j.name))
+                            .collect();
+                        return Err(self.structure(format!(
+                            "joints {} form a cycle (links {} -> {}): not a tree",
+                            joints.join(", "),
+                            cycle.iter().rev().copied().collect::<Vec<_>>().join(" -> "),
+                            cycle.last().copied().unwrap_or(link)
+                        )));
+                    }
+                    None => {}
+                }
+                state.insert(link, 1);
+                walk.push(link);
+                match self.parent_joint.get(link) {
+                    Some(j) => link = j.parent.link.as_str(),
+                    None => break,
+                }
+            }
+            for w in walk {
+                state.insert(w, 2);
+            }
+        }
+        Ok(())
     }
 
     fn structure(&self, message: String) -> SimError {

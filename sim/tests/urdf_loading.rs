@@ -327,3 +327,61 @@ fn deeply_nested_xml_is_refused_in_bounded_time() {
     );
     assert_eq!(load(&text).unwrap().nq(), 1);
 }
+
+/// Fuzzing case 16900 (seed 15): joints that form a cycle apart from the root's tree (two lines of
+/// the iiwa 7 swapped, so that link 6 hangs below link 7 and link 7 below link 6) were dropped
+/// without a word, and `info` showed a 6-joint arm. They are a structure error naming the joints
+/// and the links of the cycle.
+#[test]
+fn fuzz_case_16900_a_cycle_apart_from_the_root_is_refused() {
+    let text = format!(
+        r#"<robot name="r">{}{}{}{}{}{}{}</robot>"#,
+        link("base"),
+        link("a"),
+        link("b"),
+        link("c"),
+        revolute("j1", "base", "a", "0 0 1"),
+        revolute("j2", "b", "c", "0 0 1"),
+        revolute("j3", "c", "b", "0 0 1"),
+    );
+    assert_eq!(
+        msg(load(&text)),
+        "test.urdf: joints 'j3', 'j2' form a cycle (links c -> b -> c): not a tree"
+    );
+    // A longer one: d -> e -> f -> d.
+    let text = format!(
+        r#"<robot name="r">{}{}{}{}{}{}{}{}{}</robot>"#,
+        link("base"),
+        link("a"),
+        link("d"),
+        link("e"),
+        link("f"),
+        revolute("j1", "base", "a", "0 0 1"),
+        revolute("k1", "d", "e", "0 0 1"),
+        revolute("k2", "e", "f", "0 0 1"),
+        revolute("k3", "f", "d", "0 0 1"),
+    );
+    let m = msg(load(&text));
+    for k in ["'k1'", "'k2'", "'k3'", "form a cycle"] {
+        assert!(m.contains(k), "{m}");
+    }
+    // The shipped robots and a long chain still load (the walk visits each link once).
+    let mut chain = link("l0");
+    for i in 1..=3000 {
+        chain.push_str(&link(&format!("l{i}")));
+        chain.push_str(&revolute(
+            &format!("j{i}"),
+            &format!("l{}", i - 1),
+            &format!("l{i}"),
+            "0 0 0.001",
+        ));
+    }
+    let started = std::time::Instant::now();
+    assert_eq!(
+        load(&format!(r#"<robot name="r">{chain}</robot>"#))
+            .unwrap()
+            .nq(),
+        3000
+    );
+    assert!(started.elapsed().as_secs() < 20);
+}
