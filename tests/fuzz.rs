@@ -20,7 +20,8 @@
 //! Always: no panic (exit 101 or a signal) and no hang (each run is killed after 10 s).
 //!
 //! Cases are drawn from `ROBOCAL_FUZZ_SEED` (default 15) and numbered; case `k` depends only on the
-//! seed and `k`, so `ROBOCAL_FUZZ_CASE=k` re-runs it alone. `ROBOCAL_FUZZ_CASES` sets the number of
+//! seed and `k`, so `ROBOCAL_FUZZ_CASE=k` re-runs it alone (`ROBOCAL_FUZZ_VERBOSE=1` lists every
+//! case with its outcome, `ROBOCAL_FUZZ_KEEP=1` keeps every input, not only the failing ones). `ROBOCAL_FUZZ_CASES` sets the number of
 //! cases (default 2,000, about a minute on two cores). Failing inputs are kept in
 //! `target/fuzz-failures/case-K/` with the command line. The library-level Parquet mutation test that
 //! came before (600 files read in process) is folded in here: the Parquet byte mutations below are
@@ -495,16 +496,37 @@ const INTERESTING: [&str; 22] = [
 ];
 
 /// Replaces 1 to 3 numbers of `text` (maximal runs of digits with an optional sign, point and
-/// exponent, not part of a name such as `link_6` or `q3`) by [`INTERESTING`] values.
-fn mutate_values(rng: &mut Xoshiro256PlusPlus, text: &str) -> (String, String) {
+/// exponent, not part of a name such as `link_6` or `q3`) by [`INTERESTING`] values; only numbers
+/// within `window` (byte range) and outside comments (from `comment.0` to `comment.1`).
+fn mutate_values(
+    rng: &mut Xoshiro256PlusPlus,
+    text: &str,
+    comment: Option<(&str, &str)>,
+    window: std::ops::Range<usize>,
+) -> (String, String) {
     let b = text.as_bytes();
+    let mut skip = vec![false; b.len()];
+    if let Some((open, close)) = comment {
+        let mut from = 0;
+        while let Some(a) = text[from..].find(open) {
+            let a = from + a;
+            let z = text[a..]
+                .find(close)
+                .map_or(text.len(), |z| a + z + close.len());
+            skip[a..z].iter_mut().for_each(|x| *x = true);
+            from = z;
+        }
+    }
+    for (i, x) in skip.iter_mut().enumerate() {
+        *x |= !window.contains(&i);
+    }
     let name_char = |c: u8| c.is_ascii_alphanumeric() || c == b'_';
     let mut spans = Vec::new();
     let mut i = 0;
     while i < b.len() {
         let starts = b[i].is_ascii_digit()
             || (matches!(b[i], b'-' | b'+') && b.get(i + 1).is_some_and(u8::is_ascii_digit));
-        if starts && (i == 0 || !name_char(b[i - 1])) {
+        if starts && !skip[i] && (i == 0 || !name_char(b[i - 1])) {
             let mut j = i + 1;
             while j < b.len() && (b[j].is_ascii_digit() || b[j] == b'.') {
                 j += 1;
@@ -802,7 +824,7 @@ fn table_csv_case(c: &Corpus, rng: &mut Xoshiro256PlusPlus) -> Drawn {
             )
         }
         17..=19 => {
-            let (t, ops) = mutate_values(rng, &c.csv);
+            let (t, ops) = mutate_values(rng, &c.csv, None, 0..c.csv.len());
             let what = format!("csv values: {ops}");
             return (file, run, what, t.into_bytes(), Expect::Unknown);
         }
@@ -827,7 +849,7 @@ fn table_parquet_case(c: &Corpus, rng: &mut Xoshiro256PlusPlus) -> Drawn {
     ];
     let name = fcols[rng.random_range(0..fcols.len())];
     let plain = || WriterProperties::builder().build();
-    let (what, bytes, expect): (String, Vec<u8>, Expect) = match rng.random_range(0..12u32) {
+    let (what, bytes, expect): (String, Vec<u8>, Expect) = match rng.random_range(0..16u32) {
         0 => {
             let mut v: Vec<Option<f64>> = floats(b, name).into_iter().map(Some).collect();
             v[r] = None;
@@ -994,7 +1016,14 @@ fn model_case(c: &Corpus, rng: &mut Xoshiro256PlusPlus) -> Drawn {
             Expect::Same,
         ),
         5 | 6 => {
-            let (t, ops) = mutate_values(rng, &c.model);
+            // Half of them in the parameters (the covariance is most of the file).
+            let window = if rng.random::<bool>() {
+                let a = c.model.find("\"parameters\"").unwrap();
+                a..a + c.model[a..].find("\"covariance\"").unwrap()
+            } else {
+                0..c.model.len()
+            };
+            let (t, ops) = mutate_values(rng, &c.model, None, window);
             let what = format!("model values: {ops}");
             return (
                 file,
@@ -1150,7 +1179,7 @@ fn urdf_case(c: &Corpus, rng: &mut Xoshiro256PlusPlus) -> Drawn {
             )
         }
         8..=10 => {
-            let (t, ops) = mutate_values(rng, &text);
+            let (t, ops) = mutate_values(rng, &text, Some(("<!--", "-->")), 0..text.len());
             let what = format!("urdf values: {ops}");
             return (file, run, what, t.into_bytes(), Expect::Unknown);
         }
@@ -1230,7 +1259,7 @@ fn scenario_case(c: &Corpus, rng: &mut Xoshiro256PlusPlus) -> Drawn {
             ("comments and blank lines".into(), t, Expect::Same)
         }
         7..=9 => {
-            let (t, ops) = mutate_values(rng, &text);
+            let (t, ops) = mutate_values(rng, &text, Some(("#", "\n")), 0..text.len());
             let what = format!("scenario values: {ops}");
             return (file, run, what, t.into_bytes(), Expect::Unknown);
         }
@@ -1387,6 +1416,11 @@ fn check_output(
                         "a flange pose that is not 12 finite numbers: {doc}"
                     ));
                 }
+                // No arm reaches 100 km (each URDF offset is at most 1 km).
+                let p: Vec<f64> = numbers[..3].iter().filter_map(|v| v.as_f64()).collect();
+                if p.iter().map(|v| v * v).sum::<f64>().sqrt() > 1e5 {
+                    return Err(format!("a flange {p:?} m from the base: not a robot arm"));
+                }
             }
             Ok(())
         }
@@ -1470,11 +1504,12 @@ fn run_case(c: &Corpus, case: &Case) -> Result<i32, String> {
         }
         Ok(code)
     })();
+    let keep_all = std::env::var_os("ROBOCAL_FUZZ_KEEP").is_some();
     match &result {
-        Ok(_) => {
+        Ok(_) if !keep_all => {
             let _ = std::fs::remove_dir_all(&dir);
         }
-        Err(_) => {
+        _ => {
             // Kept for reproduction, with the command line.
             let keep = repo()
                 .join("target/fuzz-failures")
@@ -1498,6 +1533,7 @@ fn mutated_inputs_never_panic_hang_or_pass_as_valid() {
     let seed = env_number("ROBOCAL_FUZZ_SEED").unwrap_or(15);
     let cases = env_number("ROBOCAL_FUZZ_CASES").map_or(DEFAULT_CASES, |n| n as usize);
     let only = env_number("ROBOCAL_FUZZ_CASE").map(|k| k as usize);
+    let verbose = std::env::var_os("ROBOCAL_FUZZ_VERBOSE").is_some();
     let started = Instant::now();
     let corpus = Corpus::new();
     let ids: Vec<usize> = match only {
@@ -1521,7 +1557,11 @@ fn mutated_inputs_never_panic_hang_or_pass_as_valid() {
                         Expect::Invalid(_) => "invalid",
                         Expect::Unknown => "bytes",
                     };
-                    match run_case(&corpus, &case) {
+                    let result = run_case(&corpus, &case);
+                    if verbose {
+                        eprintln!("case {id}: {} -> {result:?}", case.what);
+                    }
+                    match result {
                         Ok(code) => {
                             *tally
                                 .lock()
