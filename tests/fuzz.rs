@@ -597,6 +597,15 @@ fn make_case(c: &Corpus, seed: u64, id: usize) -> Case {
 
 type Drawn = (String, Run, String, Vec<u8>, Expect);
 
+/// The largest char boundary of `s` at or below `i`.
+fn floor_boundary(s: &str, i: usize) -> usize {
+    let mut i = i.min(s.len());
+    while !s.is_char_boundary(i) {
+        i -= 1;
+    }
+    i
+}
+
 fn invalid(needles: &[String]) -> Expect {
     Expect::Invalid(needles.to_vec())
 }
@@ -998,7 +1007,7 @@ fn model_case(c: &Corpus, rng: &mut Xoshiro256PlusPlus) -> Drawn {
             (
                 "embedded robot swapped".into(),
                 serde_json::to_string_pretty(&doc).unwrap(),
-                invalid(&[file.clone()]),
+                invalid(std::slice::from_ref(&file)),
             )
         }
         3 => {
@@ -1006,8 +1015,8 @@ fn model_case(c: &Corpus, rng: &mut Xoshiro256PlusPlus) -> Drawn {
             let cut = rng.random_range(1..t.len() - 1);
             (
                 format!("truncated at {cut}"),
-                t[..t.floor_char_boundary(cut)].to_string(),
-                invalid(&[file.clone()]),
+                t[..floor_boundary(&t, cut)].to_string(),
+                invalid(std::slice::from_ref(&file)),
             )
         }
         4 => (
@@ -1123,7 +1132,7 @@ fn urdf_case(c: &Corpus, rng: &mut Xoshiro256PlusPlus) -> Drawn {
             (
                 format!("joint {name} from {parent} to itself"),
                 t,
-                invalid(&[file.clone()]),
+                invalid(std::slice::from_ref(&file)),
             )
         }
         3 => {
@@ -1142,8 +1151,12 @@ fn urdf_case(c: &Corpus, rng: &mut Xoshiro256PlusPlus) -> Drawn {
         }
         4 => {
             let cut = rng.random_range(text.len() / 4..text.len() * 3 / 4);
-            let t = text[..text.floor_char_boundary(cut)].to_string();
-            (format!("truncated at {cut}"), t, invalid(&[file.clone()]))
+            let t = text[..floor_boundary(&text, cut)].to_string();
+            (
+                format!("truncated at {cut}"),
+                t,
+                invalid(std::slice::from_ref(&file)),
+            )
         }
         5 => {
             let t = text.replacen(
@@ -1197,7 +1210,36 @@ fn scenario_case(c: &Corpus, rng: &mut Xoshiro256PlusPlus) -> Drawn {
     let file = format!("fuzz_{}", sc.name);
     let run = Run::Generate(s);
     let text = sc.text.clone();
-    let (what, out, expect): (String, String, Expect) = match rng.random_range(0..13u32) {
+    let (what, out, expect): (String, String, Expect) = match rng.random_range(0..15u32) {
+        // Profiles the measurement table would refuse: named as scenario keys, before any work.
+        13 => {
+            let t = if text.contains("[campaign.temperature]") {
+                text.replacen("t0_c = 20.0", "t0_c = 2000.0", 1)
+            } else {
+                format!("{text}\n[campaign.temperature]\nconstant = 1e15\n")
+            };
+            (
+                "a temperature of 1e15 or 2000 °C".into(),
+                t,
+                invalid(&[file.clone(), "campaign.temperature".into()]),
+            )
+        }
+        14 => {
+            let t = if text.contains("[campaign.payload]") {
+                text.replacen(
+                    "choice_kg = [0.0, 3.5, 7.0]",
+                    "choice_kg = [0.0, 3.5, 7000.0]",
+                    1,
+                )
+            } else {
+                format!("{text}\n[campaign.payload]\nmass_kg = 5000.0\n")
+            };
+            (
+                "a payload of 5 or 7 t".into(),
+                t,
+                invalid(&[file.clone(), "campaign.payload".into()]),
+            )
+        }
         0 => {
             let key = ["posses", "repeat", "seconds_per_poze"][rng.random_range(0..3)];
             let t = text.replacen("[campaign]\n", &format!("[campaign]\n{key} = 3\n"), 1);

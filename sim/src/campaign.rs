@@ -437,6 +437,15 @@ fn check_model_free(spec: &CampaignSpec, file: &str) -> Result<()> {
             format!("mass {m} must be finite and ≥ 0 kg"),
         ));
     }
+    // What the measurement table accepts (its rows are checked again when written).
+    let max = crate::measurement_table::MAX_PAYLOAD_KG;
+    if let Some(m) = masses.iter().find(|m| **m > max) {
+        return Err(err(
+            file,
+            "campaign.payload",
+            format!("mass {m} kg is beyond {max} kg: not a robot payload (kilograms are expected)"),
+        ));
+    }
     Ok(())
 }
 
@@ -821,8 +830,20 @@ impl<'a> Planner<'a> {
             let t = k as f64 * self.spec.seconds_per_pose + r as f64 * self.spec.seconds_per_repeat;
             plan.pose.push(k as i64);
             plan.q.extend_from_slice(&qs[i * n..(i + 1) * n]);
+            let temp = self.spec.temperature.temp_at(t);
+            let (low, high) = crate::measurement_table::TEMP_RANGE_C;
+            if !(low..=high).contains(&temp) {
+                return Err(err(
+                    &self.file,
+                    "campaign.temperature",
+                    format!(
+                        "{temp:e} °C at pose {k} (t = {t} s) is outside [{low}, {high}] °C: not a robot's \
+                         temperature (degrees Celsius are expected)"
+                    ),
+                ));
+            }
             plan.t_s.push(t);
-            plan.temp_c.push(self.spec.temperature.temp_at(t));
+            plan.temp_c.push(temp);
             if let (Some(out), Some(d)) = (plan.dir.as_mut(), dirs.as_ref()) {
                 out.extend_from_slice(&d[i * n..(i + 1) * n]);
             }

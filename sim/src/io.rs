@@ -370,16 +370,31 @@ impl StagedDir {
         &self.staging
     }
 
-    /// An error about a file of the staging folder, renamed to name the destination instead (what
-    /// the user asked for), e.g. `out/truth.json` rather than `out/../.out.tmp-12-0/truth.json`.
+    /// An error about a file of the staging folder (a write failure, or a table that does not pass
+    /// its checks), renamed to name the destination instead (what the user asked for), e.g.
+    /// `out/truth.json` rather than `out/../.out.tmp-12-0/truth.json`.
     pub fn user_error(&self, e: SimError) -> SimError {
+        let named = |path: PathBuf| match path.strip_prefix(&self.staging) {
+            Ok(rel) => self.target.join(rel),
+            Err(_) => path,
+        };
         match e {
             SimError::Io { path, source } => SimError::Io {
-                path: match path.strip_prefix(&self.staging) {
-                    Ok(rel) => self.target.join(rel),
-                    Err(_) => path,
-                },
+                path: named(path),
                 source,
+            },
+            SimError::Table {
+                file,
+                row,
+                line,
+                column,
+                message,
+            } => SimError::Table {
+                file: named(PathBuf::from(file)).display().to_string(),
+                row,
+                line,
+                column,
+                message,
             },
             other => other,
         }
@@ -838,6 +853,20 @@ mod tests {
         assert_eq!(
             e.to_string(),
             format!("{}: cannot write: x", out.join("a").display())
+        );
+        let e = st.user_error(SimError::Table {
+            file: st.path().join("t.parquet").display().to_string(),
+            row: Some(3),
+            line: None,
+            column: Some("temp".into()),
+            message: "bad".into(),
+        });
+        assert_eq!(
+            e.to_string(),
+            format!(
+                "{}: row 3, column temp: bad",
+                out.join("t.parquet").display()
+            )
         );
         // Subfolders of ours (a suite's datasets): swapped, or merged when they hold a file of the
         // user's, which is kept.

@@ -842,3 +842,54 @@ fn streamed_files_do_not_depend_on_chunks_threads_or_the_median_method() {
     assert_eq!(doc["campaign"]["repeats"], 3);
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// Found while extending the fuzzing suite: a scenario whose temperature profile or payload gives
+/// values the measurement table refuses (1e15 °C, 5,000 kg) failed only when the table was written,
+/// with an error naming the hidden staging folder (`.out.tmp-PID-N/measurements.parquet`). They are
+/// scenario errors naming the file and the key, before anything is written; an error about a staged
+/// table names the user's folder.
+#[test]
+fn impossible_temperatures_and_payloads_are_scenario_errors() {
+    let dir = temp_dir("impossible");
+    let text = std::fs::read_to_string(scenario_path("ur5_kinematic.toml")).unwrap();
+    assert!(!text.contains("[campaign.temperature]") && !text.contains("[campaign.payload]"));
+    for (extra, key, value) in [
+        (
+            "[campaign.temperature]\nconstant = 1e15\n",
+            "campaign.temperature",
+            "1e15 °C at pose 0",
+        ),
+        (
+            "[campaign.temperature]\nschedule = [[0.0, 20.0], [100.0, -300.0]]\n",
+            "campaign.temperature",
+            // T(t) = 20 − 3.2 t °C falls below −273.15 °C after t = 91.6 s; poses come every 15 s.
+            "-3e2 °C at pose 7 (t = 105 s)",
+        ),
+        (
+            "[campaign.payload]\nmass_kg = 5000.0\n",
+            "campaign.payload",
+            "5000 kg",
+        ),
+    ] {
+        let path = dir.join("hot.toml");
+        std::fs::write(&path, format!("{text}\n{extra}")).unwrap();
+        let res = Scenario::load(&path).and_then(|s| {
+            s.resolve(&Overrides {
+                poses: Some(20),
+                ..Overrides::default()
+            })
+        });
+        let out = dir.join("out");
+        let e = res
+            .and_then(|r| generate::generate(&r, &out, None))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("hot.toml") && e.contains(key) && e.contains(value),
+            "{e}"
+        );
+        assert!(!e.contains(".tmp-"), "{e}");
+        assert!(!out.exists());
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}

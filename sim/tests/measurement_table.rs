@@ -1275,3 +1275,26 @@ fn impossible_magnitudes_and_reused_pose_ids_are_errors() {
         ],
     );
 }
+
+/// Found by the fuzzing suite (`tests/fuzz.rs`, seed 15, the exit-0 listing of its value
+/// mutations: a `temp` of 1e15 °C predicted without a word). A temperature below absolute zero or
+/// above 1000 °C is a one-line error naming the row and the column; the bounds themselves pass.
+#[test]
+fn fuzz_found_impossible_temperatures_are_errors() {
+    let with =
+        |v: &str| format!("pose,q1,x,y,z,temp\n0,0.1,0.5,0.5,0.5,20\n1,0.2,0.5,0.5,0.5,{v}\n");
+    for v in ["1e15", "-274", "1000.5"] {
+        csv_error(
+            &with(v),
+            &[
+                "data.csv",
+                "row 2",
+                "column temp",
+                "not a robot's temperature",
+            ],
+        );
+    }
+    for v in ["-273.15", "1000", "-40", "85"] {
+        assert!(read_csv_str(&with(v), "data.csv").is_ok(), "{v}");
+    }
+}
