@@ -2,7 +2,7 @@
 //! (`MODEL.json`), URDFs and scenario files (TOML), fed to the built command line as a user would.
 //!
 //! Every case is one file made from a valid one and one command run on it (`predict`, `calibrate`,
-//! `info`, `fk`, `generate`, as fits the file). Two kinds of mutation:
+//! `diagnose`, `info`, `fk`, `generate`, as fits the file). Two kinds of mutation:
 //!
 //! * **designed**, whose validity is known beforehand: a non-numeric, empty or non-finite cell, a
 //!   missing or duplicated column, a value no measurement can have, a reused pose id, a null in a
@@ -71,6 +71,8 @@ struct Corpus {
     predicted: Vec<u8>,
     /// `calibrate` on the table: the reference `parameters`.
     calibrated: serde_json::Value,
+    /// `diagnose --json` on the table: the reference output.
+    diagnosed: Vec<u8>,
     /// The calibrated model of the table, as text and as a file.
     model: String,
     model_path: PathBuf,
@@ -197,6 +199,17 @@ impl Corpus {
             ],
         );
         let predicted = std::fs::read(dir.join("predicted.csv")).unwrap();
+        let diagnosed = setup(
+            &dir,
+            &[
+                "diagnose",
+                "--robot",
+                "ur5",
+                "--data",
+                "table.csv",
+                "--json",
+            ],
+        );
         let urdfs = [("ur5", Q_UR5), ("iiwa7", Q_IIWA)]
             .into_iter()
             .map(|(name, q)| {
@@ -239,6 +252,7 @@ impl Corpus {
             batch,
             predicted,
             calibrated,
+            diagnosed,
             model,
             model_path,
             table_path,
@@ -282,6 +296,8 @@ enum Run {
     Predict,
     /// `calibrate --robot ur5 --data FILE`.
     Calibrate,
+    /// `diagnose --robot ur5 --data FILE --json`.
+    Diagnose,
     /// `predict --model FILE --data table.csv`.
     PredictWithModel,
     /// `fk --robot FILE --q Q --json`, URDF number.
@@ -610,12 +626,12 @@ fn invalid(needles: &[String]) -> Expect {
     Expect::Invalid(needles.to_vec())
 }
 
-/// Column names of the measurement table with every optional column but orientation (UR5).
+/// The command a table case runs: predict (5 in 8), calibrate (2 in 8) or diagnose (1 in 8).
 fn table_run(rng: &mut Xoshiro256PlusPlus) -> Run {
-    if rng.random_range(0..4) == 0 {
-        Run::Calibrate
-    } else {
-        Run::Predict
+    match rng.random_range(0..8) {
+        0 | 1 => Run::Calibrate,
+        2 => Run::Diagnose,
+        _ => Run::Predict,
     }
 }
 
@@ -1346,6 +1362,7 @@ fn args_of(c: &Corpus, run: &Run, file: &str) -> Vec<String> {
             "--out",
             "model_out.json",
         ]),
+        Run::Diagnose => strings(&["diagnose", "--robot", "ur5", "--data", file, "--json"]),
         Run::PredictWithModel => strings(&[
             "predict",
             "--model",
@@ -1370,6 +1387,11 @@ fn check_output(
     same: bool,
 ) -> Result<(), String> {
     let read = |n: &str| std::fs::read(dir.join(n)).map_err(|e| format!("exit 0 but no {n}: {e}"));
+    // A table the command accepted is one the library reads.
+    if !same && matches!(case.run, Run::Calibrate | Run::Diagnose) {
+        sim::measurement_table::read(&dir.join(&case.file))
+            .map_err(|e| format!("exit 0, but the library refuses the file: {e}"))?;
+    }
     match &case.run {
         Run::Predict | Run::PredictWithModel => {
             let p = read("predicted.csv")?;
@@ -1430,6 +1452,19 @@ fn check_output(
             finite(&doc["parameters"])
                 .then_some(())
                 .ok_or("a model parameter that is not finite".into())
+        }
+        Run::Diagnose => {
+            if same {
+                return (stdout == c.diagnosed.as_slice())
+                    .then_some(())
+                    .ok_or("another diagnosis than the unmutated table's".into());
+            }
+            let doc: serde_json::Value = serde_json::from_slice(stdout)
+                .map_err(|e| format!("stdout is not one JSON document: {e}"))?;
+            doc["findings"]
+                .is_array()
+                .then_some(())
+                .ok_or("a diagnosis without findings".into())
         }
         Run::Fk(u) | Run::Info(u) => {
             let reference = if matches!(case.run, Run::Fk(_)) {
