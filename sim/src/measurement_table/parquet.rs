@@ -122,7 +122,7 @@ impl<W: std::io::Write + Send> ParquetTableWriter<W> {
     /// `file` names it in errors.
     ///
     /// # Errors
-    /// [`SimError::Table`] naming `file` when the parquet writer cannot be made.
+    /// [`SimError::Io`] naming `file` when the parquet writer cannot be made.
     pub fn new(sink: W, n_joints: usize, columns: OptionalColumns, file: &str) -> Result<Self> {
         let schema = schema(n_joints, columns);
         let stream = crate::io::ParquetStream::new(
@@ -147,7 +147,7 @@ impl<W: std::io::Write + Send> ParquetTableWriter<W> {
     /// ids are checked for reuse within the part).
     ///
     /// # Errors
-    /// [`SimError::Table`] for an invalid part or a failed write.
+    /// [`SimError::Table`] for an invalid part, [`SimError::Io`] for a failed write.
     pub fn append(&mut self, part: &MeasurementTable) -> Result<()> {
         if part.n_joints != self.n_joints || part.columns() != self.columns {
             return Err(table_err(
@@ -196,16 +196,20 @@ impl<W: std::io::Write + Send> ParquetTableWriter<W> {
     /// Writes the rest and the footer; returns the sink.
     ///
     /// # Errors
-    /// [`SimError::Table`] for a failed write.
+    /// [`SimError::Io`] for a failed write.
     pub fn finish(self) -> Result<W> {
         let file = self.file;
         self.stream.finish().map_err(|e| write_err(&file, &e))
     }
 }
 
-/// A write failure of the table `file`.
+/// A write failure of the table `file` (the sink failed, or the encoder): [`SimError::Io`], a runtime
+/// failure, not a bad table.
 fn write_err(file: &str, e: &dyn std::fmt::Display) -> SimError {
-    table_err(file, None, None, format!("cannot write Parquet: {e}"))
+    SimError::Io {
+        path: std::path::PathBuf::from(file),
+        source: std::io::Error::other(format!("Parquet: {e}")),
+    }
 }
 
 /// A problem in one column: the 0-based index within the array (if one value is at fault) and what.
