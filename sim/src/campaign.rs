@@ -733,6 +733,35 @@ impl<'a> Planner<'a> {
                     ),
                 )
             })?;
+        // The last measurement's time must be a number (t = k · seconds_per_pose + r ·
+        // seconds_per_repeat): 1e308 s a pose overflows at the second pose (fuzzing case 8805).
+        let last_pose = n_poses.saturating_sub(1) as f64 * spec.seconds_per_pose;
+        let last_repeat = spec.repeats.saturating_sub(1) as f64 * spec.seconds_per_repeat;
+        for (key, v, what) in [
+            ("campaign.seconds_per_pose", last_pose, "the last pose"),
+            (
+                "campaign.seconds_per_repeat",
+                last_repeat,
+                "the last repeat",
+            ),
+            (
+                "campaign.seconds_per_pose",
+                last_pose + last_repeat,
+                "the last measurement",
+            ),
+        ] {
+            if !v.is_finite() {
+                return Err(err(
+                    file,
+                    key,
+                    format!(
+                        "{what} would be measured at t = {v} s ({n_poses} poses {} s apart, {} repeats {} s \
+                         apart): too long a campaign to time",
+                        spec.seconds_per_pose, spec.repeats, spec.seconds_per_repeat
+                    ),
+                ));
+            }
+        }
         let prev = match &spec.start_q {
             Some(s) => {
                 model

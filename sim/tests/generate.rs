@@ -893,3 +893,44 @@ fn impossible_temperatures_and_payloads_are_scenario_errors() {
     }
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// Fuzzing case 8805 (seed 15): `seconds_per_pose = 1e308` made the third pose's time infinite, and
+/// the run failed when the table was written, naming the output file instead of the scenario key.
+/// It is a scenario error naming the key, before any work; huge but finite times still generate.
+#[test]
+fn fuzz_case_8805_a_campaign_too_long_to_time_is_a_scenario_error() {
+    let dir = temp_dir("case_8805");
+    let text = std::fs::read_to_string(scenario_path("ur5_kinematic.toml")).unwrap();
+    assert!(text.contains("seconds_per_pose = 15.0"));
+    let run = |spp: &str, poses: usize| {
+        let path = dir.join("long.toml");
+        std::fs::write(
+            &path,
+            text.replace(
+                "seconds_per_pose = 15.0",
+                &format!("seconds_per_pose = {spp}"),
+            ),
+        )
+        .unwrap();
+        Scenario::load(&path)
+            .and_then(|s| {
+                s.resolve(&Overrides {
+                    poses: Some(poses),
+                    ..Overrides::default()
+                })
+            })
+            .and_then(|r| generate::generate(&r, &dir.join("out"), None))
+    };
+    let e = run("1e308", 12).unwrap_err().to_string();
+    assert!(
+        e.contains("long.toml")
+            && e.contains("campaign.seconds_per_pose")
+            && e.contains("t = inf s"),
+        "{e}"
+    );
+    assert!(!dir.join("out").exists());
+    // One pose is measured at t = 0 whatever the spacing; 1e300 s apart, twelve poses are finite.
+    assert!(run("1e308", 1).is_ok());
+    assert!(run("1e300", 12).is_ok());
+    let _ = std::fs::remove_dir_all(&dir);
+}
