@@ -109,7 +109,6 @@ fn run(cwd: &Path, args: &[String]) -> (Option<i32>, Vec<u8>, String, bool) {
         .stdin(Stdio::null())
         .stdout(std::fs::File::create(&out).unwrap())
         .stderr(std::fs::File::create(&err).unwrap())
-        .env_remove("RAYON_NUM_THREADS")
         .env("RAYON_NUM_THREADS", "1")
         .spawn()
         .expect("run robocal");

@@ -373,31 +373,19 @@ impl StagedDir {
     /// An error about a file of the staging folder (a write failure, or a table that does not pass
     /// its checks), renamed to name the destination instead (what the user asked for), e.g.
     /// `out/truth.json` rather than `out/../.out.tmp-12-0/truth.json`.
-    pub fn user_error(&self, e: SimError) -> SimError {
+    pub fn user_error(&self, mut e: SimError) -> SimError {
         let named = |path: PathBuf| match path.strip_prefix(&self.staging) {
             Ok(rel) => self.target.join(rel),
             Err(_) => path,
         };
-        match e {
-            SimError::Io { path, source } => SimError::Io {
-                path: named(path),
-                source,
-            },
-            SimError::Table {
-                file,
-                row,
-                line,
-                column,
-                message,
-            } => SimError::Table {
-                file: named(PathBuf::from(file)).display().to_string(),
-                row,
-                line,
-                column,
-                message,
-            },
-            other => other,
+        match &mut e {
+            SimError::Io { path, .. } => *path = named(std::mem::take(path)),
+            SimError::Table { file, .. } => {
+                *file = named(PathBuf::from(&*file)).display().to_string();
+            }
+            _ => {}
         }
+        e
     }
 
     /// Moves the staged outputs into the destination. `is_ours(name)` tells which names the command

@@ -158,21 +158,11 @@ impl<W: std::io::Write + Send> ParquetTableWriter<W> {
             ));
         }
         let offset = self.rows;
-        part.validate_named(&self.file).map_err(|e| match e {
-            SimError::Table {
-                file,
-                row,
-                line,
-                column,
-                message,
-            } => SimError::Table {
-                file,
-                row: row.map(|r| r + offset),
-                line,
-                column,
-                message,
-            },
-            other => other,
+        part.validate_named(&self.file).map_err(|mut e| {
+            if let SimError::Table { row: Some(r), .. } = &mut e {
+                *r += offset;
+            }
+            e
         })?;
         self.append_unchecked(part)
     }
