@@ -104,7 +104,8 @@ fn random_table(rng: &mut StdRng, cols: Option<OptionalColumns>) -> MeasurementT
             ],
             orientation: cols.orientation.then_some(quat),
             t: cols.t.then(|| any_f64(rng)),
-            temp: cols.temp.then(|| any_f64(rng)),
+            // Within the physical range (−273.15 … 1000 °C); the extreme doubles go in q and t.
+            temp: cols.temp.then(|| bounded_f64(rng, 273.15)),
             dir: cols.dir.then_some(&dir[..]),
             payload: cols.payload.then(|| bounded_f64(rng, 1000.0).abs()),
             sigma: cols.sigma.then(|| bounded_f64(rng, 1.0).abs()),
