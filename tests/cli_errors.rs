@@ -219,7 +219,7 @@ fn the_robust_losses_are_accepted_by_name() {
     let _ = std::fs::remove_dir_all(&d);
 }
 
-/// Fuzzing case 16900 (seed 15): `fk` with as many `--q` values as the URDF should have, on a URDF
+/// Fuzzing case 16900 (seed 15, the suite's first version): `fk` with as many `--q` values as the URDF should have, on a URDF
 /// whose chain came out shorter, named the flag and the robot but not the file. The error names the
 /// `--robot` argument it loaded.
 #[test]

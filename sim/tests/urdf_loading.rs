@@ -328,7 +328,7 @@ fn deeply_nested_xml_is_refused_in_bounded_time() {
     assert_eq!(load(&text).unwrap().nq(), 1);
 }
 
-/// Fuzzing case 16900 (seed 15): joints that form a cycle apart from the root's tree (two lines of
+/// Fuzzing case 16900 (seed 15, the suite's first version): joints that form a cycle apart from the root's tree (two lines of
 /// the iiwa 7 swapped, so that link 6 hangs below link 7 and link 7 below link 6) were dropped
 /// without a word, and `info` showed a 6-joint arm. They are a structure error naming the joints
 /// and the links of the cycle.
@@ -386,7 +386,7 @@ fn fuzz_case_16900_a_cycle_apart_from_the_root_is_refused() {
     assert!(started.elapsed().as_secs() < 20);
 }
 
-/// Fuzzing cases 284 and 2117 (seed 15): URDF offsets of 1e15 m or 1e22 m loaded, and `fk` put the
+/// Fuzzing cases 284 and 2117 (seed 15, the suite's version with value mutations): URDF offsets of 1e15 m or 1e22 m loaded, and `fk` put the
 /// flange 1e21 m from the base. A joint origin or a centre of mass beyond 1 km is refused, naming the
 /// joint or link; so is an inertia with a negative principal moment (found in the suite's exit-0
 /// listing: an `izz` of −1e15), which no body has. Values at the bounds still load.
