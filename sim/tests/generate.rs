@@ -759,14 +759,21 @@ fn six_dof_probe_adds_orientation_close_to_the_truth() {
 /// threads, or on how the summary's median is selected (in memory, or by the radix selection that
 /// reads `truth.parquet` back); and they are those of the in-memory path, row for row. A campaign
 /// with repeats that straddle chunks (the `move` direction state and the payload draw carry over),
-/// outliers and a 6-DoF probe.
+/// outliers and a 6-DoF probe; every effect of the simulator, those of issue 12 (transmission error,
+/// coupling, coupled transmission, link deflection settled with the joint springs) included.
 #[test]
 fn streamed_files_do_not_depend_on_chunks_threads_or_the_median_method() {
     use generate::StreamOptions;
     let text = std::fs::read_to_string(scenario_path("iiwa7_all.toml"))
         .unwrap()
         .replace("repeats = 1\n", "repeats = 3\n")
-        .replace("outlier_rate = 0.0", "outlier_rate = 0.1\nsix_dof = true");
+        .replace("outlier_rate = 0.0", "outlier_rate = 0.1\nsix_dof = true")
+        + "[effects.transmission]\nharmonics = [1, 2]\n\
+           amplitude_rad = { normal = [0.0, 8e-5] }\nphase_rad = { uniform = [-3.0, 3.0] }\n\
+           [effects.coupling]\npairs = [[6, 4], [2, 2]]\nratio_rad_per_rad = [2e-4, -1e-4]\n\
+           [effects.coupled_transmission]\npairs = [[6, 5]]\namplitude_rad = 5e-5\n\
+           [effects.deflection]\ncompliance_rad_per_nm = [[0, 0], [3e-6, 3e-6], [0, 0], \
+           [4e-6, 4e-6], [0, 0], [5e-6, 5e-6], [0, 0]]\n";
     let res = Scenario::parse(
         &text,
         "streamed.toml",
@@ -845,6 +852,26 @@ fn streamed_files_do_not_depend_on_chunks_threads_or_the_median_method() {
             .values()
             .to_vec()
     };
+    // Every effect of the scenario moved the target (so each went through the chunks above).
+    for key in [
+        "thermal",
+        "kinematic",
+        "transmission",
+        "coupling",
+        "coupled_transmission",
+        "backlash",
+        "compliance",
+        "deflection",
+    ] {
+        let moved = col(&format!("{key}_x"))
+            .iter()
+            .filter(|v| v.abs() > 1e-7)
+            .count();
+        assert!(
+            moved > 400,
+            "{key}: {moved} of 471 rows moved by over 0.1 µm in x"
+        );
+    }
     let (x, y, z) = (col("p_tracker_x"), col("p_tracker_y"), col("p_tracker_z"));
     let mut d: Vec<f64> = (0..x.len())
         .map(|i| Vector3::new(x[i], y[i], z[i]).norm())
