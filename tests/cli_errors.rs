@@ -218,3 +218,20 @@ fn the_robust_losses_are_accepted_by_name() {
     }
     let _ = std::fs::remove_dir_all(&d);
 }
+
+/// Fuzzing case 16900 (seed 15, the suite's first version): `fk` with as many `--q` values as the URDF should have, on a URDF
+/// whose chain came out shorter, named the flag and the robot but not the file. The error names the
+/// `--robot` argument it loaded.
+#[test]
+fn fuzz_case_16900_a_joint_count_error_names_the_robot_file() {
+    let d = dir("fk_count");
+    let urdf = d.join("six.urdf");
+    std::fs::copy(repo().join("sim/robots/ur5.urdf"), &urdf).unwrap();
+    let urdf = urdf.to_str().unwrap();
+    check(
+        &["fk", "--robot", urdf, "--q", "0,0,0,0,0,0,0"],
+        2,
+        &["--q", "expected 6 joint values, got 7", urdf],
+    );
+    let _ = std::fs::remove_dir_all(&d);
+}

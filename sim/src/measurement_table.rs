@@ -61,7 +61,7 @@ mod parquet;
 pub use check::{LIMIT_TOLERANCE, check_against_model, reach_bound};
 pub use columns::{Column, ColumnValues, configurations_from_columns, from_columns};
 pub use csv::{read_csv_str, write_csv_string};
-pub use parquet::{PARQUET_MAX_ROW_GROUP_ROWS, write_parquet_bytes};
+pub use parquet::{PARQUET_MAX_ROW_GROUP_ROWS, ParquetTableWriter, write_parquet_bytes};
 
 use crate::error::{Result, SimError, fragment};
 use std::collections::HashMap;
@@ -77,6 +77,9 @@ pub const MAX_POSITION_M: f64 = 1000.0;
 pub const MAX_PAYLOAD_KG: f64 = 1000.0;
 /// A `sigma` above this (m) is rejected: a tracker's uncertainty is micrometres to millimetres.
 pub const MAX_SIGMA_M: f64 = 1.0;
+/// A `temp` outside this range (°C) is rejected: below absolute zero, or hotter than any robot runs
+/// (found by the fuzzing suite: 1e15 °C was read without a word).
+pub const TEMP_RANGE_C: (f64, f64) = (-273.15, 1000.0);
 /// Rows that share a pose id are repeated measurements of one pose: their joint values must agree
 /// with the pose's first row to within this (rad; m for prismatic joints). Encoder noise is
 /// micro-radians; a milliradian is a millimetre at a metre's reach, another configuration.
@@ -548,7 +551,7 @@ impl MeasurementTable {
     /// least one joint and one row, every float finite, `dir` in {−1, 0, +1}, `payload` and `sigma` not
     /// negative, quaternion norms within [`QUATERNION_NORM_ERROR`] of 1, physically possible magnitudes
     /// (positions within [`MAX_POSITION_M`] of the tracker, `payload` up to [`MAX_PAYLOAD_KG`], `sigma`
-    /// up to [`MAX_SIGMA_M`]), and the rows of each pose id at one configuration (joint values within
+    /// up to [`MAX_SIGMA_M`], `temp` within [`TEMP_RANGE_C`]), and the rows of each pose id at one configuration (joint values within
     /// [`POSE_REPEAT_TOLERANCE`]; the error names both rows). Reports the first bad cell in reading
     /// order (row by row, columns in file order); errors name `file`.
     pub fn validate(&self, file: &Path) -> Result<()> {
@@ -665,7 +668,17 @@ impl MeasurementTable {
             finite("t", t[r])?;
         }
         if let Some(temp) = &self.temp {
-            finite("temp", temp[r])?;
+            let v = temp[r];
+            finite("temp", v)?;
+            let (low, high) = TEMP_RANGE_C;
+            if !(low..=high).contains(&v) {
+                return bad(
+                    "temp",
+                    format!(
+                        "{v:e} °C is outside [{low}, {high}] °C: not a robot's temperature (degrees Celsius are expected)"
+                    ),
+                );
+            }
         }
         if let Some(d) = self.dir_row(r) {
             for (j, &v) in d.iter().enumerate() {
