@@ -237,6 +237,7 @@ pub fn measurement_table(plan: &Plan, sim: &Simulation, tracker: &Tracker) -> Me
         dir: plan.dir.is_some(),
         payload: true,
         sigma: tracker.noise_scale() > 0.0,
+        campaign: false,
     };
     MeasurementTable {
         n_joints: plan.nq,
@@ -256,6 +257,7 @@ pub fn measurement_table(plan: &Plan, sim: &Simulation, tracker: &Tracker) -> Me
         sigma: cols
             .sigma
             .then(|| sim.rows.iter().map(|r| r.reading.sigma_m).collect()),
+        campaign: None,
     }
 }
 

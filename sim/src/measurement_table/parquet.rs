@@ -36,6 +36,9 @@ pub fn write_parquet_bytes(table: &MeasurementTable) -> Result<Vec<u8>> {
 fn writer_properties(table: &MeasurementTable) -> WriterProperties {
     let mut b = crate::io::deterministic_writer_properties(PARQUET_MAX_ROW_GROUP_ROWS)
         .set_column_dictionary_enabled(ColumnPath::from("pose"), true);
+    if table.campaign.is_some() {
+        b = b.set_column_dictionary_enabled(ColumnPath::from("campaign"), true);
+    }
     if table.dir.is_some() {
         for j in 1..=table.n_joints {
             b = b.set_column_dictionary_enabled(ColumnPath::from(format!("dir{j}")), true);
@@ -44,13 +47,14 @@ fn writer_properties(table: &MeasurementTable) -> WriterProperties {
     b.build()
 }
 
-/// The Arrow schema of a table's file: `pose` Int64, `dir*` Int8, every other column Float64.
+/// The Arrow schema of a table's file: `pose` and `campaign` Int64, `dir*` Int8, every other column
+/// Float64.
 fn schema(table: &MeasurementTable) -> Arc<Schema> {
     let fields: Vec<Field> = table
         .column_names()
         .into_iter()
         .map(|name| {
-            let dt = if name == "pose" {
+            let dt = if name == "pose" || name == "campaign" {
                 DataType::Int64
             } else if name.starts_with("dir") {
                 DataType::Int8
@@ -90,6 +94,9 @@ fn arrays(table: &MeasurementTable, rows: std::ops::Range<usize>) -> Vec<ArrayRe
     }
     for c in [&table.payload, &table.sigma].into_iter().flatten() {
         out.push(f(c[rows.clone()].to_vec()));
+    }
+    if let Some(c) = &table.campaign {
+        out.push(Arc::new(Int64Array::from(c[rows.clone()].to_vec())));
     }
     out
 }
@@ -301,6 +308,7 @@ fn read_parquet(f: std::fs::File, file: &str, positions: Positions) -> Result<Me
 
     let nq = layout.n_joints;
     let mut pose: Vec<i64> = Vec::with_capacity(n_rows);
+    let mut campaign: Vec<i64> = Vec::new();
     let mut q_cols: Vec<Vec<f64>> = vec![Vec::with_capacity(n_rows); nq];
     let mut dir_cols: Vec<Vec<i8>> = vec![Vec::new(); if layout.columns.dir { nq } else { 0 }];
     let mut pos_cols: [Vec<f64>; 3] = Default::default();
@@ -331,6 +339,7 @@ fn read_parquet(f: std::fs::File, file: &str, positions: Positions) -> Result<Me
             let res = match role {
                 Role::Ignore => Ok(()),
                 Role::Pose => integers(arr).map(|v| pose.extend(v)),
+                Role::Campaign => integers(arr).map(|v| campaign.extend(v)),
                 Role::Dir(j) => directions(arr).map(|v| dir_cols[j].extend(v)),
                 _ => floats(arr).map(|v| match role {
                     Role::Q(j) => q_cols[j].extend(v),
@@ -340,7 +349,7 @@ fn read_parquet(f: std::fs::File, file: &str, positions: Positions) -> Result<Me
                     Role::Temp => temp.extend(v),
                     Role::Payload => payload.extend(v),
                     Role::Sigma => sigma.extend(v),
-                    Role::Ignore | Role::Pose | Role::Dir(_) => {}
+                    Role::Ignore | Role::Pose | Role::Campaign | Role::Dir(_) => {}
                 }),
             };
             if let Err((i, message)) = res {
@@ -386,6 +395,7 @@ fn read_parquet(f: std::fs::File, file: &str, positions: Positions) -> Result<Me
     table.temp = c.temp.then_some(temp);
     table.payload = c.payload.then_some(payload);
     table.sigma = c.sigma.then_some(sigma);
+    table.campaign = c.campaign.then_some(campaign);
     table.validate_named(file)?;
     Ok(table)
 }
