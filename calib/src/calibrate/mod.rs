@@ -75,6 +75,10 @@ pub struct CalibrationOptions {
     pub gross_error_threshold: f64,
     /// Seed of the learned models' cross-validation folds.
     pub learned_seed: u64,
+    /// With several campaigns, give each its own target offset (a re-seated reflector) instead of
+    /// one shared target. Default false.
+    #[serde(default)]
+    pub per_campaign_target: bool,
 }
 
 /// Most rounds of [`CalibrationOptions::gross_error_threshold`]'s exclusion.
@@ -94,6 +98,7 @@ impl Default for CalibrationOptions {
             outlier_threshold: 5.0,
             gross_error_threshold: default_gross_error_threshold(),
             learned_seed: 0,
+            per_campaign_target: false,
         }
     }
 }
@@ -206,6 +211,38 @@ pub fn observations(
     Ok(obs)
 }
 
+/// Fewest distinct configurations a campaign needs in the training rows: three points fix a rigid
+/// transform.
+pub const MIN_CAMPAIGN_POSES: usize = 3;
+
+/// Every campaign of `obs` has at least [`MIN_CAMPAIGN_POSES`] distinct configurations.
+fn check_campaign_poses(obs: &Observations, name: &str) -> Result<()> {
+    let Some(campaign) = &obs.campaign else {
+        return Ok(());
+    };
+    for id in obs.campaign_ids() {
+        let mut configs: Vec<Vec<u64>> = (0..obs.len())
+            .filter(|&r| campaign[r] == id)
+            .map(|r| obs.q_row(r).iter().map(|v| v.to_bits()).collect())
+            .collect();
+        configs.sort_unstable();
+        configs.dedup();
+        if configs.len() < MIN_CAMPAIGN_POSES {
+            return Err(CalibError::BadValue {
+                context: name.to_string(),
+                field: "campaign".into(),
+                value: id.to_string(),
+                problem: format!(
+                    "campaign {id} has {} distinct poses here: at least {MIN_CAMPAIGN_POSES} are needed to \
+                     register its tracker",
+                    configs.len()
+                ),
+            });
+        }
+    }
+    Ok(())
+}
+
 fn calibrate_with(
     model: &Model,
     train: &Dataset<'_>,
@@ -250,7 +287,17 @@ fn calibrate_with(
                     .into(),
         });
     }
-    let layout = ParamLayout::new(model, orientation).with_extensions(obs.ext.params.clone());
+    // The start: closed-form registration of every campaign.
+    let mut start = initial_params(model, &obs);
+    if options.per_campaign_target {
+        start = start.with_own_targets();
+    }
+    start.extension = vec![0.0; obs.ext.len()];
+    if let (Some(t), Some(d)) = (&test_obs, test) {
+        t.campaign_indices_or_error(&start, &d.name)?;
+    }
+    check_campaign_poses(&obs, &train.name)?;
+    let layout = ParamLayout::for_params(model, &start, obs.ext.params.clone());
     let p = layout.len();
     let dim = obs.dim();
     let n_poses = obs.n_poses();
@@ -258,7 +305,9 @@ fn calibrate_with(
     let n_configurations = obs.n_configurations();
     let equations = n_configurations * dim;
     if equations <= p {
-        let r = generic_rank(model, orientation, options);
+        // Each campaign after the first adds its registration (and target) to the generic rank.
+        let r = generic_rank(model, orientation, options) + layout.kinematic_len()
+            - ParamLayout::new(model, orientation).kinematic_len();
         if equations < r + 1 {
             return Err(CalibError::TooFewPoses {
                 context: train.name.clone(),
@@ -275,8 +324,6 @@ fn calibrate_with(
     let mut warnings = Vec::new();
 
     // Before: base and target only.
-    let mut start = initial_params(model, &obs);
-    start.extension = vec![0.0; obs.ext.len()];
     let bt = layout.base_and_target();
     let bt_scales: Vec<f64> = bt.iter().map(|&k| scales[k]).collect();
     let mut ws = LmWorkspace::new(obs.len() * dim, bt.len());
@@ -337,10 +384,12 @@ fn calibrate_with(
             }
             // Each excluded row's error against the final fit, and its warning.
             let prediction = crate::predict::Prediction::new(model, &params);
+            let campaign = prediction.campaigns_of(&obs);
             let mut scratch = prediction.scratch();
             for o in &mut excluded {
                 if let Some(r) = obs.source_row.iter().position(|&s| s + 1 == o.row) {
-                    let p = prediction.row(&obs.ext, r, obs.q_row(r), &mut scratch);
+                    let c = campaign.get(r).copied().unwrap_or(0);
+                    let p = prediction.row_in(&obs.ext, r, obs.q_row(r), c, &mut scratch);
                     o.error_m = (p - obs.position[r]).norm();
                 }
                 warnings.push(format!(

@@ -51,12 +51,14 @@ pub(super) fn find(
     let norms = prob.row_norms();
     let t = normalised_norms(&norms, &obs.weight, obs.dim());
     let prediction = Prediction::new(model, params);
+    let campaign = prediction.campaigns_of(obs);
     let mut s = prediction.scratch();
     let mut outliers = Vec::new();
     for (r, &tv) in t.iter().enumerate() {
         let raw = norms[r] / obs.weight[r].max(f64::MIN_POSITIVE).sqrt();
         if tv > threshold && raw > threshold / 10.0 {
-            let p = prediction.row(&obs.ext, r, obs.q_row(r), &mut s);
+            let c = campaign.get(r).copied().unwrap_or(0);
+            let p = prediction.row_in(&obs.ext, r, obs.q_row(r), c, &mut s);
             outliers.push(Outlier {
                 row: obs.source_row[r] + 1,
                 pose: obs.pose[r],

@@ -314,8 +314,9 @@ pub(crate) fn evaluate(
     let train_obs = observations(model, &split.train, &options.calibration, ext, at)?;
     let test_obs = observations(model, &split.test, &options.calibration, ext, at)?;
     let prediction = Prediction::new(model, &cal.params);
-    let train_err = prediction.errors(&train_obs);
-    let test_err = prediction.errors(&test_obs);
+    // With several campaigns, in the first one's tracker frame (the robot's, for the probes).
+    let train_err = prediction.reference_errors(&train_obs);
+    let test_err = prediction.reference_errors(&test_obs);
     let pose_sq = per_pose(&split.test_pose, test_err.iter().map(|e| e.norm_squared()));
     let step = Step {
         model: spec.clone(),
