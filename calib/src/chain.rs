@@ -188,8 +188,7 @@ impl Chain {
             s.frames[i] = pose_from(r, p);
         }
         s.t_tracker_flange = s.frames[self.nq() - 1] * self.flange_offset;
-        s.p_tracker =
-            (s.t_tracker_flange * nalgebra::Point3::from(self.targets[campaign])).coords;
+        s.p_tracker = (s.t_tracker_flange * nalgebra::Point3::from(self.targets[campaign])).coords;
         s.r_tracker_target = match &self.target_rotations[campaign] {
             Some(rf) => s.t_tracker_flange.rotation.matrix() * rf,
             None => Matrix3::identity(),

@@ -105,6 +105,7 @@ pub mod params;
 pub mod plan;
 pub mod predict;
 pub mod problem;
+pub mod register;
 pub mod robot;
 pub mod stats;
 pub mod units;

@@ -34,7 +34,7 @@ use crate::error::{CalibError, Result};
 use crate::extensions::{Cause, ExtensionSettings, ModelSpec, Regressors};
 use crate::learned::LearnedResidual;
 use crate::lie3::{quaternion_from_rotation, rpy_from_rotation};
-use crate::params::KinematicParams;
+use crate::params::{KinematicParams, ParamKind, ParamLayout};
 use crate::predict::Prediction;
 use crate::robot::Robot;
 use crate::units::Unit;
@@ -222,7 +222,6 @@ impl CalibratedModel {
     /// The file form of a calibration of `robot`.
     pub fn new(robot: &Robot, cal: &Calibration) -> Self {
         let p = &cal.params;
-        let n = robot.model.nq();
         let vf = if cal.report.chi2_per_dof.is_finite() {
             cal.report.chi2_per_dof
         } else {
@@ -241,31 +240,7 @@ impl CalibratedModel {
                 urdf: robot.urdf.clone(),
                 urdf_fnv1a64: Some(urdf_checksum(&robot.urdf)),
             },
-            parameters: ModelParameters {
-                joint_error_twists: (0..n)
-                    .map(|i| {
-                        let x = p.joint_twist(i);
-                        [x[0], x[1], x[2], x[3], x[4], x[5]]
-                    })
-                    .collect(),
-                zero_offsets: p.zero_offset.clone(),
-                t_tracker_base: pose_json(&p.t_tracker_base),
-                p_flange_target_m: p.p_flange_target.into(),
-                r_flange_target: p.r_flange_target.as_ref().map(rows),
-                campaign: p.campaign_ids[0],
-                campaigns: p
-                    .campaigns
-                    .iter()
-                    .zip(&p.campaign_ids[1..])
-                    .map(|(c, &id)| CampaignJson {
-                        id,
-                        t_tracker_base: pose_json(&c.t_tracker_base),
-                        p_flange_target_m: c.p_flange_target.map(Into::into),
-                        r_flange_target: c.r_flange_target.as_ref().map(rows),
-                    })
-                    .collect(),
-                default_campaign: Some(p.campaign_ids[p.default_campaign]),
-            },
+            parameters: parameters_json(p),
             covariance: Some(CovarianceJson {
                 parameters: (0..cal.layout.len()).map(|k| cal.layout.name(k)).collect(),
                 matrix: (0..cal.covariance.nrows())
@@ -290,6 +265,53 @@ impl CalibratedModel {
                 n_train_poses: cal.report.n_train_poses,
             }),
         }
+    }
+
+    /// The model with a campaign registered by [`crate::register::register`] (`reg`): its
+    /// parameters, the default campaign, and the covariance grown by the registration's block (a
+    /// registration is conditional on the robot: no cross terms). `model` is the embedded robot.
+    pub fn registered(&self, model: &Model, reg: &crate::register::Registration) -> Self {
+        let mut out = self.clone();
+        out.format_version = FORMAT_VERSION;
+        out.software = format!("robocal-calib {}", env!("CARGO_PKG_VERSION"));
+        out.parameters = parameters_json(&reg.params);
+        let ext = self
+            .extensions
+            .as_ref()
+            .map_or(Vec::new(), |e| e.settings.params(model));
+        let old = ParamLayout::for_params(model, &self.params(), ext.clone());
+        let new = ParamLayout::for_params(model, &reg.params, ext);
+        if let Some(cov) = &self.covariance
+            && cov.matrix.len() == old.len()
+        {
+            let map = layout_map(&old, &new);
+            let mut m = vec![vec![0.0; new.len()]; new.len()];
+            for (i, mi) in map.iter().enumerate() {
+                for (j, mj) in map.iter().enumerate() {
+                    if let (Some(a), Some(b)) = (mi, mj) {
+                        m[*a][*b] = cov.matrix[i][j];
+                    }
+                }
+            }
+            for (a, &ka) in reg.indices.iter().enumerate() {
+                for (b, &kb) in reg.indices.iter().enumerate() {
+                    m[ka][kb] = reg.covariance[(a, b)];
+                }
+                // The registration is refitted: its old cross terms no longer hold.
+                for k in 0..new.len() {
+                    if !reg.indices.contains(&k) {
+                        m[ka][k] = 0.0;
+                        m[k][ka] = 0.0;
+                    }
+                }
+            }
+            out.covariance = Some(CovarianceJson {
+                parameters: (0..new.len()).map(|k| new.name(k)).collect(),
+                matrix: m,
+                variance_factor: cov.variance_factor,
+            });
+        }
+        out
     }
 
     /// JSON text (pretty-printed).
@@ -524,8 +546,15 @@ impl CalibratedModel {
         );
         let mut ids = vec![p.campaign];
         ids.extend(p.campaigns.iter().map(|c| c.id));
-        let starts: Vec<Pose> = p.campaigns.iter().map(|c| pose(&c.t_tracker_base)).collect();
-        let own = p.campaigns.first().is_some_and(|c| c.p_flange_target_m.is_some());
+        let starts: Vec<Pose> = p
+            .campaigns
+            .iter()
+            .map(|c| pose(&c.t_tracker_base))
+            .collect();
+        let own = p
+            .campaigns
+            .first()
+            .is_some_and(|c| c.p_flange_target_m.is_some());
         let mut params = params.with_campaigns(&ids, &starts, own);
         for (reg, c) in params.campaigns.iter_mut().zip(&p.campaigns) {
             reg.p_flange_target = c.p_flange_target_m.map(Vector3::from);
@@ -718,6 +747,77 @@ impl Predictor {
     }
 }
 
+/// The parameters in file form.
+fn parameters_json(p: &KinematicParams) -> ModelParameters {
+    ModelParameters {
+        joint_error_twists: (0..p.joint_error.len())
+            .map(|i| {
+                let x = p.joint_twist(i);
+                [x[0], x[1], x[2], x[3], x[4], x[5]]
+            })
+            .collect(),
+        zero_offsets: p.zero_offset.clone(),
+        t_tracker_base: pose_json(&p.t_tracker_base),
+        p_flange_target_m: p.p_flange_target.into(),
+        r_flange_target: p.r_flange_target.as_ref().map(rows),
+        campaign: p.campaign_ids[0],
+        campaigns: p
+            .campaigns
+            .iter()
+            .zip(&p.campaign_ids[1..])
+            .map(|(c, &id)| CampaignJson {
+                id,
+                t_tracker_base: pose_json(&c.t_tracker_base),
+                p_flange_target_m: c.p_flange_target.map(Into::into),
+                r_flange_target: c.r_flange_target.as_ref().map(rows),
+            })
+            .collect(),
+        default_campaign: Some(p.campaign_ids[p.default_campaign]),
+    }
+}
+
+/// Where each parameter of `old` (a layout of the same robot and extensions) sits in `new`, which
+/// registers the same campaigns (by id) and perhaps more, perhaps with own targets: `None` for a
+/// parameter `new` does not have.
+fn layout_map(old: &ParamLayout, new: &ParamLayout) -> Vec<Option<usize>> {
+    (0..old.len())
+        .map(|k| match old.kind(k) {
+            ParamKind::JointTwist { joint, component } => Some(new.joint_twist(joint) + component),
+            ParamKind::ZeroOffset { joint } => Some(new.zero_offset(joint)),
+            ParamKind::BaseTwist {
+                campaign,
+                component,
+            } => new
+                .campaign_ids
+                .iter()
+                .position(|&id| id == old.campaign_ids[campaign])
+                .map(|c| new.campaign_base(c) + component),
+            ParamKind::TargetPosition { campaign, axis } => {
+                let id = old.campaign_ids[campaign];
+                let c = new.campaign_ids.iter().position(|&i| i == id)?;
+                // A shared target stays the shared one.
+                let c = if campaign == 0 || !old.campaign_targets {
+                    0
+                } else {
+                    c
+                };
+                Some(new.campaign_target_position(c) + axis)
+            }
+            ParamKind::TargetOrientation { campaign, axis } => {
+                let id = old.campaign_ids[campaign];
+                let c = new.campaign_ids.iter().position(|&i| i == id)?;
+                let c = if campaign == 0 || !old.campaign_targets {
+                    0
+                } else {
+                    c
+                };
+                new.campaign_target_orientation(c).map(|o| o + axis)
+            }
+            ParamKind::Extension { index } => Some(new.extension(index)),
+        })
+        .collect()
+}
+
 /// A pose in file form.
 fn pose_json(t: &Pose) -> PoseJson {
     PoseJson {
@@ -794,7 +894,11 @@ fn check_campaigns(p: &ModelParameters, bad: &dyn Fn(String) -> CalibError) -> R
         if c.r_flange_target.is_some() != (own_first && orientation) {
             return Err(bad(format!(
                 "key '{key}.r_flange_target' must be {} (own target: {own_first}, orientation: {orientation})",
-                if own_first && orientation { "given" } else { "null" }
+                if own_first && orientation {
+                    "given"
+                } else {
+                    "null"
+                }
             )));
         }
     }

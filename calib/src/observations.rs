@@ -162,8 +162,8 @@ impl Observations {
         params: &KinematicParams,
         source: &str,
     ) -> Result<Vec<usize>> {
-        self.campaign_indices(params).map_err(|(r, id)| {
-            CalibError::BadValue {
+        self.campaign_indices(params)
+            .map_err(|(r, id)| CalibError::BadValue {
                 context: format!("{source}: row {}", self.source_row[r] + 1),
                 field: "campaign".into(),
                 value: id.to_string(),
@@ -177,8 +177,7 @@ impl Observations {
                         .collect::<Vec<_>>()
                         .join(", ")
                 ),
-            }
-        })
+            })
     }
 
     /// Number of measurement rows.

@@ -184,10 +184,7 @@ impl ParamLayout {
     /// campaigns after the first (6 each, 9 or 12 with their own targets).
     #[inline]
     pub fn kinematic_len(&self) -> usize {
-        7 * self.n_joints
-            + 6
-            + self.target_len()
-            + (self.n_campaigns() - 1) * self.campaign_block()
+        7 * self.n_joints + 6 + self.target_len() + (self.n_campaigns() - 1) * self.campaign_block()
     }
 
     /// Index of extension parameter `e`.
@@ -275,16 +272,25 @@ impl ParamLayout {
             }
         } else {
             let rest = k - nj - 6 - self.target_len();
-            let (campaign, t) = (1 + rest / self.campaign_block(), rest % self.campaign_block());
+            let (campaign, t) = (
+                1 + rest / self.campaign_block(),
+                rest % self.campaign_block(),
+            );
             if t < 6 {
                 ParamKind::BaseTwist {
                     campaign,
                     component: t,
                 }
             } else if t < 9 {
-                ParamKind::TargetPosition { campaign, axis: t - 6 }
+                ParamKind::TargetPosition {
+                    campaign,
+                    axis: t - 6,
+                }
             } else {
-                ParamKind::TargetOrientation { campaign, axis: t - 9 }
+                ParamKind::TargetOrientation {
+                    campaign,
+                    axis: t - 9,
+                }
             }
         }
     }
@@ -535,7 +541,11 @@ impl KinematicParams {
     /// of the shared one) when `own_targets` and there are several.
     pub fn with_campaigns(mut self, ids: &[i64], start: &[Pose], own_targets: bool) -> Self {
         assert!(!ids.is_empty(), "at least one campaign");
-        assert_eq!(start.len() + 1, ids.len(), "a start for each campaign after the first");
+        assert_eq!(
+            start.len() + 1,
+            ids.len(),
+            "a start for each campaign after the first"
+        );
         let own = own_targets && ids.len() > 1;
         self.campaign_ids = ids.to_vec();
         self.campaigns = start

@@ -1391,25 +1391,51 @@ fn campaign_column_is_read_written_and_keys_the_poses() {
     // that is not an integer.
     let no_column = "pose,q1,q2,x,y,z\n0,0.1,0.2,1,2,3\n0,0.5,0.6,1,2,3\n";
     let e = read_csv_str(no_column, "n.csv").unwrap_err().to_string();
-    assert!(e.contains("pose 0 is reused with other joint values"), "{e}");
+    assert!(
+        e.contains("pose 0 is reused with other joint values"),
+        "{e}"
+    );
     let same_campaign = "pose,q1,q2,x,y,z,campaign\n0,0.1,0.2,1,2,3,1\n0,0.5,0.6,1,2,3,1\n";
-    let e = read_csv_str(same_campaign, "s.csv").unwrap_err().to_string();
+    let e = read_csv_str(same_campaign, "s.csv")
+        .unwrap_err()
+        .to_string();
     assert!(e.contains("row 2") && e.contains("column pose"), "{e}");
     let e = read_csv_str("pose,q1,x,y,z,campaign\n0,0.1,1,2,3,1.5\n", "f.csv")
         .unwrap_err()
         .to_string();
-    assert!(e.starts_with("f.csv: row 1 (line 2), column campaign:"), "{e}");
+    assert!(
+        e.starts_with("f.csv: row 1 (line 2), column campaign:"),
+        "{e}"
+    );
     // A float-typed Parquet column with integral values (a pandas default after a merge) reads.
     let q = dir.join("float_campaign.parquet");
     write_arrow(
         &q,
         vec![
-            ("pose", std::sync::Arc::new(arrow_array::Int64Array::from(vec![0, 0]))),
-            ("q1", std::sync::Arc::new(arrow_array::Float64Array::from(vec![0.1, 0.2]))),
-            ("x", std::sync::Arc::new(arrow_array::Float64Array::from(vec![1.0, 1.0]))),
-            ("y", std::sync::Arc::new(arrow_array::Float64Array::from(vec![1.0, 1.0]))),
-            ("z", std::sync::Arc::new(arrow_array::Float64Array::from(vec![1.0, 1.0]))),
-            ("campaign", std::sync::Arc::new(arrow_array::Float64Array::from(vec![1.0, 2.0]))),
+            (
+                "pose",
+                std::sync::Arc::new(arrow_array::Int64Array::from(vec![0, 0])),
+            ),
+            (
+                "q1",
+                std::sync::Arc::new(arrow_array::Float64Array::from(vec![0.1, 0.2])),
+            ),
+            (
+                "x",
+                std::sync::Arc::new(arrow_array::Float64Array::from(vec![1.0, 1.0])),
+            ),
+            (
+                "y",
+                std::sync::Arc::new(arrow_array::Float64Array::from(vec![1.0, 1.0])),
+            ),
+            (
+                "z",
+                std::sync::Arc::new(arrow_array::Float64Array::from(vec![1.0, 1.0])),
+            ),
+            (
+                "campaign",
+                std::sync::Arc::new(arrow_array::Float64Array::from(vec![1.0, 2.0])),
+            ),
         ],
     );
     assert_eq!(mt::read(&q).unwrap().campaign, Some(vec![1, 2]));

@@ -12,7 +12,7 @@ use sim::Model;
 use sim::lie::{Pose, pose_from};
 
 /// Rigid transform `T` with `dst ≈ T src` in the least-squares sense (Kabsch / Horn).
-fn kabsch(src: &[Vector3<f64>], dst: &[Vector3<f64>]) -> Pose {
+pub(crate) fn kabsch(src: &[Vector3<f64>], dst: &[Vector3<f64>]) -> Pose {
     let n = src.len() as f64;
     let cs = src.iter().sum::<Vector3<f64>>() / n;
     let cd = dst.iter().sum::<Vector3<f64>>() / n;
