@@ -298,10 +298,14 @@ impl CalibratedModel {
                     m[ka][kb] = reg.covariance[(a, b)];
                 }
                 // The registration is refitted: its old cross terms no longer hold.
-                for k in 0..new.len() {
+                for (k, row) in m.iter_mut().enumerate() {
                     if !reg.indices.contains(&k) {
-                        m[ka][k] = 0.0;
-                        m[k][ka] = 0.0;
+                        row[ka] = 0.0;
+                    }
+                }
+                for (k, v) in m[ka].iter_mut().enumerate() {
+                    if !reg.indices.contains(&k) {
+                        *v = 0.0;
                     }
                 }
             }

@@ -32,7 +32,7 @@ use sim::lie::Pose;
 use sim::measurement_table::MeasurementTable;
 
 /// Settings of [`register`].
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct RegisterOptions {
     /// Also fit the campaign's own target offset (a re-seated reflector). A model without
     /// per-campaign targets gets one for every campaign (copies of the shared target, so their
@@ -46,18 +46,6 @@ pub struct RegisterOptions {
     pub lm: LmOptions,
     /// Expected parameter magnitudes (column scaling).
     pub scales: ParameterScales,
-}
-
-impl Default for RegisterOptions {
-    fn default() -> Self {
-        RegisterOptions {
-            target: false,
-            campaign: None,
-            noise: NoiseModel::default(),
-            lm: LmOptions::default(),
-            scales: ParameterScales::default(),
-        }
-    }
 }
 
 /// A registration's residual is "well above" the model's when their RMS ratio exceeds this and the
