@@ -213,16 +213,36 @@ impl Chain {
     /// [`Chain::forward`] configuration, row-major into `out` (3 rows of `layout.len()`). The columns
     /// of the campaigns other than the row's are zero.
     pub fn position_jacobian(&self, s: &ChainScratch, layout: &ParamLayout, out: &mut [f64]) {
+        self.position_jacobian_of(s, layout, true, out);
+    }
+
+    /// [`Chain::position_jacobian`], with the joint columns (error twists and zero offsets) only when
+    /// `joints` (else they are left as they are): a fit of the registration alone needs no more.
+    pub fn position_jacobian_of(
+        &self,
+        s: &ChainScratch,
+        layout: &ParamLayout,
+        joints: bool,
+        out: &mut [f64],
+    ) {
         let np = layout.len();
         debug_assert_eq!(out.len(), 3 * np);
-        let p = s.p_tracker;
-        let campaign = s.campaign;
-        let base = &self.bases[campaign];
         if layout.n_campaigns() > 1 {
             for row in 0..3 {
                 out[row * np + layout.base()..row * np + layout.kinematic_len()].fill(0.0);
             }
         }
+        if joints {
+            self.joint_columns(s, layout, out);
+        }
+        self.registration_columns(s, layout, out);
+    }
+
+    /// The joint columns of [`Chain::position_jacobian_of`].
+    fn joint_columns(&self, s: &ChainScratch, layout: &ParamLayout, out: &mut [f64]) {
+        let np = layout.len();
+        let p = s.p_tracker;
+        let base = &self.bases[s.campaign];
         let mut prev_r = *base.rotation.matrix();
         let mut prev_a = rot_block(&prev_r, &(p - base.translation.vector));
         for i in 0..self.nq() {
@@ -248,6 +268,13 @@ impl Chain {
             prev_r = cur_r;
             prev_a = cur_a;
         }
+    }
+
+    /// The registration (base twist and target) columns of [`Chain::position_jacobian_of`].
+    fn registration_columns(&self, s: &ChainScratch, layout: &ParamLayout, out: &mut [f64]) {
+        let np = layout.len();
+        let p = s.p_tracker;
+        let campaign = s.campaign;
         let kb = layout.campaign_base(campaign);
         let kt = layout.campaign_target_position(campaign);
         let rf = s.t_tracker_flange.rotation.matrix();

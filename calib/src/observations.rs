@@ -218,11 +218,10 @@ impl Observations {
     /// Number of distinct joint configurations (rows with bit-identical joint values count once,
     /// whatever their pose ids): what determines the parameters.
     pub fn n_configurations(&self) -> usize {
-        let mut rows: Vec<Vec<u64>> = (0..self.len())
-            .map(|r| self.q_row(r).iter().map(|v| v.to_bits()).collect())
-            .collect();
-        rows.sort_unstable();
-        rows.dedup();
+        let bits = |r: usize| self.q_row(r).iter().map(|v| v.to_bits());
+        let mut rows: Vec<usize> = (0..self.len()).collect();
+        rows.sort_unstable_by(|&a, &b| bits(a).cmp(bits(b)));
+        rows.dedup_by(|a, b| bits(*a).eq(bits(*b)));
         rows.len()
     }
 }

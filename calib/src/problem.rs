@@ -87,6 +87,8 @@ pub struct KinematicProblem<'a> {
     ws: RowScratch,
     /// Campaign index of every row (empty: all in the first campaign).
     campaign: Vec<usize>,
+    /// Whether a joint or extension parameter is active (else the joint columns are not needed).
+    joint_columns: bool,
 }
 
 /// Measurement rows per parallel work item. The partial sums of the normal equations are added in
@@ -165,6 +167,9 @@ impl<'a> KinematicProblem<'a> {
         assert_eq!(start.extension.len(), obs.ext.len(), "extension parameters");
         let np = layout.len();
         let dim = obs.dim();
+        let joint_columns = active
+            .iter()
+            .any(|&k| k < layout.base() || k >= layout.kinematic_len());
         KinematicProblem {
             model,
             obs,
@@ -174,6 +179,7 @@ impl<'a> KinematicProblem<'a> {
             step_full: vec![0.0; np],
             ws: RowScratch::new(model.nq(), dim, np, active.len()),
             active,
+            joint_columns,
             layout,
             campaign,
         }
@@ -270,8 +276,12 @@ impl<'a> KinematicProblem<'a> {
         let mut res = [dp.x * sp, dp.y * sp, dp.z * sp, 0.0, 0.0, 0.0];
         let np = self.layout.len();
         if with_jacobian {
-            self.chain
-                .position_jacobian(&ws.predict.chain, &self.layout, &mut ws.block[..3 * np]);
+            self.chain.position_jacobian_of(
+                &ws.predict.chain,
+                &self.layout,
+                self.joint_columns,
+                &mut ws.block[..3 * np],
+            );
             if growth != 0.0 {
                 grow_columns(&self.layout, campaign, growth, &p, &mut ws.block[..3 * np]);
             }
@@ -442,6 +452,44 @@ impl LeastSquaresProblem for KinematicProblem<'_> {
                 }
             }
         }
+    }
+
+    fn scaled_factor(&mut self, scales: &[f64]) -> DMatrix<f64> {
+        let d = self.obs.dim();
+        let np = self.layout.len();
+        let p = self.active.len();
+        let m = self.obs.len() * d;
+        if !crate::linalg::is_tall(m, p) {
+            let mut j = DMatrix::zeros(m, p);
+            self.jacobian(&mut j);
+            return crate::lm::Subspace::square_factor(&j, scales);
+        }
+        // The blocks of rows of the tall-skinny QR, each made from the measurements it overlaps: the
+        // same matrices as cutting the whole Jacobian, without forming it.
+        let block = crate::linalg::tsqr_block_rows(p);
+        let this = &*self;
+        let factors: Vec<DMatrix<f64>> = (0..m.div_ceil(block))
+            .into_par_iter()
+            .map(|b| {
+                let (first, last) = (b * block, ((b + 1) * block).min(m));
+                let mut ws = this.scratch();
+                let mut out = DMatrix::zeros(last - first, p);
+                for r in first / d..last.div_ceil(d) {
+                    this.row_block(r, true, &mut ws);
+                    for row in 0..d {
+                        let k = r * d + row;
+                        if k < first || k >= last {
+                            continue;
+                        }
+                        for (a, &col) in this.active.iter().enumerate() {
+                            out[(k - first, a)] = ws.block[row * np + col] * scales[a];
+                        }
+                    }
+                }
+                out.qr().r()
+            })
+            .collect();
+        crate::linalg::stacked_r_factor(&factors, p)
     }
 
     fn normal_equations(

@@ -4,11 +4,11 @@ use super::paths::{Inputs, check_distinct};
 use super::robot_arg::RobotArgs;
 use super::shared::{CliError, CliResult, print_json, read_table};
 use calib::CalibError;
-use calib::calibrate::{CalibrationOptions, Dataset, RobustLoss, calibrate_model};
+use calib::calibrate::validation::{DEFAULT_FOLDS, ValidationPlan, calibrate_validated};
+use calib::calibrate::{CalibrationOptions, Dataset, RobustLoss};
 use calib::extensions::ModelChoice;
 use calib::model_file::{CalibratedModel, calibrated_urdf, urdf_deviation};
 use calib::robot::Robot;
-use calib::stats::split_by_pose;
 use serde_json::json;
 use sim::ChainSpec;
 use std::path::PathBuf;
@@ -29,16 +29,27 @@ pub struct Args {
     /// Where to write the calibrated model (JSON, with the robot embedded).
     #[arg(long, value_name = "MODEL.json")]
     out: PathBuf,
-    /// Held-out measurements for validation (instead of splitting --data).
+    /// Held-out measurements for validation, predicted by the saved model (instead of
+    /// cross-validation).
     #[arg(long, value_name = "FILE")]
     test_data: Option<PathBuf>,
-    /// Fraction of the poses of --data held out for validation (0 = calibrate on everything).
-    /// Repeated measurements of a pose stay together.
-    #[arg(long, value_name = "F", default_value_t = 0.3)]
+    /// Validate by k-fold cross-validation by pose: each fold predicted by a model fitted on the
+    /// others, folds fitted in parallel (0 = no validation). The saved model is fitted on every pose
+    /// either way. Default 5.
+    #[arg(long, value_name = "K")]
+    folds: Option<usize>,
+    /// Validate by one split instead: this fraction of the poses held out and predicted by a model
+    /// fitted on the others (repeats of a pose stay together). The saved model is still fitted on
+    /// every pose.
+    #[arg(long, value_name = "F", default_value_t = 0.0)]
     test_fraction: f64,
-    /// Seed of the train/test split.
+    /// Seed of the folds or the split.
     #[arg(long, value_name = "N", default_value_t = 0)]
     seed: u64,
+    /// With several campaigns (a `campaign` column), give each its own target offset (a re-seated
+    /// reflector) instead of one shared target.
+    #[arg(long)]
+    per_campaign_target: bool,
     /// Robust loss against outliers (iteratively reweighted).
     #[arg(long, value_name = "LOSS", value_enum)]
     robust: Option<Robust>,
@@ -94,6 +105,16 @@ pub fn run(args: Args) -> CliResult {
             args.test_fraction
         )));
     }
+    let chosen = [
+        args.test_data.is_some(),
+        args.test_fraction > 0.0,
+        args.folds.is_some(),
+    ];
+    if chosen.iter().filter(|&&b| b).count() > 1 {
+        return Err(CliError::Input(
+            "--test-data, --test-fraction and --folds are alternative validations: give one".into(),
+        ));
+    }
     let spec = ChainSpec {
         base_link: args.robot.base_link.clone(),
         tip_link: args.robot.tip_link.clone(),
@@ -106,35 +127,32 @@ pub fn run(args: Args) -> CliResult {
         Some(p) => Some(read_table(p, model)?),
         None => None,
     };
-    let (train, test, split) = match (&test_table, &args.test_data) {
+    let folds = args.folds.unwrap_or(DEFAULT_FOLDS);
+    let (plan, split) = match (&test_table, &args.test_data) {
         (Some(t), Some(p)) => (
-            Dataset::all(&table, &data_name),
-            Some(Dataset::all(t, &p.display().to_string())),
+            ValidationPlan::TestData(Dataset::all(t, &p.display().to_string())),
             json!({"kind": "test_file", "test_data": p.display().to_string()}),
         ),
-        _ => {
-            let (tr, te) = split_by_pose(&table, args.test_fraction, args.seed);
-            let split =
-                json!({"kind": "by_pose", "test_fraction": args.test_fraction, "seed": args.seed});
-            let train = Dataset {
-                table: &table,
-                rows: tr,
-                name: if te.is_empty() {
-                    data_name.clone()
-                } else {
-                    format!("{data_name} (training set)")
-                },
-            };
-            let test = (!te.is_empty()).then(|| Dataset {
-                table: &table,
-                rows: te,
-                name: format!("{data_name} (test set)"),
-            });
-            (train, test, split)
-        }
+        _ if args.test_fraction > 0.0 => (
+            ValidationPlan::Split {
+                fraction: args.test_fraction,
+                seed: args.seed,
+            },
+            json!({"kind": "by_pose", "test_fraction": args.test_fraction, "seed": args.seed}),
+        ),
+        _ if folds == 0 => (ValidationPlan::None, json!({"kind": "none"})),
+        _ => (
+            ValidationPlan::Folds {
+                k: folds,
+                seed: args.seed,
+            },
+            json!({"kind": "cross_validation", "folds": folds, "seed": args.seed}),
+        ),
     };
+    let all = Dataset::all(&table, &data_name);
     let options = CalibrationOptions {
         robust,
+        per_campaign_target: args.per_campaign_target,
         ..CalibrationOptions::default()
     };
     let model_spec = match model_spec {
@@ -152,19 +170,24 @@ pub fn run(args: Args) -> CliResult {
             d.model
         }
     };
-    let cal =
-        calibrate_model(model, &train, test.as_ref(), &model_spec, &options).map_err(|e| {
-            let split_hint = matches!(e, CalibError::TooFewPoses { .. })
-                && args.test_data.is_none()
-                && args.test_fraction > 0.0;
+    let (cal, validation) = calibrate_validated(model, &all, &model_spec, &options, &plan)
+        .map_err(|e| {
+            let hint = match (&e, &plan) {
+                (CalibError::TooFewPoses { .. }, ValidationPlan::Split { fraction, .. }) => Some(format!(
+                    " (--test-fraction {fraction} held out part of the poses for the validation fit; \
+                     --folds 0 validates nothing and uses all)"
+                )),
+                (CalibError::TooFewPoses { .. }, ValidationPlan::Folds { k, .. }) => Some(format!(
+                    " (--folds {k} fits each fold on {}/{k} of the poses; fewer folds, or --folds 0 \
+                     for no validation)",
+                    k - 1
+                )),
+                _ => None,
+            };
             let e = CliError::from(e);
-            if split_hint {
-                e.with_hint(&format!(
-                    " (--test-fraction {} held out part of the poses; --test-fraction 0 uses all)",
-                    args.test_fraction
-                ))
-            } else {
-                e
+            match hint {
+                Some(h) => e.with_hint(&h),
+                None => e,
             }
         })?;
     let report = &cal.report;
@@ -180,15 +203,15 @@ pub fn run(args: Args) -> CliResult {
         }
         return Err(CliError::Runtime(msg));
     }
-    let file = CalibratedModel::new(&robot, &cal);
+    let mut file = CalibratedModel::new(&robot, &cal);
+    if let (Some(f), Some(v)) = (file.fit.as_mut(), &validation) {
+        f.held_out_rms_m = Some(v.final_stats().rms_m);
+    }
     sim::io::write_atomic(&args.out, file.to_json().as_bytes())?;
     if let Some(path) = &args.urdf_out {
         let urdf = calibrated_urdf(model, &cal.params);
-        let configs: Vec<Vec<f64>> = train
-            .rows
-            .iter()
-            .take(200)
-            .map(|&r| table.q_row(r).to_vec())
+        let configs: Vec<Vec<f64>> = (0..table.len().min(200))
+            .map(|r| table.q_row(r).to_vec())
             .collect();
         let dev = urdf_deviation(model, &cal.params, &urdf, &configs)?;
         if dev > 1e-9 {
@@ -208,9 +231,13 @@ pub fn run(args: Args) -> CliResult {
             "urdf_out": args.urdf_out.as_ref().map(|p| p.display().to_string()),
             "split": split,
             "report": report,
+            "validation": validation,
         }))
     } else {
         eprint!("{}", report.text());
+        if let Some(v) = &validation {
+            eprint!("{}", v.text(&model_spec.name()));
+        }
         eprintln!("wrote {}", args.out.display());
         if let Some(p) = &args.urdf_out {
             eprintln!("wrote {}", p.display());

@@ -14,7 +14,8 @@
 //!
 //! One module per job: [`start`] (the closed-form start and the generic rank), [`robust`] (losses and
 //! IRLS), [`outliers`], [`extended`] (refits of extended models), [`learned_stage`], [`estimates`]
-//! (parameters in reporting form) and [`report`] (what it all says).
+//! (parameters in reporting form), [`report`] (what it all says) and [`validation`] (held-out
+//! errors: k-fold cross-validation by pose, a split, a test file).
 
 mod estimates;
 mod extended;
@@ -23,6 +24,7 @@ mod outliers;
 pub mod report;
 pub mod robust;
 pub mod start;
+pub mod validation;
 
 pub use crate::predict::prediction_and_jacobian;
 pub use extended::EQUILIBRIUM_REFITS;
@@ -351,15 +353,20 @@ fn calibrate_with(
     let mut params = before_params.clone();
     let mut robust_summary = None;
     let mut excluded: Vec<Outlier> = Vec::new();
+    // The rows' residual norms at the final parameters and weights, when the last gross-error
+    // search had them (the outlier search below needs the same).
+    let mut final_norms: Option<Vec<f64>> = None;
     let (report, sub) = match options.robust {
         None => {
             let mut prob = KinematicProblem::new(model, &obs, params.clone(), all.clone());
             let mut out = minimize(&mut prob, scales.as_slice(), &options.lm, &mut ws);
             params = prob.into_params();
             for _ in 0..GROSS_ERROR_ROUNDS {
+                let norms = outliers::row_norms(model, &obs, &params, &all);
                 let gross =
-                    outliers::find(model, &obs, &params, &all, options.gross_error_threshold);
+                    outliers::find_in(model, &obs, &params, &norms, options.gross_error_threshold);
                 if gross.is_empty() {
+                    final_norms = Some(norms);
                     break;
                 }
                 for o in &gross {
@@ -463,7 +470,10 @@ fn calibrate_with(
         ));
     }
 
-    let outliers = outliers::find(model, &obs, &params, &all, options.outlier_threshold);
+    let outliers = match &final_norms {
+        Some(norms) => outliers::find_in(model, &obs, &params, norms, options.outlier_threshold),
+        None => outliers::find(model, &obs, &params, &all, options.outlier_threshold),
+    };
 
     let sigma_rms = (obs.sigma.iter().map(|s| s * s).sum::<f64>() / obs.len() as f64).sqrt();
     let parameters = estimates(&layout, &params, &covariance, &sub);

@@ -47,9 +47,29 @@ pub(super) fn find(
     active: &[usize],
     threshold: f64,
 ) -> Vec<Outlier> {
-    let mut prob = KinematicProblem::new(model, obs, params.clone(), active.to_vec());
-    let norms = prob.row_norms();
-    let t = normalised_norms(&norms, &obs.weight, obs.dim());
+    let norms = row_norms(model, obs, params, active);
+    find_in(model, obs, params, &norms, threshold)
+}
+
+/// The weighted residual norm of every row of `obs` at `params` (noise units).
+pub(super) fn row_norms(
+    model: &Model,
+    obs: &Observations,
+    params: &KinematicParams,
+    active: &[usize],
+) -> Vec<f64> {
+    KinematicProblem::new(model, obs, params.clone(), active.to_vec()).row_norms()
+}
+
+/// [`find`] from the rows' weighted residual norms `norms` at `params` ([`row_norms`]).
+pub(super) fn find_in(
+    model: &Model,
+    obs: &Observations,
+    params: &KinematicParams,
+    norms: &[f64],
+    threshold: f64,
+) -> Vec<Outlier> {
+    let t = normalised_norms(norms, &obs.weight, obs.dim());
     let prediction = Prediction::new(model, params);
     let campaign = prediction.campaigns_of(obs);
     let mut s = prediction.scratch();
