@@ -352,6 +352,11 @@ impl LmWorkspace {
         }
     }
 
+    /// The weighted residuals at the end of the last solve.
+    pub fn residuals(&self) -> &[f64] {
+        &self.residuals
+    }
+
     /// The column-scaled normal matrix `D JᵀJ D` (p × p) at the end of the last solve.
     pub fn gram(&self) -> &DMatrix<f64> {
         &self.gram
@@ -405,7 +410,7 @@ fn normal_equations_finite(cost: f64, gram: &DMatrix<f64>) -> bool {
 
 /// Minimises `χ² = ‖r‖²` of `problem` from its current point with column scales `scales` (physical units
 /// per scaled unit, 0 = frozen). On return the problem's linearisation point is the solution and its
-/// trial point equals it; the workspace holds the final normal matrix ([`LmWorkspace::gram`]), and the returned
+/// trial point equals it; the workspace holds the final residuals and normal matrix, and the returned
 /// [`Subspace`] is the SVD at the solution (for covariance and identifiability).
 pub fn minimize<P: LeastSquaresProblem>(
     problem: &mut P,
@@ -477,6 +482,7 @@ pub fn minimize<P: LeastSquaresProblem>(
         }
         fresh = false;
         let factor = problem.scaled_factor(scales);
+        problem.residuals(&mut ws.residuals);
         sub = Subspace::from_factor(
             &factor,
             scales,
