@@ -45,6 +45,10 @@ pub struct Chain {
     home_inv: Vec<Pose>,
     /// `H'ₙ⁻¹ M`: flange in the last joint frame (m).
     flange_offset: Pose,
+    /// The nominal home pose `Hᵢ` of each joint frame (base frame, m).
+    home: Vec<Pose>,
+    /// The nominal flange at q = 0, `M` (base frame, m).
+    home_flange: Pose,
     zero_offset: Vec<f64>,
     /// `T_tracker_base` per campaign (m).
     bases: Vec<Pose>,
@@ -93,6 +97,8 @@ impl Chain {
             terms: vec![[Matrix3::zeros(); 3]; n],
             home_inv: vec![Pose::identity(); n],
             flange_offset: Pose::identity(),
+            home: model.joints.iter().map(|j| j.home).collect(),
+            home_flange: model.home_flange,
             zero_offset: vec![0.0; n],
             bases: Vec::new(),
             targets: Vec::new(),
@@ -127,16 +133,26 @@ impl Chain {
     /// If `params` has a different joint count than `model`.
     pub fn update(&mut self, model: &Model, params: &KinematicParams) {
         assert_eq!(params.joint_error.len(), model.nq(), "joint count");
+        self.update_params(params);
+    }
+
+    /// [`Chain::update`] for the robot this chain was made for, without allocating: a chain per
+    /// evaluation thread can follow parameters that change from row to row.
+    ///
+    /// # Panics
+    /// If `params` has a different joint count.
+    pub fn update_params(&mut self, params: &KinematicParams) {
+        assert_eq!(params.joint_error.len(), self.nq(), "joint count");
         let mut prev_inv = Pose::identity();
-        for (i, joint) in model.joints.iter().enumerate() {
-            let home = params.joint_error[i] * joint.home;
+        for i in 0..self.nq() {
+            let home = params.joint_error[i] * self.home[i];
             let origin = prev_inv * home;
             self.origin[i] = origin;
-            self.terms[i] = Joint::rotation_terms_for(&origin, &joint.axis);
+            self.terms[i] = Joint::rotation_terms_for(&origin, &self.axis[i]);
             prev_inv = home.inverse();
             self.home_inv[i] = prev_inv;
         }
-        self.flange_offset = prev_inv * model.home_flange;
+        self.flange_offset = prev_inv * self.home_flange;
         self.zero_offset.copy_from_slice(&params.zero_offset);
         let k = params.n_campaigns();
         self.bases.resize(k, Pose::identity());

@@ -662,6 +662,12 @@ impl Predictor {
     /// If `q` has the wrong length (check tables with [`Predictor::predict_table`]).
     pub fn predict(&mut self, q: &[f64]) -> (Vector3<f64>, Matrix3<f64>) {
         let c = self.params.default_campaign;
+        if self.learned.as_ref().is_some_and(|l| l.adjoint().is_some()) {
+            let p = Prediction::new(&self.model, &self.params).with_learned(self.learned.as_ref());
+            let mut s = p.scratch();
+            let pos = p.row_in(&Regressors::none(), 0, q, c, &mut s);
+            return (pos, s.chain.r_tracker_target);
+        }
         self.chain.forward_in(&mut self.scratch, q, c);
         // The learned correction lives in the first campaign's tracker frame.
         let frame = self.params.t_tracker_base_of(c).rotation.matrix()

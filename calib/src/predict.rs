@@ -8,6 +8,10 @@
 //! p_tracker = p + R_c R_0ᵀ r̂(q)            (learned correction, when the model has one)
 //! ```
 //!
+//! The `learned:adjoint` model is no additive correction: it changes the joints' error twists and zero
+//! offsets with the configuration ([`crate::learned::adjoint`]), so its rows are evaluated by a chain
+//! re-prepared for each row (in a per-thread [`AdjointScratch`]).
+//!
 //! With several measurement campaigns each row is predicted in its campaign `c`'s tracker frame
 //! (`T_tracker_base` of `c`, its target); the learned correction `r̂` lives in the first campaign's
 //! tracker frame and is turned into campaign `c`'s by `R_c R_0ᵀ` (`R_c` the rotation of `c`'s
@@ -22,6 +26,7 @@ use crate::chain::{Chain, ChainScratch};
 use crate::error::{CalibError, Result};
 use crate::extensions::{Regressors, apply};
 use crate::learned::LearnedResidual;
+use crate::learned::adjoint::{AdjointModel, AdjointScratch};
 use crate::lie3::log_rotation;
 use crate::observations::Observations;
 use crate::params::{KinematicParams, ParamLayout};
@@ -50,6 +55,8 @@ pub struct PredictScratch {
     pub chain: ChainScratch,
     /// Effective joint values `θ` of the last row (rad or m).
     pub theta: Vec<f64>,
+    /// The chain of a `learned:adjoint` model, re-prepared for each row.
+    pub adjoint: Option<AdjointScratch>,
 }
 
 impl PredictScratch {
@@ -58,6 +65,7 @@ impl PredictScratch {
         PredictScratch {
             chain: ChainScratch::new(n),
             theta: vec![0.0; n],
+            adjoint: None,
         }
     }
 }
@@ -129,7 +137,31 @@ impl<'a> Prediction<'a> {
 
     /// A workspace for [`Prediction::row`].
     pub fn scratch(&self) -> PredictScratch {
-        PredictScratch::new(self.nq)
+        let mut s = PredictScratch::new(self.nq);
+        if let Some(a) = self.learned.and_then(|l| l.adjoint()) {
+            s.adjoint = Some(AdjointScratch::new(&self.chain, self.params, a));
+        }
+        s
+    }
+
+    /// Row `r` of an adjoint model `a`: the chain at the row's error twists and zero offsets.
+    fn adjoint_row(
+        &self,
+        a: &AdjointModel,
+        regs: &Regressors,
+        r: usize,
+        q: &[f64],
+        campaign: usize,
+        s: &mut PredictScratch,
+    ) -> Vector3<f64> {
+        let mut ad = s
+            .adjoint
+            .take()
+            .unwrap_or_else(|| AdjointScratch::new(&self.chain, self.params, a));
+        ad.prepare(a, self.params, q);
+        let p = physical_row(&ad.chain, &ad.params, regs, r, q, campaign, s).p_tracker;
+        s.adjoint = Some(ad);
+        p
     }
 
     /// Row `r` (regressors `regs`, controller joint values `q`): the physical prediction in the first
@@ -181,6 +213,9 @@ impl<'a> Prediction<'a> {
         campaign: usize,
         s: &mut PredictScratch,
     ) -> Vector3<f64> {
+        if let Some(a) = self.learned.and_then(|l| l.adjoint()) {
+            return self.adjoint_row(a, regs, r, q, campaign, s);
+        }
         let p = self.physical_in(regs, r, q, campaign, s).p_tracker;
         match self.learned {
             Some(l) => p + self.learned_in(l, q, campaign),
@@ -303,6 +338,13 @@ impl<'a> Prediction<'a> {
     pub fn errors(&self, obs: &Observations) -> Vec<Vector3<f64>> {
         let campaign = self.campaigns_of(obs);
         let mut out = vec![Vector3::zeros(); obs.len()];
+        if self.learned.is_some_and(|l| l.adjoint().is_some()) {
+            self.evaluate(&obs.q, &campaign, &obs.ext, &mut out, None, true);
+            for (e, m) in out.iter_mut().zip(&obs.position) {
+                *e -= m;
+            }
+            return out;
+        }
         self.evaluate(&obs.q, &campaign, &obs.ext, &mut out, None, false);
         for (r, (e, m)) in out.iter_mut().zip(&obs.position).enumerate() {
             *e -= m;

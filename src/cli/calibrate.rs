@@ -4,6 +4,7 @@ use super::paths::{Inputs, check_distinct};
 use super::robot_arg::RobotArgs;
 use super::shared::{CliError, CliResult, print_json, read_table};
 use calib::CalibError;
+use calib::calibrate::auto::{self, AUTO_LEARNED_KINDS};
 use calib::calibrate::validation::{DEFAULT_FOLDS, ValidationPlan, calibrate_validated};
 use calib::calibrate::{CalibrationOptions, Dataset, RobustLoss};
 use calib::extensions::ModelChoice;
@@ -155,19 +156,27 @@ pub fn run(args: Args) -> CliResult {
         per_campaign_target: args.per_campaign_target,
         ..CalibrationOptions::default()
     };
+    let mut auto = None;
     let model_spec = match model_spec {
         Some(s) => s,
         None => {
-            let d = super::diagnose::run_diagnosis(
+            let diagnose_options = super::diagnose::options(1.0 / 3.0, args.seed, 1e-3)?;
+            let d = super::diagnose::run_diagnosis(model, &table, &data_name, &diagnose_options)?;
+            let choice = auto::choose(
                 model,
                 &table,
                 &data_name,
-                &super::diagnose::options(1.0 / 3.0, args.seed, 1e-3)?,
+                &d,
+                &diagnose_options,
+                &AUTO_LEARNED_KINDS,
             )?;
             if !args.json {
                 eprintln!("--model auto: diagnose chose {}", d.model);
+                eprintln!("--model auto: {}", choice.note);
             }
-            d.model
+            let spec = choice.spec.clone();
+            auto = Some(choice);
+            spec
         }
     };
     let (cal, validation) = calibrate_validated(model, &all, &model_spec, &options, &plan)
@@ -232,6 +241,7 @@ pub fn run(args: Args) -> CliResult {
             "split": split,
             "report": report,
             "validation": validation,
+            "auto": auto,
         }))
     } else {
         eprint!("{}", report.text());

@@ -24,7 +24,12 @@ pub(super) fn add_learned(
     let physical = Prediction::new(model, &cal.params);
     // In the first campaign's tracker frame, where the correction lives.
     let residual: Vec<Vector3<f64>> = physical.reference_errors(&obs).iter().map(|e| -e).collect();
-    let learned = crate::learned::fit(kind, &obs.q, model.nq(), &residual, options.learned_seed)?;
+    let learned = match kind {
+        LearnedKind::Adjoint => {
+            crate::learned::fit_adjoint(model, &cal.params, &obs, options.learned_seed)?
+        }
+        _ => crate::learned::fit(kind, &obs.q, model.nq(), &residual, options.learned_seed)?,
+    };
     let corrected = physical.clone().with_learned(Some(&learned));
     let stats_with = |o: &Observations| stats_of_errors(&corrected.errors(o), o);
     let test_stats = match test {

@@ -17,6 +17,7 @@
 //! (parameters in reporting form), [`report`] (what it all says) and [`validation`] (held-out
 //! errors: k-fold cross-validation by pose, a split, a test file).
 
+pub mod auto;
 mod estimates;
 mod extended;
 mod learned_stage;

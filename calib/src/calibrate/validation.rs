@@ -139,13 +139,14 @@ impl Validation {
             _ => "the test data, predicted by the saved model".to_string(),
         };
         let mm = |v: f64| format!("{:.4} mm", v * 1e3);
+        let w = model.chars().count().max(20);
         let mut s = format!(
-            "validation on held-out poses: {how}\n  {:<28} {:>6} {:>12} {:>12} {:>12} {:>12}\n",
+            "validation on held-out poses: {how}\n  {:<w$} {:>6} {:>12} {:>12} {:>12} {:>12}\n",
             "model", "poses", "RMS", "mean", "max", "ISO mean"
         );
         let mut row = |name: &str, st: &HeldOutStats| {
             s.push_str(&format!(
-                "  {name:<28} {:>6} {:>12} {:>12} {:>12} {:>12}\n",
+                "  {name:<w$} {:>6} {:>12} {:>12} {:>12} {:>12}\n",
                 st.n_poses,
                 mm(st.rms_m),
                 mm(st.mean_m),

@@ -1,0 +1,556 @@
+//! `learned:adjoint`: the adjoint error model with configuration-dependent parameters (Schillreff and
+//! Ortmeier, "Learning-based kinematic calibration using adjoint error model", ICINCO 2018): each
+//! joint's error twist and zero offset become polynomials in the joint values, identified through the
+//! product-of-exponentials chain.
+//!
+//! After the physical calibration (error twists `Gᵢ = exp[ξᵢ]`, zero offsets `δqᵢ`, extensions, tracker
+//! registrations), joint `i`'s screw and angle at configuration `q` are
+//!
+//! ```text
+//! Sᵢ'(q) = Ad(exp[ζᵢ(q)] Gᵢ) Sᵢ,   θᵢ = qᵢ + δqᵢ + δᵢ(q) (+ extension terms),
+//! ζᵢ(q) = Σₖ cᵢₖ φₖ(q) ∈ R⁶ (rad, m),   δᵢ(q) = Σₖ dᵢₖ φₖ(q) (rad, m)
+//! ```
+//!
+//! with features `φₖ` the monomials of the standardised joint values `zⱼ = (qⱼ − mean)/std` of total
+//! degree 1 to `d`, each centred and scaled over the fit rows (as in [`super::polynomial`]). The
+//! coefficients `u = (c, d)/s` (scaled by [`COEFFICIENT_SCALE`]) minimise
+//! `Σ_rows |p(q) − p_measured|² + λ n |u|²` (positions, tracker frame of each row's campaign, m).
+//!
+//! The Jacobian is analytic: a change `Δcᵢₖ` turns `exp[ζᵢ]` into `exp[J_l(ζᵢ) Δcᵢₖ φₖ] exp[ζᵢ]`
+//! ([`crate::lie3::se3_left_jacobian`]), which moves the target by the chain's error-twist Jacobian
+//! `∂p/∂ξᵢ` ([`crate::chain::Chain::position_jacobian`]) times `J_l(ζᵢ) φₖ`; a change of `dᵢₖ` moves it
+//! by the zero-offset column times `φₖ`; both times `1 + γ` with a growth term. (Checked against central
+//! differences in `tests/learned.rs`.)
+//!
+//! Degree and `λ` are chosen by 5-fold cross-validation over the rows on the model linearised at the
+//! physical solution (`u = 0`), where a fold's error is the exact quadratic form
+//! `s_f + 2uᵀg_f + uᵀG_f u` of the fold's normal equations, so no Jacobian is stored; the selected model
+//! is then solved on every row and refined by Gauss–Newton steps through the exact chain. A degree is
+//! tried only while there are at least [`EQUATIONS_PER_COEFFICIENT`] position equations per coefficient
+//! (degree 1 always). Orientation measurements are not used by the fit (its predictions of orientation
+//! follow from the chain). As with the other learned models, the correction is kept only when its
+//! cross-validated RMS beats the physical model's.
+
+use super::cross_validation::{K_FOLDS, fold_assignment, select_simplest};
+use super::polynomial::{joint_standardisation, monomials};
+use crate::chain::Chain;
+use crate::lie3::se3_left_jacobian;
+use crate::params::{KinematicParams, ParamLayout};
+use crate::predict::{PredictScratch, physical_row};
+use crate::problem::Observations;
+use nalgebra::{DMatrix, DVector, Vector3, Vector6};
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+use sim::Model;
+use sim::lie::exp_twist;
+
+/// Expected size of a coefficient (rad or m per standardised feature unit): the unit of `u`.
+pub const COEFFICIENT_SCALE: f64 = 1e-4;
+/// Ridge strengths tried, relative to the mean diagonal of the normal matrix per row.
+pub const LAMBDAS: [f64; 5] = [1e-6, 1e-4, 1e-3, 1e-2, 1e-1];
+/// Degrees tried.
+pub const DEGREES: [usize; 2] = [1, 2];
+/// A degree is tried only with at least this many position equations per coefficient (degree 1
+/// always is).
+pub const EQUATIONS_PER_COEFFICIENT: usize = 5;
+/// Most coefficients of a degree tried.
+pub const MAX_COEFFICIENTS: usize = 2000;
+/// Gauss–Newton refinements through the exact chain after the linearised solve.
+pub const REFINEMENTS: usize = 2;
+/// Measurement rows per block of the normal-equation products.
+const BLOCK_ROWS: usize = 128;
+
+/// Components per joint: the error twist `[ω; v]` (6) and the zero offset.
+const PER_JOINT: usize = 7;
+
+/// A fitted adjoint model: the coefficients of every joint's twist and zero-offset polynomials.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct AdjointModel {
+    /// Total degree of the monomials.
+    pub degree: usize,
+    /// Ridge strength chosen (relative, see [`LAMBDAS`]).
+    pub lambda: f64,
+    /// Joints.
+    pub n_joints: usize,
+    /// Mean of each joint value over the fit rows (rad or m).
+    pub q_mean: Vec<f64>,
+    /// Standard deviation of each joint value over the fit rows (1 for a joint that did not move).
+    pub q_scale: Vec<f64>,
+    /// Monomials as lists of joint indices.
+    pub monomials: Vec<Vec<usize>>,
+    /// Mean of each monomial over the fit rows.
+    pub feature_mean: Vec<f64>,
+    /// Standard deviation of each monomial over the fit rows (1 if constant).
+    pub feature_scale: Vec<f64>,
+    /// Coefficients (rad or m per standardised feature unit), index
+    /// `(joint · 7 + component) · features + feature`, components `ω_x, ω_y, ω_z, v_x, v_y, v_z, δq`.
+    pub coefficients: Vec<f64>,
+}
+
+impl AdjointModel {
+    /// Number of features.
+    pub fn n_features(&self) -> usize {
+        self.monomials.len()
+    }
+
+    /// Number of coefficients.
+    pub fn n_coefficients(&self) -> usize {
+        self.coefficients.len()
+    }
+
+    /// The standardised features `φ(q)` into `out` (length [`AdjointModel::n_features`]).
+    pub fn features(&self, q: &[f64], out: &mut [f64]) {
+        features(
+            q,
+            &self.q_mean,
+            &self.q_scale,
+            &self.monomials,
+            &self.feature_mean,
+            &self.feature_scale,
+            out,
+        );
+    }
+
+    /// `params` with joint `i`'s error motion `exp[ζᵢ(q)] Gᵢ` and zero offset `δqᵢ + δᵢ(q)` for
+    /// features `phi`, into `out` (a copy of `params` to overwrite; only the joints change).
+    pub fn apply(&self, params: &KinematicParams, phi: &[f64], out: &mut KinematicParams) {
+        let k = phi.len();
+        for i in 0..self.n_joints {
+            let mut zeta = Vector6::zeros();
+            let base = i * PER_JOINT * k;
+            for (c, z) in zeta.iter_mut().enumerate() {
+                let w = &self.coefficients[base + c * k..base + (c + 1) * k];
+                *z = w.iter().zip(phi).map(|(a, b)| a * b).sum();
+            }
+            let w = &self.coefficients[base + 6 * k..base + 7 * k];
+            let delta: f64 = w.iter().zip(phi).map(|(a, b)| a * b).sum();
+            out.joint_error[i] = exp_twist(&zeta) * params.joint_error[i];
+            out.zero_offset[i] = params.zero_offset[i] + delta;
+        }
+    }
+
+    /// `ζᵢ(q)` of joint `i` for features `phi` (rad, m).
+    fn twist(&self, phi: &[f64], i: usize) -> Vector6<f64> {
+        let k = phi.len();
+        let base = i * PER_JOINT * k;
+        Vector6::from_fn(|c, _| {
+            self.coefficients[base + c * k..base + (c + 1) * k]
+                .iter()
+                .zip(phi)
+                .map(|(a, b)| a * b)
+                .sum()
+        })
+    }
+}
+
+/// Standardised monomial features of one row.
+fn features(
+    q: &[f64],
+    q_mean: &[f64],
+    q_scale: &[f64],
+    monomials: &[Vec<usize>],
+    feature_mean: &[f64],
+    feature_scale: &[f64],
+    out: &mut [f64],
+) {
+    for (k, m) in monomials.iter().enumerate() {
+        let raw: f64 = m.iter().map(|&j| (q[j] - q_mean[j]) / q_scale[j]).product();
+        out[k] = (raw - feature_mean[k]) / feature_scale[k];
+    }
+}
+
+/// Per-thread workspace to evaluate an adjoint model: a chain and parameters that follow each row.
+#[derive(Clone, Debug)]
+pub struct AdjointScratch {
+    /// The chain at the row's parameters.
+    pub chain: Chain,
+    /// The row's parameters.
+    pub params: KinematicParams,
+    /// The row's features.
+    pub phi: Vec<f64>,
+}
+
+impl AdjointScratch {
+    /// A workspace from the physical model's `chain` and `params`.
+    pub fn new(chain: &Chain, params: &KinematicParams, model: &AdjointModel) -> Self {
+        AdjointScratch {
+            chain: chain.clone(),
+            params: params.clone(),
+            phi: vec![0.0; model.n_features()],
+        }
+    }
+
+    /// Prepares the chain for the configuration `q` (controller values, rad or m).
+    pub fn prepare(&mut self, model: &AdjointModel, params: &KinematicParams, q: &[f64]) {
+        model.features(q, &mut self.phi);
+        model.apply(params, &self.phi, &mut self.params);
+        self.chain.update_params(&self.params);
+    }
+}
+
+/// The fit rows: the training observations, the physical model, the layout of its Jacobian.
+struct Rows<'a> {
+    model: &'a Model,
+    obs: &'a Observations,
+    params: &'a KinematicParams,
+    layout: ParamLayout,
+    campaign: Vec<usize>,
+    n_joints: usize,
+}
+
+/// One row's evaluation at coefficients `coef` (or the physical model when `None`): the residual
+/// `p − p_measured` (m) and its Jacobian with respect to the scaled coefficients `u` (3 × P,
+/// row-major into `jac`).
+struct RowEval {
+    predict: PredictScratch,
+    chain: Chain,
+    params: KinematicParams,
+    block: Vec<f64>,
+    phi: Vec<f64>,
+}
+
+impl Rows<'_> {
+    fn scratch(&self, n_features: usize) -> RowEval {
+        RowEval {
+            predict: PredictScratch::new(self.n_joints),
+            chain: Chain::new(self.model, self.params),
+            params: self.params.clone(),
+            block: vec![0.0; 3 * self.layout.len()],
+            phi: vec![0.0; n_features],
+        }
+    }
+
+    /// Residual and Jacobian of row `r` for the model `m` (its coefficients; its features' settings).
+    fn eval(&self, m: &AdjointModel, r: usize, ws: &mut RowEval, jac: &mut [f64]) -> Vector3<f64> {
+        let q = self.obs.q_row(r);
+        let k = m.n_features();
+        m.features(q, &mut ws.phi);
+        m.apply(self.params, &ws.phi, &mut ws.params);
+        ws.chain.update_params(&ws.params);
+        let campaign = self.campaign.get(r).copied().unwrap_or(0);
+        let pred = physical_row(
+            &ws.chain,
+            &ws.params,
+            &self.obs.ext,
+            r,
+            q,
+            campaign,
+            &mut ws.predict,
+        );
+        let np = self.layout.len();
+        ws.chain
+            .position_jacobian_of(&ws.predict.chain, &self.layout, true, &mut ws.block);
+        let grow = 1.0 + pred.growth;
+        let p_cols = jac.len() / 3;
+        for i in 0..self.n_joints {
+            let jl = se3_left_jacobian(&m.twist(&ws.phi, i));
+            let kt = self.layout.joint_twist(i);
+            let kz = self.layout.zero_offset(i);
+            for row in 0..3 {
+                // ∂p/∂ξᵢ J_l(ζᵢ): a 6-vector per axis.
+                let jx = &ws.block[row * np + kt..row * np + kt + 6];
+                let mut d = [0.0; 6];
+                for (c, dc) in d.iter_mut().enumerate() {
+                    *dc = (0..6).map(|a| jx[a] * jl[(a, c)]).sum::<f64>() * grow;
+                }
+                let dz = ws.block[row * np + kz] * grow;
+                let out = &mut jac[row * p_cols..(row + 1) * p_cols];
+                let base = i * PER_JOINT * k;
+                for (c, dc) in d.iter().enumerate() {
+                    for (f, &phi) in ws.phi.iter().enumerate() {
+                        out[base + c * k + f] = dc * phi * COEFFICIENT_SCALE;
+                    }
+                }
+                for (f, &phi) in ws.phi.iter().enumerate() {
+                    out[base + 6 * k + f] = dz * phi * COEFFICIENT_SCALE;
+                }
+            }
+        }
+        pred.p_tracker - self.obs.position[r]
+    }
+}
+
+/// Normal equations of a set of rows: `G = AᵀA`, `g = Aᵀe`, `s = eᵀe` (A: Jacobian in `u`, e: residual).
+#[derive(Clone, Debug)]
+struct Normal {
+    gram: DMatrix<f64>,
+    grad: DVector<f64>,
+    sse: f64,
+    rows: usize,
+}
+
+impl Normal {
+    fn zeros(p: usize) -> Self {
+        Normal {
+            gram: DMatrix::zeros(p, p),
+            grad: DVector::zeros(p),
+            sse: 0.0,
+            rows: 0,
+        }
+    }
+}
+
+/// Normal equations per fold (`fold_of[r]`, `k` folds; all rows in fold 0 with `k = 1`) at the
+/// coefficients of `m`, accumulated by blocks of rows in parallel.
+fn normal_equations(rows: &Rows<'_>, m: &AdjointModel, fold_of: &[usize], k: usize) -> Vec<Normal> {
+    let p = m.n_coefficients();
+    let n = rows.obs.len();
+    let blocks: Vec<Vec<Normal>> = (0..n.div_ceil(BLOCK_ROWS))
+        .into_par_iter()
+        .map(|b| {
+            let range = b * BLOCK_ROWS..((b + 1) * BLOCK_ROWS).min(n);
+            let mut ws = rows.scratch(m.n_features());
+            let mut out: Vec<Normal> = (0..k).map(|_| Normal::zeros(p)).collect();
+            // The rows of each fold in this block, as a matrix of 3 rows each.
+            for (f, normal) in out.iter_mut().enumerate() {
+                let members: Vec<usize> = range.clone().filter(|&r| fold_of[r] == f).collect();
+                if members.is_empty() {
+                    continue;
+                }
+                let mut a = DMatrix::zeros(3 * members.len(), p);
+                let mut e = DVector::zeros(3 * members.len());
+                let mut jac = vec![0.0; 3 * p];
+                for (j, &r) in members.iter().enumerate() {
+                    let res = rows.eval(m, r, &mut ws, &mut jac);
+                    for row in 0..3 {
+                        for (c, v) in jac[row * p..(row + 1) * p].iter().enumerate() {
+                            a[(3 * j + row, c)] = *v;
+                        }
+                        e[3 * j + row] = res[row];
+                    }
+                }
+                normal.gram += a.transpose() * &a;
+                normal.grad += a.tr_mul(&e);
+                normal.sse += e.norm_squared();
+                normal.rows += members.len();
+            }
+            out
+        })
+        .collect();
+    let mut total: Vec<Normal> = (0..k).map(|_| Normal::zeros(p)).collect();
+    for part in blocks {
+        for (t, x) in total.iter_mut().zip(part) {
+            t.gram += x.gram;
+            t.grad += x.grad;
+            t.sse += x.sse;
+            t.rows += x.rows;
+        }
+    }
+    total
+}
+
+/// Solves `(G + μ I) u = −g` by Cholesky; `None` when not positive definite.
+fn ridge_solve(gram: &DMatrix<f64>, grad: &DVector<f64>, mu: f64) -> Option<DVector<f64>> {
+    let mut a = gram.clone();
+    for i in 0..a.nrows() {
+        a[(i, i)] += mu;
+    }
+    if !crate::linalg::cholesky_in_place(&mut a) {
+        return None;
+    }
+    let b = DMatrix::from_column_slice(grad.len(), 1, grad.as_slice());
+    let x = crate::linalg::cholesky_solve(&a, &b);
+    Some(-DVector::from_column_slice(x.as_slice()))
+}
+
+/// A fitted adjoint correction and its cross-validation: the model, its description, the
+/// cross-validated RMS with and without it (m).
+pub struct AdjointFit {
+    /// The model (coefficients zero when cross-validation found no gain).
+    pub model: AdjointModel,
+    /// Whether it is kept.
+    pub active: bool,
+    /// Cross-validated RMS of the 3-D position error with the selected model (m).
+    pub cv_rms_m: f64,
+    /// The same without a correction (m).
+    pub cv_rms_before_m: f64,
+    /// Rows fitted.
+    pub n_rows: usize,
+}
+
+/// An adjoint model of `degree` with zero coefficients and the standardisation of `obs`' rows.
+pub fn empty_model(obs: &Observations, degree: usize) -> AdjointModel {
+    let n = obs.n_joints;
+    let (q_mean, q_scale) = joint_standardisation(&obs.q, n);
+    let monos = monomials(n, degree);
+    let rows = obs.len();
+    let k = monos.len();
+    let mut mean = vec![0.0; k];
+    let mut sq = vec![0.0; k];
+    for r in 0..rows {
+        let q = obs.q_row(r);
+        for (f, m) in monos.iter().enumerate() {
+            let v: f64 = m.iter().map(|&j| (q[j] - q_mean[j]) / q_scale[j]).product();
+            mean[f] += v;
+            sq[f] += v * v;
+        }
+    }
+    let scale: Vec<f64> = (0..k)
+        .map(|f| {
+            mean[f] /= rows as f64;
+            let var = sq[f] / rows as f64 - mean[f] * mean[f];
+            if var > 1e-24 { var.sqrt() } else { 1.0 }
+        })
+        .collect();
+    AdjointModel {
+        degree,
+        lambda: 0.0,
+        n_joints: n,
+        q_mean,
+        q_scale,
+        monomials: monos,
+        feature_mean: mean,
+        feature_scale: scale,
+        coefficients: vec![0.0; n * PER_JOINT * k],
+    }
+}
+
+/// Fits the adjoint model to the training rows `obs` (with its extension regressors) of the physical
+/// model `params` of `model`; folds from `seed`.
+pub fn fit(
+    model: &Model,
+    params: &KinematicParams,
+    obs: &Observations,
+    seed: u64,
+) -> crate::error::Result<AdjointFit> {
+    let n = obs.len();
+    let layout = ParamLayout::for_params(model, params, obs.ext.params.clone());
+    let campaign =
+        obs.campaign_indices(params)
+            .map_err(|(r, id)| crate::error::CalibError::BadValue {
+                context: "learned:adjoint".into(),
+                field: "campaign".into(),
+                value: id.to_string(),
+                problem: format!("row {r}: not a campaign of the model"),
+            })?;
+    let rows = Rows {
+        model,
+        obs,
+        params,
+        layout,
+        campaign,
+        n_joints: model.nq(),
+    };
+    let fold_of = fold_assignment(n, K_FOLDS, seed);
+    // Candidates from the simplest: low degree first, strong ridge first.
+    let mut candidates: Vec<(usize, f64)> = Vec::new();
+    let mut sse = Vec::new();
+    let mut before = 0.0;
+    for &degree in &DEGREES {
+        let m = empty_model(obs, degree);
+        let p = m.n_coefficients();
+        if degree > 1 && (p * EQUATIONS_PER_COEFFICIENT > 3 * n || p > MAX_COEFFICIENTS) {
+            break;
+        }
+        let folds = normal_equations(&rows, &m, &fold_of, K_FOLDS);
+        let mut all = Normal::zeros(p);
+        for f in &folds {
+            all.gram += &f.gram;
+            all.grad += &f.grad;
+            all.sse += f.sse;
+            all.rows += f.rows;
+        }
+        before = all.sse;
+        let scale = all.gram.trace() / (p as f64 * n as f64);
+        for &lambda in LAMBDAS.iter().rev() {
+            let mut total = 0.0;
+            for f in &folds {
+                let gram = &all.gram - &f.gram;
+                let grad = &all.grad - &f.grad;
+                let mu = lambda * scale * (all.rows - f.rows) as f64;
+                let total_f = match ridge_solve(&gram, &grad, mu) {
+                    Some(u) => f.sse + 2.0 * u.dot(&f.grad) + u.dot(&(&f.gram * &u)),
+                    None => f64::INFINITY,
+                };
+                total += total_f.max(0.0);
+            }
+            candidates.push((degree, lambda));
+            sse.push(total);
+        }
+    }
+    let best = select_simplest(&sse, n);
+    let (degree, lambda) = candidates[best];
+    let cv_rms_m = (sse[best] / n as f64).sqrt();
+    let cv_rms_before_m = (before / n as f64).sqrt();
+    let mut m = empty_model(obs, degree);
+    m.lambda = lambda;
+    let active = cv_rms_m < cv_rms_before_m;
+    if active {
+        let p = m.n_coefficients();
+        let all_fold = vec![0; n];
+        let mut u = DVector::zeros(p);
+        let mut mu = 0.0;
+        let mut objective = f64::INFINITY;
+        let mut accepted = u.clone();
+        let set = |m: &mut AdjointModel, u: &DVector<f64>| {
+            for (c, v) in m.coefficients.iter_mut().zip(u.iter()) {
+                *c = v * COEFFICIENT_SCALE;
+            }
+        };
+        // The linearised solve at u = 0, then Gauss–Newton steps through the exact chain, each kept
+        // only if it lowers the penalised objective.
+        for _ in 0..=REFINEMENTS + 1 {
+            set(&mut m, &u);
+            let normal = normal_equations(&rows, &m, &all_fold, 1).remove(0);
+            if mu == 0.0 {
+                mu = lambda * normal.gram.trace() / p as f64;
+            }
+            let value = normal.sse + mu * u.norm_squared();
+            if value >= objective {
+                break;
+            }
+            objective = value;
+            accepted.copy_from(&u);
+            let grad = &normal.grad + &u * mu;
+            let Some(step) = ridge_solve(&normal.gram, &grad, mu) else {
+                break;
+            };
+            u += step;
+        }
+        set(&mut m, &accepted);
+    }
+    Ok(AdjointFit {
+        model: m,
+        active,
+        cv_rms_m,
+        cv_rms_before_m,
+        n_rows: n,
+    })
+}
+
+/// The residual `p − p_measured` (m) of every row of `obs` and its Jacobian with respect to the
+/// coefficients in physical units (rad or m per feature unit; rows × 3 by P), for the tests against
+/// finite differences.
+pub fn residuals_and_jacobian(
+    model: &Model,
+    params: &KinematicParams,
+    obs: &Observations,
+    adjoint: &AdjointModel,
+) -> (Vec<Vector3<f64>>, DMatrix<f64>) {
+    let layout = ParamLayout::for_params(model, params, obs.ext.params.clone());
+    let campaign = obs
+        .campaign_indices(params)
+        .expect("rows of the model's campaigns");
+    let rows = Rows {
+        model,
+        obs,
+        params,
+        layout,
+        campaign,
+        n_joints: model.nq(),
+    };
+    let p = adjoint.n_coefficients();
+    let mut ws = rows.scratch(adjoint.n_features());
+    let mut jac = vec![0.0; 3 * p];
+    let mut out = DMatrix::zeros(3 * obs.len(), p);
+    let mut res = Vec::with_capacity(obs.len());
+    for r in 0..obs.len() {
+        res.push(rows.eval(adjoint, r, &mut ws, &mut jac));
+        for row in 0..3 {
+            for c in 0..p {
+                out[(3 * r + row, c)] = jac[row * p + c] / COEFFICIENT_SCALE;
+            }
+        }
+    }
+    (res, out)
+}
