@@ -147,6 +147,9 @@ pub struct Calibration {
     pub extensions: Option<ExtensionSettings>,
     /// The learned residual correction fitted after the physical model, if asked for.
     pub learned: Option<LearnedResidual>,
+    /// The physical fit's parameters, when the learned stage changed `params` (`learned:adjoint`
+    /// refits the registrations with its coefficients): what the physical model alone predicts.
+    pub physical: Option<KinematicParams>,
 }
 
 /// Calibrates the kinematic model of `model` on `train`, validating on `test` when given.
@@ -521,5 +524,6 @@ fn calibrate_with(
         report,
         extensions: extensions.cloned(),
         learned: None,
+        physical: None,
     })
 }

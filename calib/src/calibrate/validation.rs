@@ -235,12 +235,12 @@ pub fn held_out_errors(
     obs.campaign_indices_or_error(&cal.params, &test.name)?;
     // The nominal model's extension values are zero: the regressors do not move it.
     let before = Prediction::new(model, &cal.before).errors(&obs);
-    let physical = Prediction::new(model, &cal.params);
-    let after = physical.errors(&obs);
-    let learned = cal
-        .learned
-        .as_ref()
-        .map(|l| physical.clone().with_learned(Some(l)).errors(&obs));
+    let after = Prediction::new(model, cal.physical.as_ref().unwrap_or(&cal.params)).errors(&obs);
+    let learned = cal.learned.as_ref().map(|l| {
+        Prediction::new(model, &cal.params)
+            .with_learned(Some(l))
+            .errors(&obs)
+    });
     Ok((before, after, learned))
 }
 

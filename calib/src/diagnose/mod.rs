@@ -23,6 +23,7 @@
 //! The noise floor ([`noise_floor`]) comes from repeated poses when the data have enough of them, else
 //! from the `sigma` column or the tracker noise model.
 
+pub mod campaigns;
 pub mod noise_floor;
 pub mod report;
 pub mod significance;
@@ -220,6 +221,9 @@ pub struct Diagnosis {
     /// thermal drift.
     #[serde(default)]
     pub not_tried: Vec<NotTried>,
+    /// The held-out residual per measurement campaign, with several campaigns.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub campaigns: Option<campaigns::CampaignReport>,
     /// What `--report` draws (not part of the JSON).
     #[serde(skip)]
     pub plots: report::PlotData,
@@ -584,7 +588,20 @@ pub fn diagnose_with_progress(
         });
     }
     let split = Split {
-        test_pose: test_rows.iter().map(|&r| table.pose[r]).collect(),
+        // One id per pose (per campaign with several: pose ids may repeat across campaigns).
+        test_pose: match &table.campaign {
+            None => test_rows.iter().map(|&r| table.pose[r]).collect(),
+            Some(_) => {
+                let mut ids = std::collections::HashMap::new();
+                test_rows
+                    .iter()
+                    .map(|&r| {
+                        let next = ids.len() as i64;
+                        *ids.entry(table.pose_key(r)).or_insert(next)
+                    })
+                    .collect()
+            }
+        },
         train: Dataset {
             table,
             rows: train_rows,
@@ -749,7 +766,7 @@ pub fn diagnose_with_progress(
             .train
             .rows
             .iter()
-            .map(|&r| table.pose[r])
+            .map(|&r| table.pose_key(r))
             .collect::<std::collections::BTreeSet<_>>()
             .len(),
         n_test: split
@@ -765,6 +782,7 @@ pub fn diagnose_with_progress(
         model: current.spec.clone(),
         trials,
         not_tried,
+        campaigns: campaigns::report(&split, &current, options.alpha),
         alpha: options.alpha,
         seed: options.seed,
         health,

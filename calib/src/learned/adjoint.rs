@@ -11,10 +11,14 @@
 //! ζᵢ(q) = Σₖ cᵢₖ φₖ(q) ∈ R⁶ (rad, m),   δᵢ(q) = Σₖ dᵢₖ φₖ(q) (rad, m)
 //! ```
 //!
-//! with features `φₖ` the monomials of the standardised joint values `zⱼ = (qⱼ − mean)/std` of total
-//! degree 1 to `d`, each centred and scaled over the fit rows (as in [`super::polynomial`]). The
-//! coefficients `u = (c, d)/s` (scaled by [`COEFFICIENT_SCALE`]) minimise
-//! `Σ_rows |p(q) − p_measured|² + λ n |u|²` (positions, tracker frame of each row's campaign, m).
+//! with features `φ₀ = 1` (a correction of the joint's constant error twist and zero offset) and `φₖ`
+//! the monomials of the standardised joint values `zⱼ = (qⱼ − mean)/std` of total degree 1 to `d`,
+//! each centred and scaled over the fit rows (as in [`super::polynomial`]). The coefficients are
+//! identified jointly with every campaign's tracker registration and the target (refitted, since the
+//! physical fit's compromise for a configuration-dependent error biased them too): with `u` the
+//! parameters scaled by [`COEFFICIENT_SCALE`], they minimise `Σ_rows |p(q) − p_measured|² + Σ μ u²`
+//! (positions, tracker frame of each row's campaign, m), `μ = λ ·` the normal matrix's mean diagonal
+//! on the coefficients and [`FLOOR_RIDGE`] times it on the registration.
 //!
 //! The Jacobian is analytic: a change `Δcᵢₖ` turns `exp[ζᵢ]` into `exp[J_l(ζᵢ) Δcᵢₖ φₖ] exp[ζᵢ]`
 //! ([`crate::lie3::se3_left_jacobian`]), which moves the target by the chain's error-twist Jacobian
@@ -76,7 +80,8 @@ pub struct AdjointModel {
     pub q_mean: Vec<f64>,
     /// Standard deviation of each joint value over the fit rows (1 for a joint that did not move).
     pub q_scale: Vec<f64>,
-    /// Monomials as lists of joint indices.
+    /// Monomials as lists of joint indices (feature `k + 1` is monomial `k`; feature 0 is the
+    /// constant 1).
     pub monomials: Vec<Vec<usize>>,
     /// Mean of each monomial over the fit rows.
     pub feature_mean: Vec<f64>,
@@ -88,9 +93,9 @@ pub struct AdjointModel {
 }
 
 impl AdjointModel {
-    /// Number of features.
+    /// Number of features: the constant and the monomials.
     pub fn n_features(&self) -> usize {
-        self.monomials.len()
+        1 + self.monomials.len()
     }
 
     /// Number of coefficients.
@@ -98,64 +103,41 @@ impl AdjointModel {
         self.coefficients.len()
     }
 
-    /// The standardised features `φ(q)` into `out` (length [`AdjointModel::n_features`]).
+    /// The features `φ(q)` into `out` (length [`AdjointModel::n_features`]): 1, then the standardised
+    /// monomials.
     pub fn features(&self, q: &[f64], out: &mut [f64]) {
-        features(
-            q,
-            &self.q_mean,
-            &self.q_scale,
-            &self.monomials,
-            &self.feature_mean,
-            &self.feature_scale,
-            out,
-        );
+        out[0] = 1.0;
+        for (k, m) in self.monomials.iter().enumerate() {
+            let raw: f64 = m
+                .iter()
+                .map(|&j| (q[j] - self.q_mean[j]) / self.q_scale[j])
+                .product();
+            out[k + 1] = (raw - self.feature_mean[k]) / self.feature_scale[k];
+        }
     }
 
     /// `params` with joint `i`'s error motion `exp[ζᵢ(q)] Gᵢ` and zero offset `δqᵢ + δᵢ(q)` for
     /// features `phi`, into `out` (a copy of `params` to overwrite; only the joints change).
     pub fn apply(&self, params: &KinematicParams, phi: &[f64], out: &mut KinematicParams) {
-        let k = phi.len();
         for i in 0..self.n_joints {
-            let mut zeta = Vector6::zeros();
-            let base = i * PER_JOINT * k;
-            for (c, z) in zeta.iter_mut().enumerate() {
-                let w = &self.coefficients[base + c * k..base + (c + 1) * k];
-                *z = w.iter().zip(phi).map(|(a, b)| a * b).sum();
-            }
-            let w = &self.coefficients[base + 6 * k..base + 7 * k];
-            let delta: f64 = w.iter().zip(phi).map(|(a, b)| a * b).sum();
+            let (zeta, delta) = self.deviation(phi, i);
             out.joint_error[i] = exp_twist(&zeta) * params.joint_error[i];
             out.zero_offset[i] = params.zero_offset[i] + delta;
         }
     }
 
-    /// `ζᵢ(q)` of joint `i` for features `phi` (rad, m).
-    fn twist(&self, phi: &[f64], i: usize) -> Vector6<f64> {
+    /// `ζᵢ(q)` (rad, m) and `δᵢ(q)` of joint `i` for features `phi`.
+    fn deviation(&self, phi: &[f64], i: usize) -> (Vector6<f64>, f64) {
         let k = phi.len();
         let base = i * PER_JOINT * k;
-        Vector6::from_fn(|c, _| {
+        let dot = |c: usize| -> f64 {
             self.coefficients[base + c * k..base + (c + 1) * k]
                 .iter()
                 .zip(phi)
                 .map(|(a, b)| a * b)
                 .sum()
-        })
-    }
-}
-
-/// Standardised monomial features of one row.
-fn features(
-    q: &[f64],
-    q_mean: &[f64],
-    q_scale: &[f64],
-    monomials: &[Vec<usize>],
-    feature_mean: &[f64],
-    feature_scale: &[f64],
-    out: &mut [f64],
-) {
-    for (k, m) in monomials.iter().enumerate() {
-        let raw: f64 = m.iter().map(|&j| (q[j] - q_mean[j]) / q_scale[j]).product();
-        out[k] = (raw - feature_mean[k]) / feature_scale[k];
+        };
+        (Vector6::from_fn(|c, _| dot(c)), dot(6))
     }
 }
 
@@ -188,19 +170,20 @@ impl AdjointScratch {
     }
 }
 
-/// The fit rows: the training observations, the physical model, the layout of its Jacobian.
+/// The fit rows and the point they are linearised at: the physical model with its registrations.
 struct Rows<'a> {
     model: &'a Model,
     obs: &'a Observations,
-    params: &'a KinematicParams,
+    params: KinematicParams,
     layout: ParamLayout,
     campaign: Vec<usize>,
     n_joints: usize,
+    /// Layout indices of the registration parameters refitted with the adjoint model: every
+    /// campaign's base twist, the target positions.
+    registration: Vec<usize>,
 }
 
-/// One row's evaluation at coefficients `coef` (or the physical model when `None`): the residual
-/// `p − p_measured` (m) and its Jacobian with respect to the scaled coefficients `u` (3 × P,
-/// row-major into `jac`).
+/// Per-thread workspace of [`Rows::eval`].
 struct RowEval {
     predict: PredictScratch,
     chain: Chain,
@@ -213,19 +196,26 @@ impl Rows<'_> {
     fn scratch(&self, n_features: usize) -> RowEval {
         RowEval {
             predict: PredictScratch::new(self.n_joints),
-            chain: Chain::new(self.model, self.params),
+            chain: Chain::new(self.model, &self.params),
             params: self.params.clone(),
             block: vec![0.0; 3 * self.layout.len()],
             phi: vec![0.0; n_features],
         }
     }
 
-    /// Residual and Jacobian of row `r` for the model `m` (its coefficients; its features' settings).
+    /// Number of parameters: the coefficients of `m` and the registration.
+    fn n_params(&self, m: &AdjointModel) -> usize {
+        m.n_coefficients() + self.registration.len()
+    }
+
+    /// Residual `p − p_measured` (m) of row `r` for the model `m` at the current registration, and
+    /// its Jacobian with respect to the scaled parameters `u` (3 × [`Rows::n_params`], row-major
+    /// into `jac`).
     fn eval(&self, m: &AdjointModel, r: usize, ws: &mut RowEval, jac: &mut [f64]) -> Vector3<f64> {
         let q = self.obs.q_row(r);
         let k = m.n_features();
         m.features(q, &mut ws.phi);
-        m.apply(self.params, &ws.phi, &mut ws.params);
+        m.apply(&self.params, &ws.phi, &mut ws.params);
         ws.chain.update_params(&ws.params);
         let campaign = self.campaign.get(r).copied().unwrap_or(0);
         let pred = physical_row(
@@ -243,7 +233,8 @@ impl Rows<'_> {
         let grow = 1.0 + pred.growth;
         let p_cols = jac.len() / 3;
         for i in 0..self.n_joints {
-            let jl = se3_left_jacobian(&m.twist(&ws.phi, i));
+            let (zeta, _) = m.deviation(&ws.phi, i);
+            let jl = se3_left_jacobian(&zeta);
             let kt = self.layout.joint_twist(i);
             let kz = self.layout.zero_offset(i);
             for row in 0..3 {
@@ -264,6 +255,28 @@ impl Rows<'_> {
                 for (f, &phi) in ws.phi.iter().enumerate() {
                     out[base + 6 * k + f] = dz * phi * COEFFICIENT_SCALE;
                 }
+            }
+        }
+        // The registration: a base twist moves the (grown) prediction rigidly, [−[p], I]; the
+        // target's columns grow with the arm.
+        let p = pred.p_tracker;
+        let kb = self.layout.campaign_base(campaign);
+        let first = m.n_coefficients();
+        for row in 0..3 {
+            let out = &mut jac[row * p_cols..(row + 1) * p_cols];
+            for (j, &col) in self.registration.iter().enumerate() {
+                let v = if (kb..kb + 3).contains(&col) {
+                    let e = Vector3::from_fn(|a, _| if a == col - kb { 1.0 } else { 0.0 });
+                    e.cross(&p)[row]
+                } else if (kb + 3..kb + 6).contains(&col) {
+                    if row == col - kb - 3 { 1.0 } else { 0.0 }
+                } else if col >= self.layout.base() && col < self.layout.kinematic_len() {
+                    // Another campaign's base: zero in position_jacobian_of; a target: times 1 + γ.
+                    ws.block[row * np + col] * grow
+                } else {
+                    0.0
+                };
+                out[first + j] = v * COEFFICIENT_SCALE;
             }
         }
         pred.p_tracker - self.obs.position[r]
@@ -293,7 +306,7 @@ impl Normal {
 /// Normal equations per fold (`fold_of[r]`, `k` folds; all rows in fold 0 with `k = 1`) at the
 /// coefficients of `m`, accumulated by blocks of rows in parallel.
 fn normal_equations(rows: &Rows<'_>, m: &AdjointModel, fold_of: &[usize], k: usize) -> Vec<Normal> {
-    let p = m.n_coefficients();
+    let p = rows.n_params(m);
     let n = rows.obs.len();
     let blocks: Vec<Vec<Normal>> = (0..n.div_ceil(BLOCK_ROWS))
         .into_par_iter()
@@ -301,7 +314,7 @@ fn normal_equations(rows: &Rows<'_>, m: &AdjointModel, fold_of: &[usize], k: usi
             let range = b * BLOCK_ROWS..((b + 1) * BLOCK_ROWS).min(n);
             let mut ws = rows.scratch(m.n_features());
             let mut out: Vec<Normal> = (0..k).map(|_| Normal::zeros(p)).collect();
-            // The rows of each fold in this block, as a matrix of 3 rows each.
+            let mut jac = vec![0.0; 3 * p];
             for (f, normal) in out.iter_mut().enumerate() {
                 let members: Vec<usize> = range.clone().filter(|&r| fold_of[r] == f).collect();
                 if members.is_empty() {
@@ -309,7 +322,6 @@ fn normal_equations(rows: &Rows<'_>, m: &AdjointModel, fold_of: &[usize], k: usi
                 }
                 let mut a = DMatrix::zeros(3 * members.len(), p);
                 let mut e = DVector::zeros(3 * members.len());
-                let mut jac = vec![0.0; 3 * p];
                 for (j, &r) in members.iter().enumerate() {
                     let res = rows.eval(m, r, &mut ws, &mut jac);
                     for row in 0..3 {
@@ -339,11 +351,11 @@ fn normal_equations(rows: &Rows<'_>, m: &AdjointModel, fold_of: &[usize], k: usi
     total
 }
 
-/// Solves `(G + μ I) u = −g` by Cholesky; `None` when not positive definite.
-fn ridge_solve(gram: &DMatrix<f64>, grad: &DVector<f64>, mu: f64) -> Option<DVector<f64>> {
+/// Solves `(G + diag(μ)) u = −g` by Cholesky; `None` when not positive definite.
+fn ridge_solve(gram: &DMatrix<f64>, grad: &DVector<f64>, mu: &[f64]) -> Option<DVector<f64>> {
     let mut a = gram.clone();
-    for i in 0..a.nrows() {
-        a[(i, i)] += mu;
+    for (i, m) in mu.iter().enumerate() {
+        a[(i, i)] += m;
     }
     if !crate::linalg::cholesky_in_place(&mut a) {
         return None;
@@ -353,11 +365,28 @@ fn ridge_solve(gram: &DMatrix<f64>, grad: &DVector<f64>, mu: f64) -> Option<DVec
     Some(-DVector::from_column_slice(x.as_slice()))
 }
 
-/// A fitted adjoint correction and its cross-validation: the model, its description, the
-/// cross-validated RMS with and without it (m).
+/// Relative ridge on the registration: enough to make its redundancy with a common error twist of
+/// all axes harmless, too little to bias anything identifiable.
+pub const FLOOR_RIDGE: f64 = 1e-9;
+
+/// The ridge per scaled parameter: `λ` on every coefficient (the constant terms included: with a
+/// near-zero ridge there, measured on the real UR5, the constants' near-redundant combinations made the
+/// linearised cross-validation optimistic, 98.9 µm against 109.7 µm held out, where `λ` on them gives
+/// 98.9 µm against 99.2 µm), [`FLOOR_RIDGE`] on the registration; both times `scale` (the normal
+/// matrix's mean diagonal, times the rows).
+fn ridge(m: &AdjointModel, registration: usize, lambda: f64, scale: f64) -> Vec<f64> {
+    let mut mu = vec![lambda * scale; m.n_coefficients()];
+    mu.extend(std::iter::repeat_n(FLOOR_RIDGE * scale, registration));
+    mu
+}
+
+/// A fitted adjoint correction and its cross-validation.
 pub struct AdjointFit {
     /// The model (coefficients zero when cross-validation found no gain).
     pub model: AdjointModel,
+    /// The physical parameters with the registrations refitted with the adjoint model (unchanged
+    /// when it is not kept).
+    pub params: KinematicParams,
     /// Whether it is kept.
     pub active: bool,
     /// Cross-validated RMS of the 3-D position error with the selected model (m).
@@ -401,8 +430,43 @@ pub fn empty_model(obs: &Observations, degree: usize) -> AdjointModel {
         monomials: monos,
         feature_mean: mean,
         feature_scale: scale,
-        coefficients: vec![0.0; n * PER_JOINT * k],
+        coefficients: vec![0.0; n * PER_JOINT * (k + 1)],
     }
+}
+
+/// The rows of `obs` for the physical model `params` of `model`.
+fn rows<'a>(
+    model: &'a Model,
+    params: &KinematicParams,
+    obs: &'a Observations,
+) -> crate::error::Result<Rows<'a>> {
+    let layout = ParamLayout::for_params(model, params, obs.ext.params.clone());
+    let campaign =
+        obs.campaign_indices(params)
+            .map_err(|(r, id)| crate::error::CalibError::BadValue {
+                context: "learned:adjoint".into(),
+                field: "campaign".into(),
+                value: id.to_string(),
+                problem: format!("row {r}: not a campaign of the model"),
+            })?;
+    let mut registration = Vec::new();
+    for c in 0..layout.n_campaigns() {
+        let b = layout.campaign_base(c);
+        registration.extend(b..b + 6);
+        if c == 0 || layout.campaign_targets {
+            let t = layout.campaign_target_position(c);
+            registration.extend(t..t + 3);
+        }
+    }
+    Ok(Rows {
+        model,
+        obs,
+        params: params.clone(),
+        layout,
+        campaign,
+        n_joints: model.nq(),
+        registration,
+    })
 }
 
 /// Fits the adjoint model to the training rows `obs` (with its extension regressors) of the physical
@@ -414,23 +478,8 @@ pub fn fit(
     seed: u64,
 ) -> crate::error::Result<AdjointFit> {
     let n = obs.len();
-    let layout = ParamLayout::for_params(model, params, obs.ext.params.clone());
-    let campaign =
-        obs.campaign_indices(params)
-            .map_err(|(r, id)| crate::error::CalibError::BadValue {
-                context: "learned:adjoint".into(),
-                field: "campaign".into(),
-                value: id.to_string(),
-                problem: format!("row {r}: not a campaign of the model"),
-            })?;
-    let rows = Rows {
-        model,
-        obs,
-        params,
-        layout,
-        campaign,
-        n_joints: model.nq(),
-    };
+    let mut rows = rows(model, params, obs)?;
+    let n_reg = rows.registration.len();
     let fold_of = fold_assignment(n, K_FOLDS, seed);
     // Candidates from the simplest: low degree first, strong ridge first.
     let mut candidates: Vec<(usize, f64)> = Vec::new();
@@ -438,7 +487,7 @@ pub fn fit(
     let mut before = 0.0;
     for &degree in &DEGREES {
         let m = empty_model(obs, degree);
-        let p = m.n_coefficients();
+        let p = rows.n_params(&m);
         if degree > 1 && (p * EQUATIONS_PER_COEFFICIENT > 3 * n || p > MAX_COEFFICIENTS) {
             break;
         }
@@ -457,8 +506,8 @@ pub fn fit(
             for f in &folds {
                 let gram = &all.gram - &f.gram;
                 let grad = &all.grad - &f.grad;
-                let mu = lambda * scale * (all.rows - f.rows) as f64;
-                let total_f = match ridge_solve(&gram, &grad, mu) {
+                let mu = ridge(&m, n_reg, lambda, scale * (all.rows - f.rows) as f64);
+                let total_f = match ridge_solve(&gram, &grad, &mu) {
                     Some(u) => f.sse + 2.0 * u.dot(&f.grad) + u.dot(&(&f.gram * &u)),
                     None => f64::INFINITY,
                 };
@@ -476,41 +525,54 @@ pub fn fit(
     m.lambda = lambda;
     let active = cv_rms_m < cv_rms_before_m;
     if active {
-        let p = m.n_coefficients();
+        let nc = m.n_coefficients();
         let all_fold = vec![0; n];
-        let mut u = DVector::zeros(p);
-        let mut mu = 0.0;
+        let mut coef = DVector::zeros(nc);
+        let mut mu = Vec::new();
         let mut objective = f64::INFINITY;
-        let mut accepted = u.clone();
-        let set = |m: &mut AdjointModel, u: &DVector<f64>| {
-            for (c, v) in m.coefficients.iter_mut().zip(u.iter()) {
+        let mut accepted = (coef.clone(), rows.params.clone());
+        // The linearised solve at the physical model, then Gauss–Newton steps through the exact
+        // chain (coefficients additive, registrations retracted), each kept only if it lowers the
+        // penalised objective.
+        for _ in 0..=REFINEMENTS + 1 {
+            for (c, v) in m.coefficients.iter_mut().zip(coef.iter()) {
                 *c = v * COEFFICIENT_SCALE;
             }
-        };
-        // The linearised solve at u = 0, then Gauss–Newton steps through the exact chain, each kept
-        // only if it lowers the penalised objective.
-        for _ in 0..=REFINEMENTS + 1 {
-            set(&mut m, &u);
             let normal = normal_equations(&rows, &m, &all_fold, 1).remove(0);
-            if mu == 0.0 {
-                mu = lambda * normal.gram.trace() / p as f64;
+            if mu.is_empty() {
+                let p = normal.gram.nrows();
+                mu = ridge(&m, n_reg, lambda, normal.gram.trace() / p as f64);
             }
-            let value = normal.sse + mu * u.norm_squared();
+            let penalty: f64 = coef.iter().zip(&mu).map(|(u, m)| m * u * u).sum();
+            let value = normal.sse + penalty;
             if value >= objective {
                 break;
             }
             objective = value;
-            accepted.copy_from(&u);
-            let grad = &normal.grad + &u * mu;
-            let Some(step) = ridge_solve(&normal.gram, &grad, mu) else {
+            accepted = (coef.clone(), rows.params.clone());
+            let mut grad = normal.grad.clone();
+            for (g, (u, m)) in grad.iter_mut().zip(coef.iter().zip(&mu)) {
+                *g += m * u;
+            }
+            let Some(step) = ridge_solve(&normal.gram, &grad, &mu) else {
                 break;
             };
-            u += step;
+            coef += step.rows(0, nc);
+            let mut full = vec![0.0; rows.layout.len()];
+            for (j, &k) in rows.registration.iter().enumerate() {
+                full[k] = step[nc + j] * COEFFICIENT_SCALE;
+            }
+            let layout = rows.layout.clone();
+            rows.params.retract(&layout, &full);
         }
-        set(&mut m, &accepted);
+        for (c, v) in m.coefficients.iter_mut().zip(accepted.0.iter()) {
+            *c = v * COEFFICIENT_SCALE;
+        }
+        rows.params = accepted.1;
     }
     Ok(AdjointFit {
         model: m,
+        params: if active { rows.params } else { params.clone() },
         active,
         cv_rms_m,
         cv_rms_before_m,
@@ -519,35 +581,25 @@ pub fn fit(
 }
 
 /// The residual `p − p_measured` (m) of every row of `obs` and its Jacobian with respect to the
-/// coefficients in physical units (rad or m per feature unit; rows × 3 by P), for the tests against
-/// finite differences.
+/// coefficients in physical units (rad or m per feature unit; rows × 3 by the coefficients), for the
+/// tests against finite differences.
 pub fn residuals_and_jacobian(
     model: &Model,
     params: &KinematicParams,
     obs: &Observations,
     adjoint: &AdjointModel,
 ) -> (Vec<Vector3<f64>>, DMatrix<f64>) {
-    let layout = ParamLayout::for_params(model, params, obs.ext.params.clone());
-    let campaign = obs
-        .campaign_indices(params)
-        .expect("rows of the model's campaigns");
-    let rows = Rows {
-        model,
-        obs,
-        params,
-        layout,
-        campaign,
-        n_joints: model.nq(),
-    };
-    let p = adjoint.n_coefficients();
+    let rows = rows(model, params, obs).expect("rows of the model's campaigns");
+    let p = rows.n_params(adjoint);
+    let nc = adjoint.n_coefficients();
     let mut ws = rows.scratch(adjoint.n_features());
     let mut jac = vec![0.0; 3 * p];
-    let mut out = DMatrix::zeros(3 * obs.len(), p);
+    let mut out = DMatrix::zeros(3 * obs.len(), nc);
     let mut res = Vec::with_capacity(obs.len());
     for r in 0..obs.len() {
         res.push(rows.eval(adjoint, r, &mut ws, &mut jac));
         for row in 0..3 {
-            for c in 0..p {
+            for c in 0..nc {
                 out[(3 * r + row, c)] = jac[row * p + c] / COEFFICIENT_SCALE;
             }
         }

@@ -214,13 +214,14 @@ pub fn fit(
 }
 
 /// Fits `learned:adjoint` ([`adjoint`]) to the training rows `obs` of the physical model `params` of
-/// `model` (folds from `seed`). Errors as [`fit`] for too few rows.
+/// `model` (folds from `seed`): the correction, and the parameters with the registrations refitted
+/// with it. Errors as [`fit`] for too few rows.
 pub fn fit_adjoint(
     model: &sim::Model,
     params: &crate::params::KinematicParams,
     obs: &crate::problem::Observations,
     seed: u64,
-) -> Result<LearnedResidual, CalibError> {
+) -> Result<(LearnedResidual, crate::params::KinematicParams), CalibError> {
     let n = obs.len();
     if n < MIN_ROWS {
         return Err(bad(
@@ -238,7 +239,7 @@ pub fn fit_adjoint(
          ({} coefficients, ridge λ = {:.0e})",
         f.model.degree, p, f.model.lambda
     );
-    Ok(LearnedResidual {
+    let residual = LearnedResidual {
         kind: LearnedKind::Adjoint,
         n_joints: obs.n_joints,
         n_rows: n,
@@ -252,7 +253,8 @@ pub fn fit_adjoint(
         cv_rms_m: f.cv_rms_m,
         cv_rms_before_m: f.cv_rms_before_m,
         n_parameters: if f.active { p } else { 0 },
-    })
+    };
+    Ok((residual, f.params))
 }
 
 fn fit_polynomial(
