@@ -181,16 +181,26 @@ pub fn run(args: Args) -> CliResult {
     };
     let (cal, validation) = calibrate_validated(model, &all, &model_spec, &options, &plan)
         .map_err(|e| {
+            // Only a validation fit (a fold, or the split's training part) gets the hint: the model
+            // on every pose had enough.
             let hint = match (&e, &plan) {
-                (CalibError::TooFewPoses { .. }, ValidationPlan::Split { fraction, .. }) => Some(format!(
-                    " (--test-fraction {fraction} held out part of the poses for the validation fit; \
-                     --folds 0 validates nothing and uses all)"
-                )),
-                (CalibError::TooFewPoses { .. }, ValidationPlan::Folds { k, .. }) => Some(format!(
-                    " (--folds {k} fits each fold on {}/{k} of the poses; fewer folds, or --folds 0 \
-                     for no validation)",
-                    k - 1
-                )),
+                (CalibError::TooFewPoses { context, .. }, ValidationPlan::Split { fraction, .. })
+                    if context.ends_with("(training set)") =>
+                {
+                    Some(format!(
+                        " (--test-fraction {fraction} held out part of the poses for the validation fit; \
+                         --folds 0 validates nothing)"
+                    ))
+                }
+                (CalibError::TooFewPoses { context, .. }, ValidationPlan::Folds { k, .. })
+                    if context.contains("(fold ") =>
+                {
+                    Some(format!(
+                        " (--folds {k} fits each fold on {}/{k} of the poses; fewer folds, or --folds 0 \
+                         for no validation)",
+                        k - 1
+                    ))
+                }
                 _ => None,
             };
             let e = CliError::from(e);
