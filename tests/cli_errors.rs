@@ -200,9 +200,19 @@ fn bad_input_and_unknown_flag_values_exit_2() {
     // Enough for the model on every pose (11), too few for a fold's 4/5 of them: the hint says so.
     let twelve = self::data(&d, "12");
     check(
-        &["calibrate", "--data", twelve.to_str().unwrap(), "--out", out],
+        &[
+            "calibrate",
+            "--data",
+            twelve.to_str().unwrap(),
+            "--out",
+            out,
+        ],
         2,
-        &["fold", "distinct poses", "--folds 5 fits each fold on 4/5 of the poses"],
+        &[
+            "fold",
+            "distinct poses",
+            "--folds 5 fits each fold on 4/5 of the poses",
+        ],
     );
     // The same with an explicit split.
     check(
@@ -216,7 +226,10 @@ fn bad_input_and_unknown_flag_values_exit_2() {
             "0.3",
         ],
         2,
-        &["training set", "--test-fraction 0.3 held out part of the poses"],
+        &[
+            "training set",
+            "--test-fraction 0.3 held out part of the poses",
+        ],
     );
     assert!(!Path::new(out).exists());
     let _ = std::fs::remove_dir_all(&d);

@@ -379,7 +379,10 @@ fn a_single_cell_and_a_single_run_reproduce_alone() {
     // calibrate saves the model fitted on every pose; its --test-fraction validation is the sweep's
     // run: the split's held-out poses predicted by the model fitted on the others.
     let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
-    assert_eq!(v["report"]["n_train_poses"].as_f64().unwrap(), a["poses"][r]);
+    assert_eq!(
+        v["report"]["n_train_poses"].as_f64().unwrap(),
+        a["poses"][r]
+    );
     let held = &v["validation"]["after"];
     assert_eq!(
         held["n_poses"].as_f64().unwrap(),
