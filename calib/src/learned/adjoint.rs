@@ -59,8 +59,9 @@ pub const DEGREES: [usize; 2] = [1, 2];
 pub const EQUATIONS_PER_COEFFICIENT: usize = 5;
 /// Most coefficients of a degree tried.
 pub const MAX_COEFFICIENTS: usize = 2000;
-/// Gauss–Newton refinements through the exact chain after the linearised solve.
-pub const REFINEMENTS: usize = 2;
+/// Gauss–Newton refinements through the exact chain after the linearised solve (the model is
+/// nearly linear in its coefficients: one settles it; each costs a pass over the rows).
+pub const REFINEMENTS: usize = 1;
 /// Measurement rows per block of the normal-equation products.
 const BLOCK_ROWS: usize = 128;
 
@@ -485,6 +486,9 @@ pub fn fit(
     let mut candidates: Vec<(usize, f64)> = Vec::new();
     let mut sse = Vec::new();
     let mut before = 0.0;
+    // The normal equations over every row at the physical model, per degree tried: the first step of
+    // the final solve.
+    let mut at_zero: Vec<Normal> = Vec::new();
     for &degree in &DEGREES {
         let m = empty_model(obs, degree);
         let p = rows.n_params(&m);
@@ -500,6 +504,7 @@ pub fn fit(
             all.rows += f.rows;
         }
         before = all.sse;
+        at_zero.push(all.clone());
         let scale = all.gram.trace() / (p as f64 * n as f64);
         for &lambda in LAMBDAS.iter().rev() {
             let mut total = 0.0;
@@ -534,11 +539,16 @@ pub fn fit(
         // The linearised solve at the physical model, then Gauss–Newton steps through the exact
         // chain (coefficients additive, registrations retracted), each kept only if it lowers the
         // penalised objective.
+        let mut first =
+            Some(at_zero.swap_remove(DEGREES.iter().position(|&d| d == degree).unwrap_or(0)));
         for _ in 0..=REFINEMENTS + 1 {
             for (c, v) in m.coefficients.iter_mut().zip(coef.iter()) {
                 *c = v * COEFFICIENT_SCALE;
             }
-            let normal = normal_equations(&rows, &m, &all_fold, 1).remove(0);
+            let normal = match first.take() {
+                Some(n) => n,
+                None => normal_equations(&rows, &m, &all_fold, 1).remove(0),
+            };
             if mu.is_empty() {
                 let p = normal.gram.nrows();
                 mu = ridge(&m, n_reg, lambda, normal.gram.trace() / p as f64);
