@@ -102,6 +102,7 @@ pub mod lm;
 pub mod model_file;
 pub mod observations;
 pub mod params;
+pub mod physical_row;
 pub mod plan;
 pub mod predict;
 pub mod problem;

@@ -24,73 +24,19 @@
 
 use crate::chain::{Chain, ChainScratch};
 use crate::error::{CalibError, Result};
-use crate::extensions::{Regressors, apply};
+use crate::extensions::Regressors;
 use crate::learned::LearnedResidual;
-use crate::learned::adjoint::{AdjointModel, AdjointScratch};
+use crate::learned::adjoint::AdjointModel;
 use crate::lie3::log_rotation;
 use crate::observations::Observations;
 use crate::params::{KinematicParams, ParamLayout};
+pub use crate::physical_row::{AdjointScratch, PredictScratch, RowPrediction, physical_row};
 use nalgebra::{DMatrix, Matrix3, Vector3};
 use rayon::prelude::*;
 use sim::Model;
 
 /// Rows per parallel work item of the batch evaluations.
 const CHUNK_ROWS: usize = 2048;
-
-/// One row's physical prediction (no learned correction).
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct RowPrediction {
-    /// Predicted target position, tracker frame (m), growth applied.
-    pub p_tracker: Vector3<f64>,
-    /// `p_kin − t_tracker_base` (m): the lever that the growth multiplies.
-    pub lever: Vector3<f64>,
-    /// The growth factor `γ` (dimensionless; 0 without growth terms).
-    pub growth: f64,
-}
-
-/// Per-evaluation workspace of a [`Prediction`]: made once, reused without allocating.
-#[derive(Clone, Debug)]
-pub struct PredictScratch {
-    /// The chain's frames at the last row (tracker frame), with `r_tracker_target`.
-    pub chain: ChainScratch,
-    /// Effective joint values `θ` of the last row (rad or m).
-    pub theta: Vec<f64>,
-    /// The chain of a `learned:adjoint` model, re-prepared for each row.
-    pub adjoint: Option<AdjointScratch>,
-}
-
-impl PredictScratch {
-    /// Workspace for a robot of `n` joints.
-    pub fn new(n: usize) -> Self {
-        PredictScratch {
-            chain: ChainScratch::new(n),
-            theta: vec![0.0; n],
-            adjoint: None,
-        }
-    }
-}
-
-/// The physical prediction of row `r` (regressors `regs`, joint values `q`) in campaign `campaign`
-/// (index) by `chain`, prepared at `params`, into `s`: the one evaluation every path uses.
-#[inline]
-pub fn physical_row(
-    chain: &Chain,
-    params: &KinematicParams,
-    regs: &Regressors,
-    r: usize,
-    q: &[f64],
-    campaign: usize,
-    s: &mut PredictScratch,
-) -> RowPrediction {
-    let growth = apply(regs, &params.extension, r, q, &mut s.theta);
-    chain.forward_in(&mut s.chain, &s.theta, campaign);
-    let lever = s.chain.p_tracker - chain.t_tracker_base(campaign).translation.vector;
-    RowPrediction {
-        p_tracker: s.chain.p_tracker + growth * lever,
-        lever,
-        growth,
-    }
-}
 
 /// A calibrated model ready to predict: parameters, prepared chain, optional learned correction.
 #[derive(Clone, Debug)]
@@ -139,7 +85,11 @@ impl<'a> Prediction<'a> {
     pub fn scratch(&self) -> PredictScratch {
         let mut s = PredictScratch::new(self.nq);
         if let Some(a) = self.learned.and_then(|l| l.adjoint()) {
-            s.adjoint = Some(AdjointScratch::new(&self.chain, self.params, a));
+            s.adjoint = Some(AdjointScratch::new(
+                &self.chain,
+                self.params,
+                a.n_features(),
+            ));
         }
         s
     }
@@ -157,8 +107,8 @@ impl<'a> Prediction<'a> {
         let mut ad = s
             .adjoint
             .take()
-            .unwrap_or_else(|| AdjointScratch::new(&self.chain, self.params, a));
-        ad.prepare(a, self.params, q);
+            .unwrap_or_else(|| AdjointScratch::new(&self.chain, self.params, a.n_features()));
+        a.prepare(&mut ad, self.params, q);
         let p = physical_row(&ad.chain, &ad.params, regs, r, q, campaign, s).p_tracker;
         s.adjoint = Some(ad);
         p

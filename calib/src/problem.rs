@@ -12,7 +12,7 @@ use crate::extensions::Term;
 use crate::lie3::{left_jacobian_inverse, log_rotation};
 use crate::lm::LeastSquaresProblem;
 use crate::params::{KinematicParams, ParamLayout};
-use crate::predict::{PredictScratch, physical_row};
+use crate::physical_row::{PredictScratch, physical_row};
 use nalgebra::{DMatrix, Vector3};
 use rayon::prelude::*;
 use sim::Model;

@@ -39,9 +39,10 @@ use super::cross_validation::{K_FOLDS, fold_assignment, select_simplest};
 use super::polynomial::{joint_standardisation, monomials};
 use crate::chain::Chain;
 use crate::lie3::se3_left_jacobian;
+use crate::observations::Observations;
 use crate::params::{KinematicParams, ParamLayout};
-use crate::predict::{PredictScratch, physical_row};
-use crate::problem::Observations;
+pub use crate::physical_row::AdjointScratch;
+use crate::physical_row::{PredictScratch, physical_row};
 use nalgebra::{DMatrix, DVector, Vector3, Vector6};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -142,32 +143,13 @@ impl AdjointModel {
     }
 }
 
-/// Per-thread workspace to evaluate an adjoint model: a chain and parameters that follow each row.
-#[derive(Clone, Debug)]
-pub struct AdjointScratch {
-    /// The chain at the row's parameters.
-    pub chain: Chain,
-    /// The row's parameters.
-    pub params: KinematicParams,
-    /// The row's features.
-    pub phi: Vec<f64>,
-}
-
-impl AdjointScratch {
-    /// A workspace from the physical model's `chain` and `params`.
-    pub fn new(chain: &Chain, params: &KinematicParams, model: &AdjointModel) -> Self {
-        AdjointScratch {
-            chain: chain.clone(),
-            params: params.clone(),
-            phi: vec![0.0; model.n_features()],
-        }
-    }
-
-    /// Prepares the chain for the configuration `q` (controller values, rad or m).
-    pub fn prepare(&mut self, model: &AdjointModel, params: &KinematicParams, q: &[f64]) {
-        model.features(q, &mut self.phi);
-        model.apply(params, &self.phi, &mut self.params);
-        self.chain.update_params(&self.params);
+impl AdjointModel {
+    /// Prepares `s` for the configuration `q` (controller values, rad or m): the features, the
+    /// parameters of `params` with the row's error twists and zero offsets, the chain at them.
+    pub fn prepare(&self, s: &mut AdjointScratch, params: &KinematicParams, q: &[f64]) {
+        self.features(q, &mut s.phi);
+        self.apply(params, &s.phi, &mut s.params);
+        s.chain.update_params(&s.params);
     }
 }
 

@@ -219,7 +219,7 @@ pub fn fit(
 pub fn fit_adjoint(
     model: &sim::Model,
     params: &crate::params::KinematicParams,
-    obs: &crate::problem::Observations,
+    obs: &crate::observations::Observations,
     seed: u64,
 ) -> Result<(LearnedResidual, crate::params::KinematicParams), CalibError> {
     let n = obs.len();
