@@ -4,15 +4,18 @@ use super::paths::{Inputs, check_distinct};
 use super::robot_arg::RobotArgs;
 use super::shared::{CliError, CliResult, print_json, read_table};
 use calib::CalibError;
-use calib::calibrate::auto::{self, AUTO_LEARNED_KINDS};
-use calib::calibrate::validation::{DEFAULT_FOLDS, ValidationPlan, calibrate_validated};
-use calib::calibrate::{CalibrationOptions, Dataset, RobustLoss};
-use calib::extensions::ModelChoice;
-use calib::model_file::{CalibratedModel, calibrated_urdf, urdf_deviation};
+use calib::calibrate::auto::{self, AUTO_LEARNED_KINDS, AutoChoice};
+use calib::calibrate::validation::{
+    DEFAULT_FOLDS, Validation, ValidationPlan, calibrate_validated,
+};
+use calib::calibrate::{Calibration, CalibrationOptions, Dataset, RobustLoss};
+use calib::extensions::{ModelChoice, ModelSpec};
+use calib::model_file::CalibratedModel;
 use calib::robot::Robot;
 use serde_json::json;
 use sim::ChainSpec;
-use std::path::PathBuf;
+use sim::measurement_table::MeasurementTable;
+use std::path::{Path, PathBuf};
 
 /// Arguments of `robocal calibrate`.
 #[derive(clap::Args, Debug)]
@@ -22,11 +25,8 @@ pub struct Args {
     /// Measurement table (.csv or .parquet, see the measurement contract).
     #[arg(long, value_name = "FILE")]
     data: PathBuf,
-    /// Error model: `kinematic` (joint error twists, zero offsets, base and target), a `+`-joined
-    /// extension such as `kinematic+joint_compliance+thermal_drift` (also `gear_backlash`,
-    /// `learned:poly|poly1|poly2|poly3|kernel`), or `auto` (what diagnose chooses).
-    #[arg(long, value_name = "MODEL", default_value = "kinematic")]
-    model: String,
+    #[command(flatten)]
+    options: Options,
     /// Where to write the calibrated model (JSON, with the robot embedded).
     #[arg(long, value_name = "MODEL.json")]
     out: PathBuf,
@@ -34,32 +34,46 @@ pub struct Args {
     /// cross-validation).
     #[arg(long, value_name = "FILE")]
     test_data: Option<PathBuf>,
-    /// Validate by k-fold cross-validation by pose: each fold predicted by a model fitted on the
-    /// others, folds fitted in parallel (0 = no validation). The saved model is fitted on every pose
-    /// either way. Default 5.
-    #[arg(long, value_name = "K")]
-    folds: Option<usize>,
-    /// Validate by one split instead: this fraction of the poses held out and predicted by a model
-    /// fitted on the others (repeats of a pose stay together). The saved model is still fitted on
-    /// every pose.
-    #[arg(long, value_name = "F", default_value_t = 0.0)]
-    test_fraction: f64,
-    /// Seed of the folds or the split.
-    #[arg(long, value_name = "N", default_value_t = 0)]
-    seed: u64,
-    /// With several campaigns (a `campaign` column), give each its own target offset (a re-seated
-    /// reflector) instead of one shared target.
-    #[arg(long)]
-    per_campaign_target: bool,
-    /// Robust loss against outliers (iteratively reweighted).
-    #[arg(long, value_name = "LOSS", value_enum)]
-    robust: Option<Robust>,
-    /// Also write a URDF of the calibrated robot (joint origins adjusted).
+    /// Also write the calibrated URDF: the --robot URDF with the chain's joint origins moved to the
+    /// calibrated robot, everything else kept, base and target transforms in a comment.
     #[arg(long, value_name = "FILE.urdf")]
     urdf_out: Option<PathBuf>,
     /// Print one JSON document on stdout instead of text on stderr.
     #[arg(long)]
     json: bool,
+}
+
+/// The flags of `robocal calibrate` that are values rather than files: one definition for the command
+/// line (flattened into its arguments) and the Python package (`robocal.calibrate(data, **options)`,
+/// keyword arguments parsed by [`super::flags::parse`]). A flag added here is a keyword argument there.
+#[derive(clap::Args, Debug, Clone)]
+pub struct Options {
+    /// Error model: `kinematic` (joint error twists, zero offsets, base and target), a `+`-joined
+    /// extension such as `kinematic+joint_compliance+thermal_drift` (also `gear_backlash`,
+    /// `learned:poly|poly1|poly2|poly3|kernel|adjoint`), or `auto` (what diagnose chooses, then the
+    /// learned residual when it pays).
+    #[arg(long, value_name = "MODEL", default_value = "kinematic")]
+    pub model: String,
+    /// Validate by k-fold cross-validation by pose: each fold predicted by a model fitted on the
+    /// others, folds fitted in parallel (0 = no validation). The saved model is fitted on every pose
+    /// either way. Default 5.
+    #[arg(long, value_name = "K")]
+    pub folds: Option<usize>,
+    /// Validate by one split instead: this fraction of the poses held out and predicted by a model
+    /// fitted on the others (repeats of a pose stay together). The saved model is still fitted on
+    /// every pose.
+    #[arg(long, value_name = "F", default_value_t = 0.0)]
+    pub test_fraction: f64,
+    /// Seed of the folds or the split.
+    #[arg(long, value_name = "N", default_value_t = 0)]
+    pub seed: u64,
+    /// With several campaigns (a `campaign` column), give each its own target offset (a re-seated
+    /// reflector) instead of one shared target.
+    #[arg(long)]
+    pub per_campaign_target: bool,
+    /// Robust loss against outliers (iteratively reweighted).
+    #[arg(long, value_name = "LOSS", value_enum)]
+    robust: Option<Robust>,
 }
 
 /// `--robust`: the robust loss against outliers.
@@ -81,105 +95,196 @@ impl Robust {
     }
 }
 
-/// Runs `robocal calibrate`.
-pub fn run(args: Args) -> CliResult {
-    let model_spec = match args.model.parse::<ModelChoice>()? {
-        ModelChoice::Auto => None,
-        ModelChoice::Model(m) => Some(m),
-    };
-    let robust = args.robust.map(Robust::loss);
-    let mut inputs = Inputs::new();
-    inputs
-        .add("--data", &args.data)
-        .add_robot(&args.robot.robot);
-    if let Some(t) = &args.test_data {
-        inputs.add("--test-data", t);
+impl Options {
+    /// The model `--model` names, `None` for `auto`.
+    fn model_spec(&self) -> Result<Option<ModelSpec>, CliError> {
+        Ok(match self.model.parse::<ModelChoice>()? {
+            ModelChoice::Auto => None,
+            ModelChoice::Model(m) => Some(m),
+        })
     }
-    inputs.check("--out", &args.out)?;
-    if let Some(u) = &args.urdf_out {
-        inputs.check("--urdf-out", u)?;
-        check_distinct(("--out", &args.out), ("--urdf-out", u))?;
+
+    /// The model to fit (`None` for `auto`) and calib's calibration options; bad values are input
+    /// errors naming the flag. `test_data`: whether held-out measurements are given (`--test-data`,
+    /// the `test` table), an alternative to `--folds` and `--test-fraction`.
+    fn resolve(
+        &self,
+        test_data: bool,
+    ) -> Result<(Option<ModelSpec>, CalibrationOptions), CliError> {
+        let model_spec = self.model_spec()?;
+        if !(0.0..1.0).contains(&self.test_fraction) {
+            return Err(CliError::Input(format!(
+                "--test-fraction {}: must be in [0, 1)",
+                self.test_fraction
+            )));
+        }
+        let chosen = [test_data, self.test_fraction > 0.0, self.folds.is_some()];
+        if chosen.iter().filter(|&&b| b).count() > 1 {
+            return Err(CliError::Input(
+                "--test-data, --test-fraction and --folds are alternative validations: give one"
+                    .into(),
+            ));
+        }
+        if self.folds == Some(1) {
+            return Err(CliError::Input(
+                "--folds 1: cross-validation needs at least 2 folds (0 for no validation)".into(),
+            ));
+        }
+        let options = CalibrationOptions {
+            robust: self.robust.map(Robust::loss),
+            per_campaign_target: self.per_campaign_target,
+            ..CalibrationOptions::default()
+        };
+        Ok((model_spec, options))
     }
-    if !(0.0..1.0).contains(&args.test_fraction) {
-        return Err(CliError::Input(format!(
-            "--test-fraction {}: must be in [0, 1)",
-            args.test_fraction
-        )));
+
+    /// How to validate (`test`: the `--test-data` table) and the report's `split` object.
+    fn plan<'a>(&self, test: Option<Named<'a>>) -> (ValidationPlan<'a>, serde_json::Value) {
+        let folds = self.folds.unwrap_or(DEFAULT_FOLDS);
+        match test {
+            Some(t) => (
+                ValidationPlan::TestData(Dataset::all(t.table, t.name)),
+                json!({"kind": "test_file", "test_data": t.name}),
+            ),
+            None if self.test_fraction > 0.0 => (
+                ValidationPlan::Split {
+                    fraction: self.test_fraction,
+                    seed: self.seed,
+                },
+                json!({"kind": "by_pose", "test_fraction": self.test_fraction, "seed": self.seed}),
+            ),
+            None if folds == 0 => (ValidationPlan::None, json!({"kind": "none"})),
+            None => (
+                ValidationPlan::Folds {
+                    k: folds,
+                    seed: self.seed,
+                },
+                json!({"kind": "cross_validation", "folds": folds, "seed": self.seed}),
+            ),
+        }
     }
-    let chosen = [
-        args.test_data.is_some(),
-        args.test_fraction > 0.0,
-        args.folds.is_some(),
-    ];
-    if chosen.iter().filter(|&&b| b).count() > 1 {
-        return Err(CliError::Input(
-            "--test-data, --test-fraction and --folds are alternative validations: give one".into(),
-        ));
+}
+
+/// A measurement table and the name that stands for it in messages and reports (its file name).
+#[derive(Clone, Copy, Debug)]
+pub struct Named<'a> {
+    /// The table, checked against the robot.
+    pub table: &'a MeasurementTable,
+    /// Its name (a file as given, or a description of a table in memory).
+    pub name: &'a str,
+}
+
+/// What `robocal calibrate` computes between reading its inputs and writing its outputs.
+pub struct Outcome {
+    /// The fitted model (`auto` resolved).
+    pub model_spec: ModelSpec,
+    /// The calibration.
+    pub cal: Calibration,
+    /// How the model was validated: the report's `split` object.
+    pub split: serde_json::Value,
+    /// The validation (`None` with `--folds 0`).
+    pub validation: Option<Validation>,
+    /// What `--model auto` chose and why (`None` for a named model).
+    pub auto: Option<AutoChoice>,
+}
+
+impl Outcome {
+    /// The message of a calibration that did not converge (a runtime failure), if it did not.
+    pub fn failure(&self) -> Option<String> {
+        let report = &self.cal.report;
+        (!report.was_successful()).then(|| {
+            format!(
+                "calibration did not converge: {} after {} iterations",
+                report.after.solver.termination, report.after.solver.iterations
+            )
+        })
     }
-    let spec = ChainSpec {
-        base_link: args.robot.base_link.clone(),
-        tip_link: args.robot.tip_link.clone(),
-    };
-    let robot = Robot::load(&args.robot.robot, &spec)?;
+
+    /// The model file: the calibration, with the validation's held-out RMS in its fit summary.
+    pub fn model_file(&self, robot: &Robot) -> CalibratedModel {
+        let mut file = CalibratedModel::new(robot, &self.cal);
+        if let (Some(f), Some(v)) = (file.fit.as_mut(), &self.validation) {
+            f.held_out_rms_m = Some(v.final_stats().rms_m);
+        }
+        file
+    }
+
+    /// The validation's text (empty without one).
+    pub fn validation_text(&self) -> String {
+        self.validation
+            .as_ref()
+            .map(|v| v.text(&self.model_spec.name()))
+            .unwrap_or_default()
+    }
+
+    /// The `calibrate --json` document: `out` and `urdf_out` name the files written (null when none).
+    pub fn json(
+        &self,
+        robot: &Robot,
+        data: &str,
+        out: Option<&Path>,
+        urdf_out: Option<&Path>,
+    ) -> serde_json::Value {
+        json!({
+            "robot": robot.model.name,
+            "model": self.model_spec.name(),
+            "data": data,
+            "out": out.map(|p| p.display().to_string()),
+            "urdf_out": urdf_out.map(|p| p.display().to_string()),
+            "split": self.split,
+            "report": self.cal.report,
+            "validation": self.validation,
+            "auto": self.auto,
+        })
+    }
+}
+
+/// Calibrates `robot` on every pose of `data` as `robocal calibrate` does with `options`, and
+/// validates the model (on `test`, by cross-validation or by one split, as `options` say); `progress`
+/// hears which model `--model auto`'s diagnosis fits, `note` what it chose. A calibration that does not
+/// converge is an [`Outcome`] too (see [`Outcome::failure`]).
+pub fn calibrate(
+    robot: &Robot,
+    data: Named<'_>,
+    test: Option<Named<'_>>,
+    options: &Options,
+    progress: &mut dyn FnMut(&str),
+    note: &mut dyn FnMut(&str),
+) -> Result<Outcome, CliError> {
+    let (model_spec, calibration) = options.resolve(test.is_some())?;
     let model = &robot.model;
-    let table = read_table(&args.data, model)?;
-    let data_name = args.data.display().to_string();
-    let test_table = match &args.test_data {
-        Some(p) => Some(read_table(p, model)?),
-        None => None,
-    };
-    let folds = args.folds.unwrap_or(DEFAULT_FOLDS);
-    let (plan, split) = match (&test_table, &args.test_data) {
-        (Some(t), Some(p)) => (
-            ValidationPlan::TestData(Dataset::all(t, &p.display().to_string())),
-            json!({"kind": "test_file", "test_data": p.display().to_string()}),
-        ),
-        _ if args.test_fraction > 0.0 => (
-            ValidationPlan::Split {
-                fraction: args.test_fraction,
-                seed: args.seed,
-            },
-            json!({"kind": "by_pose", "test_fraction": args.test_fraction, "seed": args.seed}),
-        ),
-        _ if folds == 0 => (ValidationPlan::None, json!({"kind": "none"})),
-        _ => (
-            ValidationPlan::Folds {
-                k: folds,
-                seed: args.seed,
-            },
-            json!({"kind": "cross_validation", "folds": folds, "seed": args.seed}),
-        ),
-    };
-    let all = Dataset::all(&table, &data_name);
-    let options = CalibrationOptions {
-        robust,
-        per_campaign_target: args.per_campaign_target,
-        ..CalibrationOptions::default()
-    };
+    let table = data.table;
+    let (plan, split) = options.plan(test);
+    let all = Dataset::all(table, data.name);
     let mut auto = None;
     let model_spec = match model_spec {
         Some(s) => s,
         None => {
-            let diagnose_options = super::diagnose::options(1.0 / 3.0, args.seed, 1e-3)?;
-            let d = super::diagnose::run_diagnosis(model, &table, &data_name, &diagnose_options)?;
+            let diagnose_options = super::diagnose::options(1.0 / 3.0, options.seed, 1e-3)?;
+            let d = super::diagnose::run_diagnosis_with(
+                model,
+                table,
+                data.name,
+                &diagnose_options,
+                progress,
+            )?;
+            note(&format!("--model auto: diagnose chose {}", d.model));
+            progress("--model auto: testing the learned residual on diagnose's held-out poses");
             let choice = auto::choose(
                 model,
-                &table,
-                &data_name,
+                table,
+                data.name,
                 &d,
                 &diagnose_options,
                 &AUTO_LEARNED_KINDS,
             )?;
-            if !args.json {
-                eprintln!("--model auto: diagnose chose {}", d.model);
-                eprintln!("--model auto: {}", choice.note);
-            }
+            note(&format!("--model auto: {}", choice.note));
             let spec = choice.spec.clone();
             auto = Some(choice);
             spec
         }
     };
-    let (cal, validation) = calibrate_validated(model, &all, &model_spec, &options, &plan)
+    let (cal, validation) = calibrate_validated(model, &all, &model_spec, &calibration, &plan)
         .map_err(|e| {
             // Only a validation fit (a fold, or the split's training part) gets the hint: the model
             // on every pose had enough.
@@ -209,12 +314,69 @@ pub fn run(args: Args) -> CliResult {
                 None => e,
             }
         })?;
+    Ok(Outcome {
+        model_spec,
+        cal,
+        split,
+        validation,
+        auto,
+    })
+}
+
+/// Runs `robocal calibrate`.
+pub fn run(args: Args) -> CliResult {
+    args.options.model_spec()?;
+    let mut inputs = Inputs::new();
+    inputs
+        .add("--data", &args.data)
+        .add_robot(&args.robot.robot);
+    if let Some(t) = &args.test_data {
+        inputs.add("--test-data", t);
+    }
+    inputs.check("--out", &args.out)?;
+    if let Some(u) = &args.urdf_out {
+        inputs.check("--urdf-out", u)?;
+        check_distinct(("--out", &args.out), ("--urdf-out", u))?;
+    }
+    args.options.resolve(args.test_data.is_some())?;
+    let spec = ChainSpec {
+        base_link: args.robot.base_link.clone(),
+        tip_link: args.robot.tip_link.clone(),
+    };
+    let robot = Robot::load(&args.robot.robot, &spec)?;
+    let model = &robot.model;
+    let table = read_table(&args.data, model)?;
+    let data_name = args.data.display().to_string();
+    let test_table = match &args.test_data {
+        Some(p) => Some((read_table(p, model)?, p.display().to_string())),
+        None => None,
+    };
+    let test = test_table
+        .as_ref()
+        .map(|(t, name)| Named { table: t, name });
+    let data = Named {
+        table: &table,
+        name: &data_name,
+    };
+    let mut spinner = super::diagnose::Spinner::default();
+    let quiet = args.json;
+    let outcome = calibrate(
+        &robot,
+        data,
+        test,
+        &args.options,
+        &mut |m| spinner.show(m),
+        &mut |m| {
+            if !quiet {
+                eprintln!("{m}");
+            }
+        },
+    );
+    drop(spinner);
+    let outcome = outcome?;
+    let cal = &outcome.cal;
     let report = &cal.report;
-    if !report.was_successful() {
-        let msg = format!(
-            "calibration did not converge: {} after {} iterations",
-            report.after.solver.termination, report.after.solver.iterations
-        );
+    if let Some(msg) = outcome.failure() {
         if args.json {
             print_json(&json!({"error": msg, "report": report}))?;
         } else {
@@ -222,42 +384,21 @@ pub fn run(args: Args) -> CliResult {
         }
         return Err(CliError::Runtime(msg));
     }
-    let mut file = CalibratedModel::new(&robot, &cal);
-    if let (Some(f), Some(v)) = (file.fit.as_mut(), &validation) {
-        f.held_out_rms_m = Some(v.final_stats().rms_m);
-    }
+    let file = outcome.model_file(&robot);
     sim::io::write_atomic(&args.out, file.to_json().as_bytes())?;
     if let Some(path) = &args.urdf_out {
-        let urdf = calibrated_urdf(model, &cal.params);
-        let configs: Vec<Vec<f64>> = (0..table.len().min(200))
-            .map(|r| table.q_row(r).to_vec())
-            .collect();
-        let dev = urdf_deviation(model, &cal.params, &urdf, &configs)?;
-        if dev > 1e-9 {
-            return Err(CliError::Runtime(format!(
-                "{}: the calibrated URDF deviates from the model by {dev:.1e} (m or rotation entry); not written",
-                path.display()
-            )));
-        }
-        sim::io::write_atomic(path, urdf.as_bytes())?;
+        super::urdf_out::write(path, &file, &table, &data_name)?;
     }
     if args.json {
-        print_json(&json!({
-            "robot": model.name,
-            "model": model_spec.name(),
-            "data": data_name,
-            "out": args.out.display().to_string(),
-            "urdf_out": args.urdf_out.as_ref().map(|p| p.display().to_string()),
-            "split": split,
-            "report": report,
-            "validation": validation,
-            "auto": auto,
-        }))
+        print_json(&outcome.json(
+            &robot,
+            &data_name,
+            Some(&args.out),
+            args.urdf_out.as_deref(),
+        ))
     } else {
         eprint!("{}", report.text());
-        if let Some(v) = &validation {
-            eprint!("{}", v.text(&model_spec.name()));
-        }
+        eprint!("{}", outcome.validation_text());
         eprintln!("wrote {}", args.out.display());
         if let Some(p) = &args.urdf_out {
             eprintln!("wrote {}", p.display());

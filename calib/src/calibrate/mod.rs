@@ -196,6 +196,7 @@ pub fn calibrate_model(
     };
     cal.report.model = spec.name();
     if let Some(kind) = spec.learned {
+        crate::cancel::checkpoint()?;
         learned_stage::add_learned(model, &mut cal, kind, train, test, options)?;
     }
     Ok(cal)
@@ -275,6 +276,7 @@ fn calibrate_with(
             problem: "no rows to calibrate on".into(),
         });
     }
+    crate::cancel::checkpoint()?;
     let mut obs = observations(model, train, options, extensions, at)?;
     let test_obs = match test {
         Some(t) if !t.rows.is_empty() => Some(observations(model, t, options, extensions, at)?),
@@ -336,6 +338,7 @@ fn calibrate_with(
     let mut prob = KinematicProblem::new(model, &obs, start, bt);
     let (before_report, _) = minimize(&mut prob, &bt_scales, &options.lm, &mut ws);
     let before_params = prob.into_params();
+    crate::cancel::checkpoint()?;
     if !before_report.was_successful() {
         warnings.push(format!(
             "the base-and-target fit did not converge ({})",
@@ -433,6 +436,8 @@ fn calibrate_with(
             (fit.report, fit.subspace)
         }
     };
+    // A solve stopped by the caller (Ctrl-C in Python) ends the calibration here.
+    crate::cancel::checkpoint()?;
     if !report.was_successful() {
         warnings.push(format!(
             "the kinematic fit did not converge: {}",
@@ -453,6 +458,7 @@ fn calibrate_with(
         (1.0, "noise model (no degrees of freedom left)")
     };
     let covariance = sub.covariance(variance_factor);
+    crate::cancel::checkpoint()?;
     let observability = Observability::from_subspace(&sub);
     let null = describe_null_space(model, &params, ws.gram(), &sub, &obs);
     for line in &null.data_specific {
@@ -474,6 +480,7 @@ fn calibrate_with(
         ));
     }
 
+    crate::cancel::checkpoint()?;
     let outliers = match &final_norms {
         Some(norms) => outliers::find_in(model, &obs, &params, norms, options.outlier_threshold),
         None => outliers::find(model, &obs, &params, &all, options.outlier_threshold),

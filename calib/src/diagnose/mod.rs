@@ -652,6 +652,7 @@ pub fn diagnose_with_progress(
             .max_by(|a, b| a.gain.total_cmp(&b.gain));
         let mut best: Option<(Evaluated, f64, f64)> = None;
         for cause in remaining {
+            crate::cancel::checkpoint()?;
             let spec = current.spec.with(cause);
             progress(&spec.name());
             let cand = match evaluate(model, &split, &spec, options) {
@@ -740,6 +741,7 @@ pub fn diagnose_with_progress(
         Some(v) => (v, "given (--noise-floor)".to_string()),
         None => noise_floor::estimate(table, &split.test.rows, &options.calibration.noise),
     };
+    crate::cancel::checkpoint()?;
     progress("unexplained structure");
     let unexplained = unexplained::analyse(model, &split, &current, noise_floor_m, options)?;
     plots.test_errors_final_m = current.test_err.iter().map(|e| e.norm()).collect();
