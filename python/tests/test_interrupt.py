@@ -38,7 +38,7 @@ def test_other_threads_run_during_a_calibration(big):
         time.sleep(0.05)
         before = ticks
         start = time.perf_counter()
-        robocal.calibrate(big, robot="iiwa7", test_fraction=0.0)
+        robocal.calibrate(big, robot="iiwa7", folds=0)
         elapsed = time.perf_counter() - start
         during = ticks - before
     finally:
@@ -51,20 +51,20 @@ def test_other_threads_run_during_a_calibration(big):
 
 def test_ctrl_c_interrupts_a_calibration(big):
     start = time.perf_counter()
-    robocal.calibrate(big, robot="iiwa7", test_fraction=0.0)
+    robocal.calibrate(big, robot="iiwa7", folds=0)
     full = time.perf_counter() - start
     assert full > 0.5, "the calibration is too short to tell"
     timer = threading.Timer(0.1 * full, _thread.interrupt_main)
     start = time.perf_counter()
     timer.start()
     with pytest.raises(KeyboardInterrupt):
-        robocal.calibrate(big, robot="iiwa7", test_fraction=0.0)
+        robocal.calibrate(big, robot="iiwa7", folds=0)
     interrupted = time.perf_counter() - start
     timer.join()
     # Stopped at a checkpoint soon after the signal, long before the work would have finished.
     assert interrupted < 0.6 * full, (interrupted, full)
     # And nothing is left behind: the next call runs to the end.
-    assert robocal.calibrate(big.head(600), robot="iiwa7").report["report"]["after"]["train"]["rms_m"] > 0
+    assert robocal.calibrate(big.head(600), robot="iiwa7", folds=0).report["report"]["after"]["train"]["rms_m"] > 0
 
 
 def test_ctrl_c_interrupts_a_diagnosis(big):

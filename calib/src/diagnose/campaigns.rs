@@ -10,7 +10,25 @@
 use super::significance::normal_upper_quantile;
 use super::{Evaluated, Split};
 use serde::{Deserialize, Serialize};
-use std::collections::BTreeMap;
+use sim::measurement_table::MeasurementTable;
+use std::collections::{BTreeMap, HashMap};
+
+/// One id per row of `rows` naming its pose: the `pose` column, or with a `campaign` column a running
+/// id per (campaign, pose), since campaigns may number their poses independently.
+pub(crate) fn pose_ids(table: &MeasurementTable, rows: &[usize]) -> Vec<i64> {
+    match &table.campaign {
+        None => rows.iter().map(|&r| table.pose[r]).collect(),
+        Some(_) => {
+            let mut ids = HashMap::new();
+            rows.iter()
+                .map(|&r| {
+                    let next = ids.len() as i64;
+                    *ids.entry(table.pose_key(r)).or_insert(next)
+                })
+                .collect()
+        }
+    }
+}
 
 /// Smallest RMS ratio (campaign against the others) for a campaign to be named.
 pub const MIN_RATIO: f64 = 1.2;

@@ -588,20 +588,7 @@ pub fn diagnose_with_progress(
         });
     }
     let split = Split {
-        // One id per pose (per campaign with several: pose ids may repeat across campaigns).
-        test_pose: match &table.campaign {
-            None => test_rows.iter().map(|&r| table.pose[r]).collect(),
-            Some(_) => {
-                let mut ids = std::collections::HashMap::new();
-                test_rows
-                    .iter()
-                    .map(|&r| {
-                        let next = ids.len() as i64;
-                        *ids.entry(table.pose_key(r)).or_insert(next)
-                    })
-                    .collect()
-            }
-        },
+        test_pose: campaigns::pose_ids(table, &test_rows),
         train: Dataset {
             table,
             rows: train_rows,
