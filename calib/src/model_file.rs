@@ -275,6 +275,7 @@ impl CalibratedModel {
         out.format_version = FORMAT_VERSION;
         out.software = format!("robocal-calib {}", env!("CARGO_PKG_VERSION"));
         out.parameters = parameters_json(&reg.params);
+        keep_unrefitted(&mut out.parameters, &self.parameters, reg.report.campaign);
         let ext = self
             .extensions
             .as_ref()
@@ -783,6 +784,28 @@ fn parameters_json(p: &KinematicParams) -> ModelParameters {
             })
             .collect(),
         default_campaign: Some(p.campaign_ids[p.default_campaign]),
+    }
+}
+
+/// The robot's parameters and every registration that `refitted` (a campaign id) is not, as `old`
+/// (the file registered from) has them: the same numbers, not their round trip through a pose
+/// (exp and log move the last digit).
+fn keep_unrefitted(new: &mut ModelParameters, old: &ModelParameters, refitted: i64) {
+    new.joint_error_twists = old.joint_error_twists.clone();
+    new.zero_offsets = old.zero_offsets.clone();
+    if old.campaign != refitted {
+        new.t_tracker_base = old.t_tracker_base.clone();
+        new.p_flange_target_m = old.p_flange_target_m;
+        new.r_flange_target = old.r_flange_target;
+    }
+    for c in new.campaigns.iter_mut().filter(|c| c.id != refitted) {
+        if let Some(o) = old.campaigns.iter().find(|o| o.id == c.id) {
+            c.t_tracker_base = o.t_tracker_base.clone();
+            if c.p_flange_target_m.is_some() && o.p_flange_target_m.is_some() {
+                c.p_flange_target_m = o.p_flange_target_m;
+                c.r_flange_target = o.r_flange_target;
+            }
+        }
     }
 }
 
