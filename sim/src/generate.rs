@@ -258,6 +258,7 @@ pub fn measurement_table(plan: &Plan, sim: &Simulation, tracker: &Tracker) -> Me
         sigma: cols
             .sigma
             .then(|| sim.rows.iter().map(|r| r.reading.sigma_m).collect()),
+        campaign: None,
     }
 }
 
@@ -735,6 +736,7 @@ fn measurement_columns(has_dir: bool, tracker: &Tracker) -> OptionalColumns {
         dir: has_dir,
         payload: true,
         sigma: tracker.noise_scale() > 0.0,
+        campaign: false,
     }
 }
 

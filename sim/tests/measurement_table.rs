@@ -76,18 +76,25 @@ fn random_table(rng: &mut StdRng, cols: Option<OptionalColumns>) -> MeasurementT
         dir: rng.random_bool(0.5),
         payload: rng.random_bool(0.5),
         sigma: rng.random_bool(0.5),
+        campaign: rng.random_bool(0.5),
     });
     let mut t = MeasurementTable::new(nq, cols);
-    // Rows sharing a pose id are repeats of one pose: the same joint values.
-    let mut q_of_pose: std::collections::HashMap<i64, Vec<f64>> = Default::default();
+    // Rows sharing a pose id (in one campaign) are repeats of one pose: the same joint values.
+    let mut q_of_pose: std::collections::HashMap<(i64, i64), Vec<f64>> = Default::default();
     for _ in 0..rows {
         let pose = match rng.random_range(0..4) {
             0 => i64::MIN,
             1 => i64::MAX,
             _ => rng.random_range(-5..1000),
         };
+        let campaign = match rng.random_range(0..4) {
+            0 => i64::MIN,
+            1 => i64::MAX,
+            _ => rng.random_range(-2..3),
+        };
+        let key = (if cols.campaign { campaign } else { 0 }, pose);
         let fresh: Vec<f64> = (0..nq).map(|_| any_f64(rng)).collect();
-        let q = q_of_pose.entry(pose).or_insert(fresh).clone();
+        let q = q_of_pose.entry(key).or_insert(fresh).clone();
         let dir: Vec<i8> = (0..nq).map(|_| rng.random_range(-1..=1)).collect();
         let quat = {
             let v: [f64; 4] = std::array::from_fn(|_| rng.random::<f64>() - 0.5);
@@ -109,6 +116,7 @@ fn random_table(rng: &mut StdRng, cols: Option<OptionalColumns>) -> MeasurementT
             dir: cols.dir.then_some(&dir[..]),
             payload: cols.payload.then(|| bounded_f64(rng, 1000.0).abs()),
             sigma: cols.sigma.then(|| bounded_f64(rng, 1.0).abs()),
+            campaign: cols.campaign.then_some(campaign),
         })
         .unwrap();
     }
@@ -149,6 +157,7 @@ fn assert_bit_equal(a: &MeasurementTable, b: &MeasurementTable, what: &str) {
     assert_eq!(a.dir, b.dir, "{what}: dir");
     assert_eq!(opt(&a.payload), opt(&b.payload), "{what}: payload");
     assert_eq!(opt(&a.sigma), opt(&b.sigma), "{what}: sigma");
+    assert_eq!(a.campaign, b.campaign, "{what}: campaign");
 }
 
 #[test]
@@ -477,7 +486,7 @@ fn parquet_bytes_are_deterministic_and_typed_as_specified() {
     for (i, col) in schema.columns().iter().enumerate() {
         let name = col.name();
         let (physical, logical) = (col.physical_type(), col.logical_type_ref().cloned());
-        let expect = if name == "pose" {
+        let expect = if name == "pose" || name == "campaign" {
             "INT64"
         } else if name.starts_with("dir") {
             "INT32" // Int8 is INT32 with the INT(8, signed) logical type
@@ -1298,4 +1307,84 @@ fn fuzz_found_impossible_temperatures_are_errors() {
     for v in ["-273.15", "1000", "-40", "85"] {
         assert!(read_csv_str(&with(v), "data.csv").is_ok(), "{v}");
     }
+}
+
+#[test]
+fn campaign_column_is_read_written_and_keys_the_poses() {
+    // Two campaigns both number their poses from 0: a pose is (campaign, pose), so pose 0 of campaign
+    // 7 may stand at other joint values than pose 0 of campaign 3.
+    let text = "pose,q1,q2,x,y,z,campaign\n0,0.1,0.2,1,2,3,3\n1,0.3,0.4,1,2,3,3\n0,0.5,0.6,1,2,3,7\n0,0.1,0.2,1.5,2,3,3\n";
+    let t = read_csv_str(text, "c.csv").unwrap();
+    assert_eq!(t.campaign, Some(vec![3, 3, 7, 3]));
+    assert!(t.columns().campaign);
+    assert_eq!(t.campaign_ids(), vec![3, 7]);
+    assert_eq!(t.n_poses(), 3);
+    assert_eq!(
+        t.rows_by_pose(),
+        vec![(0, vec![0, 3]), (1, vec![1]), (0, vec![2])]
+    );
+    assert_eq!(t.pose_key(2), (7, 0));
+    assert_eq!(t.row(2).campaign, Some(7));
+    // Written last, as an integer, and read back identically from CSV and Parquet.
+    let csv = mt::write_csv_string(&t).unwrap();
+    assert_eq!(csv.lines().next().unwrap(), "pose,q1,q2,x,y,z,campaign");
+    assert!(csv.lines().nth(3).unwrap().ends_with(",7"), "{csv}");
+    assert_eq!(read_csv_str(&csv, "c.csv").unwrap(), t);
+    let dir = temp_dir("campaign");
+    let p = dir.join("c.parquet");
+    mt::write(&p, &t).unwrap();
+    assert_eq!(mt::read(&p).unwrap(), t);
+    // Without the column, the same pose id at other joint values is an error; so is a campaign id
+    // that is not an integer.
+    let no_column = "pose,q1,q2,x,y,z\n0,0.1,0.2,1,2,3\n0,0.5,0.6,1,2,3\n";
+    let e = read_csv_str(no_column, "n.csv").unwrap_err().to_string();
+    assert!(
+        e.contains("pose 0 is reused with other joint values"),
+        "{e}"
+    );
+    let same_campaign = "pose,q1,q2,x,y,z,campaign\n0,0.1,0.2,1,2,3,1\n0,0.5,0.6,1,2,3,1\n";
+    let e = read_csv_str(same_campaign, "s.csv")
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("row 2") && e.contains("column pose"), "{e}");
+    let e = read_csv_str("pose,q1,x,y,z,campaign\n0,0.1,1,2,3,1.5\n", "f.csv")
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.starts_with("f.csv: row 1 (line 2), column campaign:"),
+        "{e}"
+    );
+    // A float-typed Parquet column with integral values (a pandas default after a merge) reads.
+    let q = dir.join("float_campaign.parquet");
+    write_arrow(
+        &q,
+        vec![
+            (
+                "pose",
+                std::sync::Arc::new(arrow_array::Int64Array::from(vec![0, 0])),
+            ),
+            (
+                "q1",
+                std::sync::Arc::new(arrow_array::Float64Array::from(vec![0.1, 0.2])),
+            ),
+            (
+                "x",
+                std::sync::Arc::new(arrow_array::Float64Array::from(vec![1.0, 1.0])),
+            ),
+            (
+                "y",
+                std::sync::Arc::new(arrow_array::Float64Array::from(vec![1.0, 1.0])),
+            ),
+            (
+                "z",
+                std::sync::Arc::new(arrow_array::Float64Array::from(vec![1.0, 1.0])),
+            ),
+            (
+                "campaign",
+                std::sync::Arc::new(arrow_array::Float64Array::from(vec![1.0, 2.0])),
+            ),
+        ],
+    );
+    assert_eq!(mt::read(&q).unwrap().campaign, Some(vec![1, 2]));
+    std::fs::remove_dir_all(&dir).unwrap();
 }

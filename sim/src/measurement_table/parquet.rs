@@ -35,6 +35,9 @@ pub fn write_parquet_bytes(table: &MeasurementTable) -> Result<Vec<u8>> {
 fn writer_properties(n_joints: usize, columns: OptionalColumns) -> WriterProperties {
     let mut b = crate::io::deterministic_writer_properties(PARQUET_MAX_ROW_GROUP_ROWS)
         .set_column_dictionary_enabled(ColumnPath::from("pose"), true);
+    if columns.campaign {
+        b = b.set_column_dictionary_enabled(ColumnPath::from("campaign"), true);
+    }
     if columns.dir {
         for j in 1..=n_joints {
             b = b.set_column_dictionary_enabled(ColumnPath::from(format!("dir{j}")), true);
@@ -43,13 +46,14 @@ fn writer_properties(n_joints: usize, columns: OptionalColumns) -> WriterPropert
     b.build()
 }
 
-/// The Arrow schema of a table's file: `pose` Int64, `dir*` Int8, every other column Float64.
+/// The Arrow schema of a table's file: `pose` and `campaign` Int64, `dir*` Int8, every other column
+/// Float64.
 fn schema(n_joints: usize, columns: OptionalColumns) -> Arc<Schema> {
     let fields: Vec<Field> = MeasurementTable::new(n_joints, columns)
         .column_names()
         .into_iter()
         .map(|name| {
-            let dt = if name == "pose" {
+            let dt = if name == "pose" || name == "campaign" {
                 DataType::Int64
             } else if name.starts_with("dir") {
                 DataType::Int8
@@ -89,6 +93,9 @@ fn arrays(table: &MeasurementTable, rows: std::ops::Range<usize>) -> Vec<ArrayRe
     }
     for c in [&table.payload, &table.sigma].into_iter().flatten() {
         out.push(f(c[rows.clone()].to_vec()));
+    }
+    if let Some(c) = &table.campaign {
+        out.push(Arc::new(Int64Array::from(c[rows.clone()].to_vec())));
     }
     out
 }
