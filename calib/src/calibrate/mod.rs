@@ -40,7 +40,7 @@ use crate::error::{CalibError, Result};
 use crate::extensions::{ExtensionSettings, ModelSpec, Regressors};
 use crate::identifiability::{Observability, describe_null_space};
 use crate::learned::LearnedResidual;
-use crate::lm::{LmOptions, LmWorkspace, Subspace, minimize};
+use crate::lm::{LmOptions, LmWorkspace, SolveHints, Subspace, minimize, minimize_with};
 use crate::params::{KinematicParams, ParamLayout, ParameterScales};
 use crate::problem::{KinematicProblem, NoiseModel, Observations};
 use crate::stats::residual_stats;
@@ -198,13 +198,32 @@ pub(crate) struct FoldStart<'a> {
     pub before: &'a KinematicParams,
     /// Its physical parameters (before any learned stage changed them).
     pub physical: &'a KinematicParams,
+    /// The fold's normal equations and `R` factor at `physical`, when one pass over every row made
+    /// them ([`validation`]'s fold shares).
+    pub shared: Option<&'a FoldShare>,
+}
+
+/// A fold's normal equations and `R` factor of its scaled Jacobian at the all-pose solution
+/// (every training row at weight 1, [`CalibrationOptions::scales`]), summed from the other folds'
+/// shares of one pass over every row: the start and the rank decision of its Levenberg–Marquardt
+/// solve ([`crate::lm::SolveHints`]).
+#[derive(Clone, Debug)]
+pub(crate) struct FoldShare {
+    /// `χ²` at the start.
+    pub cost: f64,
+    /// `D JᵀJ D` (p × p, full).
+    pub gram: DMatrix<f64>,
+    /// `D Jᵀr`.
+    pub gradient: Vec<f64>,
+    /// `R` of the scaled Jacobian (p × p).
+    pub factor: DMatrix<f64>,
 }
 
 impl FoldStart<'_> {
     /// Whether the fit of `obs` can start here: the same campaigns, orientation and (no) extension
     /// parameters as the calibration on every pose. A fold without a campaign's poses, or an
     /// extended model, starts from the closed form instead.
-    fn fits(&self, obs: &Observations) -> bool {
+    pub(crate) fn fits(&self, obs: &Observations) -> bool {
         self.before.campaign_ids == obs.campaign_ids()
             && self.physical.campaign_ids == self.before.campaign_ids
             && self.before.r_flange_target.is_some() == obs.orientation.is_some()
@@ -426,7 +445,15 @@ fn calibrate_with(
     let (report, sub) = match options.robust {
         None => {
             let mut prob = KinematicProblem::new(model, &obs, params.clone(), all.clone());
-            let mut out = minimize(&mut prob, scales.as_slice(), &options.lm, &mut ws);
+            // A fold's first solve starts where its shared work was done (weights 1, no exclusion).
+            let hints = match warm.and_then(|f| f.shared) {
+                Some(s) if s.factor.nrows() == p && s.gradient.len() == p => SolveHints {
+                    initial: Some((s.cost, &s.gram, &s.gradient)),
+                    factor: Some(&s.factor),
+                },
+                _ => SolveHints::default(),
+            };
+            let mut out = minimize_with(&mut prob, scales.as_slice(), &options.lm, &mut ws, &hints);
             params = prob.into_params();
             for _ in 0..GROSS_ERROR_ROUNDS {
                 let norms = outliers::row_norms(model, &obs, &params, &all);

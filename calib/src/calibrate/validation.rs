@@ -20,9 +20,12 @@
 //! them it leaves out the repeatability scatter that averaging removes.
 
 use super::{
-    Calibration, CalibrationOptions, Dataset, FoldStart, calibrate_model, calibrate_model_from,
-    observations,
+    Calibration, CalibrationOptions, Dataset, FoldShare, FoldStart, calibrate_model,
+    calibrate_model_from, observations,
 };
+use crate::params::ParamLayout;
+use crate::problem::KinematicProblem;
+use nalgebra::DMatrix;
 use crate::error::{CalibError, Result};
 use crate::extensions::ModelSpec;
 use crate::predict::Prediction;
@@ -304,7 +307,68 @@ fn fold_start(all: &Calibration) -> FoldStart<'_> {
     FoldStart {
         before: &all.before,
         physical: all.physical.as_ref().unwrap_or(&all.params),
+        shared: None,
     }
+}
+
+/// Every fold's [`FoldShare`] at `start`'s physical parameters, from one pass over the rows of
+/// `data` (`fold_of` per row, `k` folds): fold `f`'s is the sum of the other folds' shares, in
+/// fold order. `None` where the folds cannot start there (see [`FoldStart`]), with a robust loss
+/// (its reweighting starts elsewhere), or for an extended model.
+fn fold_shares(
+    model: &Model,
+    data: &Dataset<'_>,
+    spec: &ModelSpec,
+    options: &CalibrationOptions,
+    fold_of: &[usize],
+    k: usize,
+    start: &FoldStart<'_>,
+) -> Result<Option<Vec<FoldShare>>> {
+    if !spec.causes.is_empty() || options.robust.is_some() {
+        return Ok(None);
+    }
+    let obs = observations(model, data, options, None, &[])?;
+    if !start.fits(&obs) {
+        return Ok(None);
+    }
+    let params = start.physical.clone();
+    let layout = ParamLayout::for_params(model, &params, obs.ext.params.clone());
+    let scales = options.scales.vector(&layout);
+    let p = layout.len();
+    let mut problem = KinematicProblem::new(model, &obs, params, (0..p).collect());
+    let parts = problem.group_parts(scales.as_slice(), fold_of, k);
+    let shares = (0..k)
+        .map(|f| {
+            let others = || parts.iter().enumerate().filter(move |(g, _)| *g != f);
+            let mut gram = DMatrix::zeros(p, p);
+            let mut gradient = vec![0.0; p];
+            let mut cost = 0.0;
+            for (_, part) in others() {
+                cost += part.cost;
+                for (t, v) in gradient.iter_mut().zip(&part.gradient) {
+                    *t += v;
+                }
+                for (t, v) in gram.as_mut_slice().iter_mut().zip(&part.gram) {
+                    *t += v;
+                }
+            }
+            for a in 0..p {
+                for b in a + 1..p {
+                    gram[(a, b)] = gram[(b, a)];
+                }
+            }
+            let factors: Vec<DMatrix<f64>> = others()
+                .flat_map(|(_, part)| part.factors.iter().cloned())
+                .collect();
+            FoldShare {
+                cost,
+                gram,
+                gradient,
+                factor: crate::linalg::stacked_r_factor(&factors, p),
+            }
+        })
+        .collect();
+    Ok(Some(shares))
 }
 
 /// The training and held-out rows of fold `f` (`fold_of` per row of `data`): the training rows as
@@ -371,7 +435,15 @@ fn cross_validate_from(
         });
     }
     let fold_of = pose_folds(data, k, seed);
+    let shares = match &start {
+        Some(s) => fold_shares(model, data, spec, options, &fold_of, k, s)?,
+        None => None,
+    };
     let run = |f: usize| -> Result<(FoldErrors, Vec<usize>, usize)> {
+        let start = start.map(|s| FoldStart {
+            shared: shares.as_ref().map(|v| &v[f]),
+            ..s
+        });
         let (cal, errors, test) = fit_fold(model, data, spec, options, &fold_of, f, start)?;
         Ok((errors, test, cal.report.n_train_poses))
     };
