@@ -417,7 +417,12 @@ impl<'a> KinematicProblem<'a> {
     /// [`crate::linalg::stacked_r_factor`]). One evaluation of each row serves both. Chunks run in
     /// parallel; every sum and list is in chunk order, so the result does not depend on the number
     /// of threads. The groups of cross-validation folds share their work this way.
-    pub(crate) fn group_parts(&mut self, scales: &[f64], group: &[usize], k: usize) -> Vec<GroupPart> {
+    pub(crate) fn group_parts(
+        &mut self,
+        scales: &[f64],
+        group: &[usize],
+        k: usize,
+    ) -> Vec<GroupPart> {
         assert_eq!(group.len(), self.obs.len(), "a group for every row");
         let d = self.obs.dim();
         let np = self.layout.len();

@@ -23,12 +23,12 @@ use super::{
     Calibration, CalibrationOptions, Dataset, FoldShare, FoldStart, calibrate_model,
     calibrate_model_from, observations,
 };
-use crate::params::ParamLayout;
-use crate::problem::KinematicProblem;
-use nalgebra::DMatrix;
 use crate::error::{CalibError, Result};
 use crate::extensions::ModelSpec;
+use crate::params::ParamLayout;
 use crate::predict::Prediction;
+use crate::problem::KinematicProblem;
+use nalgebra::DMatrix;
 use nalgebra::Vector3;
 use rand::SeedableRng;
 use rand::seq::SliceRandom;
@@ -411,6 +411,38 @@ fn fit_fold(
     let cal = calibrate_model_from(model, &train_set, None, spec, options, start)?;
     let errors = held_out_errors(model, &cal, &test_set, options)?;
     Ok((cal, errors, test))
+}
+
+/// The calibrations of the `k` folds of [`cross_validate`] (seed `seed`), in fold order, each from
+/// the closed-form start, or, with `all` (the calibration of `spec` on every row of `data`), started
+/// there as [`cross_validate_warm`] does: for inspection and for checking that both reach the same
+/// minima. A fold started at `all` has no training statistics or outliers in its report, and, when
+/// its rank decision came from the shared factor, its subspace and covariance are those at `all`'s
+/// solution.
+pub fn fold_calibrations(
+    model: &Model,
+    data: &Dataset<'_>,
+    spec: &ModelSpec,
+    options: &CalibrationOptions,
+    k: usize,
+    seed: u64,
+    all: Option<&Calibration>,
+) -> Result<Vec<Calibration>> {
+    let fold_of = pose_folds(data, k, seed);
+    let start = all.map(fold_start);
+    let shares = match &start {
+        Some(s) => fold_shares(model, data, spec, options, &fold_of, k, s)?,
+        None => None,
+    };
+    (0..k)
+        .map(|f| {
+            let start = start.map(|s| FoldStart {
+                shared: shares.as_ref().map(|v| &v[f]),
+                ..s
+            });
+            Ok(fit_fold(model, data, spec, options, &fold_of, f, start)?.0)
+        })
+        .collect()
 }
 
 fn cross_validate_from(
