@@ -203,12 +203,22 @@ pub(crate) struct FoldStart<'a> {
     pub shared: Option<&'a FoldShare>,
 }
 
-/// A fold's normal equations and `R` factor of its scaled Jacobian at the all-pose solution
-/// (every training row at weight 1, [`CalibrationOptions::scales`]), summed from the other folds'
-/// shares of one pass over every row: the start and the rank decision of its Levenberg–Marquardt
-/// solve ([`crate::lm::SolveHints`]).
+/// A fold's shared work for its two solves: the base-and-target fit at the all-pose "before"
+/// parameters and the full fit at the all-pose solution.
 #[derive(Clone, Debug)]
 pub(crate) struct FoldShare {
+    /// For the base-and-target fit (its active parameters only).
+    pub before: SolveShare,
+    /// For the fit of every parameter.
+    pub after: SolveShare,
+}
+
+/// A fold's normal equations and `R` factor of its scaled Jacobian at a solve's start (every
+/// training row at weight 1, [`CalibrationOptions::scales`] of the active parameters), summed from
+/// the other folds' shares of one pass over every row: the start and the rank decision of its
+/// Levenberg–Marquardt solve ([`crate::lm::SolveHints`]).
+#[derive(Clone, Debug)]
+pub(crate) struct SolveShare {
     /// `χ²` at the start.
     pub cost: f64,
     /// `D JᵀJ D` (p × p, full).
@@ -217,6 +227,20 @@ pub(crate) struct FoldShare {
     pub gradient: Vec<f64>,
     /// `R` of the scaled Jacobian (p × p).
     pub factor: DMatrix<f64>,
+}
+
+impl SolveShare {
+    /// The hints of a solve of `p` parameters (none when the factor is not square: too few rows).
+    fn hints(&self, p: usize) -> SolveHints<'_> {
+        if self.factor.nrows() == p && self.factor.ncols() == p && self.gradient.len() == p {
+            SolveHints {
+                initial: Some((self.cost, &self.gram, &self.gradient)),
+                factor: Some(&self.factor),
+            }
+        } else {
+            SolveHints::default()
+        }
+    }
 }
 
 impl FoldStart<'_> {
@@ -407,7 +431,11 @@ fn calibrate_with(
     let bt_scales: Vec<f64> = bt.iter().map(|&k| scales[k]).collect();
     let mut ws = LmWorkspace::new(obs.len() * dim, bt.len());
     let mut prob = KinematicProblem::new(model, &obs, start, bt);
-    let (before_report, _) = minimize(&mut prob, &bt_scales, &options.lm, &mut ws);
+    let hints = match warm.and_then(|f| f.shared) {
+        Some(s) => s.before.hints(bt_scales.len()),
+        None => SolveHints::default(),
+    };
+    let (before_report, _) = minimize_with(&mut prob, &bt_scales, &options.lm, &mut ws, &hints);
     let before_params = prob.into_params();
     crate::cancel::checkpoint()?;
     if !before_report.was_successful() {
@@ -447,11 +475,8 @@ fn calibrate_with(
             let mut prob = KinematicProblem::new(model, &obs, params.clone(), all.clone());
             // A fold's first solve starts where its shared work was done (weights 1, no exclusion).
             let hints = match warm.and_then(|f| f.shared) {
-                Some(s) if s.factor.nrows() == p && s.gradient.len() == p => SolveHints {
-                    initial: Some((s.cost, &s.gram, &s.gradient)),
-                    factor: Some(&s.factor),
-                },
-                _ => SolveHints::default(),
+                Some(s) => s.after.hints(p),
+                None => SolveHints::default(),
             };
             let mut out = minimize_with(&mut prob, scales.as_slice(), &options.lm, &mut ws, &hints);
             params = prob.into_params();

@@ -20,11 +20,12 @@
 //! them it leaves out the repeatability scatter that averaging removes.
 
 use super::{
-    Calibration, CalibrationOptions, Dataset, FoldShare, FoldStart, calibrate_model,
+    Calibration, CalibrationOptions, Dataset, FoldShare, FoldStart, SolveShare, calibrate_model,
     calibrate_model_from, observations,
 };
 use crate::error::{CalibError, Result};
 use crate::extensions::ModelSpec;
+use crate::params::KinematicParams;
 use crate::params::ParamLayout;
 use crate::predict::Prediction;
 use crate::problem::KinematicProblem;
@@ -311,9 +312,9 @@ fn fold_start(all: &Calibration) -> FoldStart<'_> {
     }
 }
 
-/// Every fold's [`FoldShare`] at `start`'s physical parameters, from one pass over the rows of
-/// `data` (`fold_of` per row, `k` folds): fold `f`'s is the sum of the other folds' shares, in
-/// fold order. `None` where the folds cannot start there (see [`FoldStart`]), with a robust loss
+/// Every fold's [`FoldShare`] at `start`'s "before" and physical parameters, from one pass over
+/// the rows of `data` for each (`fold_of` per row, `k` folds): fold `f`'s is the sum of the other
+/// folds' shares, in fold order. `None` where the folds cannot start there (see [`FoldStart`]), with a robust loss
 /// (its reweighting starts elsewhere), or for an extended model.
 fn fold_shares(
     model: &Model,
@@ -331,42 +332,51 @@ fn fold_shares(
     if !start.fits(&obs) {
         return Ok(None);
     }
-    let params = start.physical.clone();
-    let layout = ParamLayout::for_params(model, &params, obs.ext.params.clone());
+    let layout = ParamLayout::for_params(model, start.physical, obs.ext.params.clone());
     let scales = options.scales.vector(&layout);
-    let p = layout.len();
-    let mut problem = KinematicProblem::new(model, &obs, params, (0..p).collect());
-    let parts = problem.group_parts(scales.as_slice(), fold_of, k);
-    let shares = (0..k)
-        .map(|f| {
-            let others = || parts.iter().enumerate().filter(move |(g, _)| *g != f);
-            let mut gram = DMatrix::zeros(p, p);
-            let mut gradient = vec![0.0; p];
-            let mut cost = 0.0;
-            for (_, part) in others() {
-                cost += part.cost;
-                for (t, v) in gradient.iter_mut().zip(&part.gradient) {
-                    *t += v;
+    let stage = |params: &KinematicParams, active: Vec<usize>| -> Vec<SolveShare> {
+        let p = active.len();
+        let stage_scales: Vec<f64> = active.iter().map(|&k| scales[k]).collect();
+        let mut problem = KinematicProblem::new(model, &obs, params.clone(), active);
+        let parts = problem.group_parts(&stage_scales, fold_of, k);
+        (0..k)
+            .map(|f| {
+                let others = || parts.iter().enumerate().filter(move |(g, _)| *g != f);
+                let mut gram = DMatrix::zeros(p, p);
+                let mut gradient = vec![0.0; p];
+                let mut cost = 0.0;
+                for (_, part) in others() {
+                    cost += part.cost;
+                    for (t, v) in gradient.iter_mut().zip(&part.gradient) {
+                        *t += v;
+                    }
+                    for (t, v) in gram.as_mut_slice().iter_mut().zip(&part.gram) {
+                        *t += v;
+                    }
                 }
-                for (t, v) in gram.as_mut_slice().iter_mut().zip(&part.gram) {
-                    *t += v;
+                for a in 0..p {
+                    for b in a + 1..p {
+                        gram[(a, b)] = gram[(b, a)];
+                    }
                 }
-            }
-            for a in 0..p {
-                for b in a + 1..p {
-                    gram[(a, b)] = gram[(b, a)];
+                let factors: Vec<DMatrix<f64>> = others()
+                    .flat_map(|(_, part)| part.factors.iter().cloned())
+                    .collect();
+                SolveShare {
+                    cost,
+                    gram,
+                    gradient,
+                    factor: crate::linalg::stacked_r_factor(&factors, p),
                 }
-            }
-            let factors: Vec<DMatrix<f64>> = others()
-                .flat_map(|(_, part)| part.factors.iter().cloned())
-                .collect();
-            FoldShare {
-                cost,
-                gram,
-                gradient,
-                factor: crate::linalg::stacked_r_factor(&factors, p),
-            }
-        })
+            })
+            .collect()
+    };
+    let before = stage(start.before, layout.base_and_target());
+    let after = stage(start.physical, (0..layout.len()).collect());
+    let shares = before
+        .into_iter()
+        .zip(after)
+        .map(|(before, after)| FoldShare { before, after })
         .collect();
     Ok(Some(shares))
 }
