@@ -314,8 +314,8 @@ fn fold_start(all: &Calibration) -> FoldStart<'_> {
 
 /// Every fold's [`FoldShare`] at `start`'s "before" and physical parameters, from one pass over
 /// the rows of `data` for each (`fold_of` per row, `k` folds): fold `f`'s is the sum of the other
-/// folds' shares, in fold order. `None` where the folds cannot start there (see [`FoldStart`]), with a robust loss
-/// (its reweighting starts elsewhere), or for an extended model.
+/// folds' shares, in fold order. `None` where the folds cannot start there (see [`FoldStart`]),
+/// with a robust loss (its reweighting starts elsewhere), or for an extended model.
 fn fold_shares(
     model: &Model,
     data: &Dataset<'_>,
@@ -439,20 +439,38 @@ pub fn fold_calibrations(
     all: Option<&Calibration>,
 ) -> Result<Vec<Calibration>> {
     let fold_of = pose_folds(data, k, seed);
-    let start = all.map(fold_start);
+    fit_folds(model, data, spec, options, &fold_of, k, all.map(fold_start))?
+        .into_iter()
+        .map(|r| r.map(|(cal, ..)| cal))
+        .collect()
+}
+
+/// Every fold's [`fit_fold`] (`fold_of` per row, `k` folds), in parallel, in fold order; with
+/// `start`, after the pass over every row that the folds share ([`fold_shares`]).
+#[allow(clippy::type_complexity)]
+fn fit_folds(
+    model: &Model,
+    data: &Dataset<'_>,
+    spec: &ModelSpec,
+    options: &CalibrationOptions,
+    fold_of: &[usize],
+    k: usize,
+    start: Option<FoldStart<'_>>,
+) -> Result<Vec<Result<(Calibration, FoldErrors, Vec<usize>)>>> {
     let shares = match &start {
-        Some(s) => fold_shares(model, data, spec, options, &fold_of, k, s)?,
+        Some(s) => fold_shares(model, data, spec, options, fold_of, k, s)?,
         None => None,
     };
-    (0..k)
+    Ok((0..k)
+        .into_par_iter()
         .map(|f| {
             let start = start.map(|s| FoldStart {
                 shared: shares.as_ref().map(|v| &v[f]),
                 ..s
             });
-            Ok(fit_fold(model, data, spec, options, &fold_of, f, start)?.0)
+            fit_fold(model, data, spec, options, fold_of, f, start)
         })
-        .collect()
+        .collect())
 }
 
 fn cross_validate_from(
@@ -477,20 +495,11 @@ fn cross_validate_from(
         });
     }
     let fold_of = pose_folds(data, k, seed);
-    let shares = match &start {
-        Some(s) => fold_shares(model, data, spec, options, &fold_of, k, s)?,
-        None => None,
-    };
-    let run = |f: usize| -> Result<(FoldErrors, Vec<usize>, usize)> {
-        let start = start.map(|s| FoldStart {
-            shared: shares.as_ref().map(|v| &v[f]),
-            ..s
-        });
-        let (cal, errors, test) = fit_fold(model, data, spec, options, &fold_of, f, start)?;
-        Ok((errors, test, cal.report.n_train_poses))
-    };
     let results: Vec<Result<(FoldErrors, Vec<usize>, usize)>> =
-        (0..k).into_par_iter().map(run).collect();
+        fit_folds(model, data, spec, options, &fold_of, k, start)?
+            .into_iter()
+            .map(|r| r.map(|(cal, errors, test)| (errors, test, cal.report.n_train_poses)))
+            .collect();
     let n = data.rows.len();
     let (mut before, mut after) = (vec![Vector3::zeros(); n], vec![Vector3::zeros(); n]);
     let mut learned: Option<Vec<Vector3<f64>>> = None;
