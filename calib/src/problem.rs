@@ -644,3 +644,104 @@ impl LeastSquaresProblem for KinematicProblem<'_> {
         total.cost
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::lm::LeastSquaresProblem;
+    use crate::observations::NoiseModel;
+    use rand::{RngExt, SeedableRng};
+    use sim::measurement_table::{MeasurementTable, OptionalColumns};
+
+    /// Each group's share of [`KinematicProblem::group_parts`] against the normal equations of a
+    /// problem on that group's rows alone (what a fold computes for itself), and the groups' sum
+    /// against the problem on every row; each group's stacked `R` factors against its normal matrix
+    /// (`RᵀR = D JᵀJ D`). 5,000 rows: three chunks, summed and stacked in order.
+    #[test]
+    fn group_parts_add_up_to_each_groups_own_normal_equations() {
+        let model = sim::robots::load_builtin("iiwa7").unwrap();
+        let mut rng = rand::rngs::StdRng::seed_from_u64(11);
+        let n = 5000;
+        let mut table = MeasurementTable::new(7, OptionalColumns::default());
+        for r in 0..n {
+            table.pose.push(r as i64);
+            for _ in 0..7 {
+                table.q.push(rng.random_range(-1.5..1.5));
+            }
+            table.position.push([
+                rng.random_range(-1.0..1.0),
+                rng.random_range(-1.0..1.0),
+                rng.random_range(-1.0..1.0),
+            ]);
+        }
+        let noise = NoiseModel::default();
+        let all_rows: Vec<usize> = (0..n).collect();
+        let obs = Observations::from_table(&table, &all_rows, &noise, "t").unwrap();
+        let params = KinematicParams::nominal(7, false);
+        let layout = ParamLayout::for_params(&model, &params, Vec::new());
+        let p = layout.len();
+        let scales: Vec<f64> = (0..p).map(|k| 1.0 + 0.1 * k as f64).collect();
+        let k = 3;
+        let group: Vec<usize> = (0..n).map(|r| (r * 7 + r / 11) % k).collect();
+        let mut problem = KinematicProblem::new(&model, &obs, params.clone(), (0..p).collect());
+        let parts = problem.group_parts(&scales, &group, k);
+        // The normal equations of `rows` alone.
+        let own = |rows: &[usize]| {
+            let o = Observations::from_table(&table, rows, &noise, "t").unwrap();
+            let mut pr = KinematicProblem::new(&model, &o, params.clone(), (0..p).collect());
+            let mut gram = DMatrix::zeros(p, p);
+            let mut gradient = vec![0.0; p];
+            pr.set_params(&vec![0.0; p]);
+            let cost = pr.normal_equations(&scales, &mut gram, &mut gradient);
+            (cost, gram, gradient)
+        };
+        let close = |a: f64, b: f64, scale: f64| (a - b).abs() <= 1e-11 * scale;
+        let (mut sum_cost, mut sum_grad, mut sum_gram) = (0.0, vec![0.0; p], vec![0.0; p * p]);
+        for (g, part) in parts.iter().enumerate() {
+            let rows: Vec<usize> = (0..n).filter(|&r| group[r] == g).collect();
+            let (cost, gram, gradient) = own(&rows);
+            let gmax = gram.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+            assert!(close(part.cost, cost, cost), "group {g}: χ²");
+            let grad_max = gradient.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+            for a in 0..p {
+                assert!(
+                    close(part.gradient[a], gradient[a], grad_max),
+                    "group {g}: gradient {a}"
+                );
+                for b in a..p {
+                    assert!(
+                        close(part.gram[a * p + b], gram[(b, a)], gmax),
+                        "group {g}: ({b}, {a})"
+                    );
+                }
+            }
+            let r = crate::linalg::stacked_r_factor(&part.factors, p);
+            let rtr = r.transpose() * &r;
+            for a in 0..p {
+                for b in 0..p {
+                    assert!(
+                        (rtr[(a, b)] - gram[(a, b)]).abs() <= 1e-10 * gmax,
+                        "group {g}: RᵀR ({a}, {b})"
+                    );
+                }
+            }
+            sum_cost += part.cost;
+            for (s, v) in sum_grad.iter_mut().zip(&part.gradient) {
+                *s += v;
+            }
+            for (s, v) in sum_gram.iter_mut().zip(&part.gram) {
+                *s += v;
+            }
+        }
+        let (cost, gram, gradient) = own(&all_rows);
+        let gmax = gram.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        assert!(close(sum_cost, cost, cost));
+        let grad_max = gradient.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        for a in 0..p {
+            assert!(close(sum_grad[a], gradient[a], grad_max));
+            for b in a..p {
+                assert!(close(sum_gram[a * p + b], gram[(b, a)], gmax));
+            }
+        }
+    }
+}
