@@ -371,7 +371,9 @@ fn fold_shares(
             })
             .collect()
     };
+    crate::cancel::checkpoint()?;
     let before = stage(start.before, layout.base_and_target());
+    crate::cancel::checkpoint()?;
     let after = stage(start.physical, (0..layout.len()).collect());
     let shares = before
         .into_iter()
