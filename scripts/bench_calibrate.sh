@@ -1,10 +1,11 @@
 #!/usr/bin/env bash
 # Benchmark of `robocal calibrate` on large data (issue 13): 100,000 poses of iiwa7_clean, the model
 # fitted on every pose with --folds 0 (no validation) and with the default 5-fold cross-validation
-# (folds in parallel), in release mode, on all cores. Prints the wall and CPU time of each run and the
-# medians. With ROBOCAL_BASE=path/to/robocal it also times that build's default calibrate (before issue
-# 13: 70 % of the poses fitted, 30 % held out) on the same data, interleaved run by run, for the
-# side-by-side comparison the targets ask for (the machine's speed varies).
+# (folds in parallel), in release mode, on all cores. Prints the wall and CPU time of each run, the
+# medians and the ratio default/--folds 0. With ROBOCAL_BASE=path/to/robocal it also times that
+# build's default calibrate and its --folds 0 on the same data (before issue 13 the default held out
+# 30 % of the poses and had no --folds: give ROBOCAL_BASE_FOLDS0=0 then), interleaved run by run, for
+# the side-by-side comparison the targets ask for (the machine's speed varies).
 # Targets: --folds 0 no slower than the base build's default; default folds under 4x --folds 0.
 # Usage: [ROBOCAL_BIN=…] [ROBOCAL_BASE=…] scripts/bench_calibrate.sh [POSES] [RUNS]
 set -euo pipefail
@@ -37,12 +38,24 @@ time_one() { # label, binary, args...
   echo "run $k $label: wall $t s, cpu $c s"
 }
 for k in $(seq "$runs"); do
-  if [ -n "${ROBOCAL_BASE:-}" ]; then time_one base_default "$ROBOCAL_BASE"; fi
+  if [ -n "${ROBOCAL_BASE:-}" ]; then
+    time_one base_default "$ROBOCAL_BASE"
+    if [ "${ROBOCAL_BASE_FOLDS0:-1}" != 0 ]; then time_one base_folds0 "$ROBOCAL_BASE" --folds 0; fi
+  fi
   time_one folds0 "$bin" --folds 0
   time_one folds5 "$bin"
 done
 median() { tr ' ' '\n' | grep -v '^$' | sort -n | awk '{a[NR]=$1} END {print a[int((NR+1)/2)]}'; }
-for label in base_default folds0 folds5; do
+declare -A mwall mcpu
+for label in base_default base_folds0 folds0 folds5; do
   [ -n "${wall[$label]:-}" ] || continue
-  echo "bench_calibrate: $label: median wall $(echo "${wall[$label]}" | median) s, median cpu $(echo "${cpu[$label]}" | median) s over $runs runs ($poses poses, nproc $(nproc))"
+  mwall[$label]=$(echo "${wall[$label]}" | median)
+  mcpu[$label]=$(echo "${cpu[$label]}" | median)
+  echo "bench_calibrate: $label: median wall ${mwall[$label]} s, median cpu ${mcpu[$label]} s over $runs runs ($poses poses, nproc $(nproc))"
 done
+ratio() { # label of the default, label of --folds 0
+  [ -n "${mwall[$1]:-}" ] && [ -n "${mwall[$2]:-}" ] || return 0
+  echo "bench_calibrate: $1 / $2: wall $(echo "scale=2; ${mwall[$1]} / ${mwall[$2]}" | bc)x, cpu $(echo "scale=2; ${mcpu[$1]} / ${mcpu[$2]}" | bc)x (target: under 4x)"
+}
+ratio folds5 folds0
+ratio base_default base_folds0

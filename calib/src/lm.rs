@@ -421,6 +421,50 @@ pub fn minimize<P: LeastSquaresProblem>(
     options: &LmOptions,
     ws: &mut LmWorkspace,
 ) -> (MinimizationReport, Subspace) {
+    minimize_with(problem, scales, options, ws, &SolveHints::default())
+}
+
+/// What a solve may take from work done elsewhere ([`minimize_with`]): cross-validation folds,
+/// which start at the solution on every row, get these from one pass over all rows.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct SolveHints<'a> {
+    /// The normal equations at the start, as [`LeastSquaresProblem::normal_equations`] gives them
+    /// with the solve's scales: `χ²`, `D JᵀJ D` (p × p, full), `D Jᵀr`.
+    pub initial: Option<(f64, &'a DMatrix<f64>, &'a [f64])>,
+    /// A square factor of the scaled Jacobian ([`LeastSquaresProblem::scaled_factor`]) at a point
+    /// next to the solution (the start, when the solve starts next to its minimum). The rank decision
+    /// takes its SVD when every singular value lies further than [`RANK_HINT_BAND`] (relative) from
+    /// the threshold, where the short way to the solution cannot move one across it; otherwise the
+    /// factor at the solution is computed as without a hint.
+    pub factor: Option<&'a DMatrix<f64>>,
+}
+
+/// Relative distance from the rank threshold that every singular value of
+/// [`SolveHints::factor`] must keep for its SVD to stand for the one at the solution.
+pub const RANK_HINT_BAND: f64 = 0.01;
+
+impl Subspace {
+    /// Whether every singular value lies further than `band · t` from the threshold `t`.
+    fn clear_of_threshold(&self, band: f64) -> bool {
+        let smax = self.singular_values.first().copied().unwrap_or(0.0);
+        let t = (self.rtol * smax).max(self.floor);
+        smax.is_finite()
+            && smax > 0.0
+            && self
+                .singular_values
+                .iter()
+                .all(|s| (s - t).abs() > band * t)
+    }
+}
+
+/// [`minimize`] with [`SolveHints`]: the same solve, with the hinted work taken instead of computed.
+pub fn minimize_with<P: LeastSquaresProblem>(
+    problem: &mut P,
+    scales: &[f64],
+    options: &LmOptions,
+    ws: &mut LmWorkspace,
+    hints: &SolveHints<'_>,
+) -> (MinimizationReport, Subspace) {
     let (m, p) = (problem.n_residuals(), problem.n_params());
     assert_eq!(scales.len(), p, "one scale per parameter");
     if ws.residuals.len() != m || ws.gram.nrows() != p {
@@ -428,7 +472,18 @@ pub fn minimize<P: LeastSquaresProblem>(
     }
     let zero = vec![0.0; p];
     problem.set_params(&zero);
-    let cost_initial = problem.normal_equations(scales, &mut ws.gram, &mut ws.gradient);
+    let cost_initial = match hints.initial {
+        Some((cost, gram, gradient)) => {
+            ws.gram.copy_from(gram);
+            ws.gradient.copy_from_slice(gradient);
+            cost
+        }
+        None => problem.normal_equations(scales, &mut ws.gram, &mut ws.gradient),
+    };
+    let hinted = hints
+        .factor
+        .map(|f| Subspace::from_factor(f, scales, options.rank_rtol, options.min_singular_value, m))
+        .filter(|s| s.clear_of_threshold(RANK_HINT_BAND));
     let mut report = MinimizationReport {
         termination: TerminationReason::Converged,
         iterations: 0,
@@ -488,15 +543,17 @@ pub fn minimize<P: LeastSquaresProblem>(
             // No rank decision for a solve the caller stopped: its result is not used.
             return (report, nothing_solved());
         }
-        let factor = problem.scaled_factor(scales);
+        sub = match &hinted {
+            Some(h) => h.clone(),
+            None => Subspace::from_factor(
+                &problem.scaled_factor(scales),
+                scales,
+                options.rank_rtol,
+                options.min_singular_value,
+                m,
+            ),
+        };
         problem.residuals(&mut ws.residuals);
-        sub = Subspace::from_factor(
-            &factor,
-            scales,
-            options.rank_rtol,
-            options.min_singular_value,
-            m,
-        );
         report.rank = sub.rank;
         let settled = sub.rank == basis.ncols();
         let paused = report.termination == TerminationReason::MaxIterations

@@ -347,9 +347,28 @@ impl<'a> KinematicProblem<'a> {
         let np = self.layout.len();
         let p = self.active.len();
         let rows = c * CHUNK_ROWS..((c + 1) * CHUNK_ROWS).min(self.obs.len());
+        for r in rows {
+            self.add_row_normal(r, d, np, p, scales, ws, part);
+        }
+    }
+
+    /// Row `r`'s share of the normal equations added to `part` (`d` residuals, `np` layout and `p`
+    /// active parameters); leaves its active, scaled Jacobian rows in `ws.rows` (d × p, row-major).
+    #[allow(clippy::too_many_arguments)]
+    #[inline]
+    fn add_row_normal(
+        &self,
+        r: usize,
+        d: usize,
+        np: usize,
+        p: usize,
+        scales: &[f64],
+        ws: &mut RowScratch,
+        part: &mut NormalPart,
+    ) {
         let gs = &mut part.gram;
         let gradient = &mut part.gradient;
-        for r in rows {
+        {
             let res = self.row_block(r, true, ws);
             // Gather the active, scaled rows of this measurement (d × p, row-major).
             for (row, &e) in res.iter().enumerate().take(d) {
@@ -390,6 +409,99 @@ impl<'a> KinematicProblem<'a> {
             }
         }
     }
+
+    /// Per group of rows (`group[r] < k` for every row), at the trial point with the column scales
+    /// `scales`: the group's share of the normal equations ([`LeastSquaresProblem::normal_equations`]:
+    /// `χ²`, the lower triangle of `D JᵀJ D` column-major, `D Jᵀr`) and the `R` factors of its scaled
+    /// Jacobian rows, one per chunk of [`CHUNK_ROWS`] rows that has some (stack them with
+    /// [`crate::linalg::stacked_r_factor`]). One evaluation of each row serves both. Chunks run in
+    /// parallel; every sum and list is in chunk order, so the result does not depend on the number
+    /// of threads. The groups of cross-validation folds share their work this way.
+    pub(crate) fn group_parts(
+        &mut self,
+        scales: &[f64],
+        group: &[usize],
+        k: usize,
+    ) -> Vec<GroupPart> {
+        assert_eq!(group.len(), self.obs.len(), "a group for every row");
+        let d = self.obs.dim();
+        let np = self.layout.len();
+        let p = self.active.len();
+        let n = self.obs.len();
+        let zero = vec![0.0; p];
+        self.set_params(&zero);
+        let empty = || NormalPart {
+            cost: 0.0,
+            gradient: vec![0.0; p],
+            gram: vec![0.0; p * p],
+        };
+        let this = &*self;
+        let chunks: Vec<Vec<(NormalPart, Option<DMatrix<f64>>)>> = (0..n.div_ceil(CHUNK_ROWS))
+            .into_par_iter()
+            .map(|c| {
+                let rows = c * CHUNK_ROWS..((c + 1) * CHUNK_ROWS).min(n);
+                let mut ws = this.scratch();
+                let mut count = vec![0usize; k];
+                for r in rows.clone() {
+                    count[group[r]] += 1;
+                }
+                let mut jac: Vec<DMatrix<f64>> =
+                    count.iter().map(|&m| DMatrix::zeros(m * d, p)).collect();
+                let mut at = vec![0usize; k];
+                let mut parts: Vec<NormalPart> = (0..k).map(|_| empty()).collect();
+                for r in rows {
+                    let g = group[r];
+                    this.add_row_normal(r, d, np, p, scales, &mut ws, &mut parts[g]);
+                    for row in 0..d {
+                        for a in 0..p {
+                            jac[g][(at[g], a)] = ws.rows[row * p + a];
+                        }
+                        at[g] += 1;
+                    }
+                }
+                parts
+                    .into_iter()
+                    .zip(jac)
+                    .zip(&count)
+                    .map(|((part, j), &m)| (part, (m > 0).then(|| j.qr().r())))
+                    .collect()
+            })
+            .collect();
+        let mut out: Vec<GroupPart> = (0..k)
+            .map(|_| GroupPart {
+                cost: 0.0,
+                gram: vec![0.0; p * p],
+                gradient: vec![0.0; p],
+                factors: Vec::new(),
+            })
+            .collect();
+        for chunk in chunks {
+            for (o, (part, r)) in out.iter_mut().zip(chunk) {
+                o.cost += part.cost;
+                for (t, v) in o.gradient.iter_mut().zip(&part.gradient) {
+                    *t += v;
+                }
+                for (t, v) in o.gram.iter_mut().zip(&part.gram) {
+                    *t += v;
+                }
+                o.factors.extend(r);
+            }
+        }
+        out
+    }
+}
+
+/// One group's share of the normal equations and its `R` factors ([`KinematicProblem::group_parts`]).
+#[derive(Clone, Debug)]
+pub(crate) struct GroupPart {
+    /// `χ²` of the group's rows.
+    pub cost: f64,
+    /// Lower triangle of the group's `D JᵀJ D` (p × p, column-major).
+    pub gram: Vec<f64>,
+    /// The group's `D Jᵀr`.
+    pub gradient: Vec<f64>,
+    /// `R` factors of the group's scaled Jacobian rows, one per chunk of rows that has some.
+    pub factors: Vec<DMatrix<f64>>,
 }
 
 impl LeastSquaresProblem for KinematicProblem<'_> {
@@ -530,5 +642,106 @@ impl LeastSquaresProblem for KinematicProblem<'_> {
             }
         }
         total.cost
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::lm::LeastSquaresProblem;
+    use crate::observations::NoiseModel;
+    use rand::{RngExt, SeedableRng};
+    use sim::measurement_table::{MeasurementTable, OptionalColumns};
+
+    /// Each group's share of [`KinematicProblem::group_parts`] against the normal equations of a
+    /// problem on that group's rows alone (what a fold computes for itself), and the groups' sum
+    /// against the problem on every row; each group's stacked `R` factors against its normal matrix
+    /// (`RᵀR = D JᵀJ D`). 5,000 rows: three chunks, summed and stacked in order.
+    #[test]
+    fn group_parts_add_up_to_each_groups_own_normal_equations() {
+        let model = sim::robots::load_builtin("iiwa7").unwrap();
+        let mut rng = rand::rngs::StdRng::seed_from_u64(11);
+        let n = 5000;
+        let mut table = MeasurementTable::new(7, OptionalColumns::default());
+        for r in 0..n {
+            table.pose.push(r as i64);
+            for _ in 0..7 {
+                table.q.push(rng.random_range(-1.5..1.5));
+            }
+            table.position.push([
+                rng.random_range(-1.0..1.0),
+                rng.random_range(-1.0..1.0),
+                rng.random_range(-1.0..1.0),
+            ]);
+        }
+        let noise = NoiseModel::default();
+        let all_rows: Vec<usize> = (0..n).collect();
+        let obs = Observations::from_table(&table, &all_rows, &noise, "t").unwrap();
+        let params = KinematicParams::nominal(7, false);
+        let layout = ParamLayout::for_params(&model, &params, Vec::new());
+        let p = layout.len();
+        let scales: Vec<f64> = (0..p).map(|k| 1.0 + 0.1 * k as f64).collect();
+        let k = 3;
+        let group: Vec<usize> = (0..n).map(|r| (r * 7 + r / 11) % k).collect();
+        let mut problem = KinematicProblem::new(&model, &obs, params.clone(), (0..p).collect());
+        let parts = problem.group_parts(&scales, &group, k);
+        // The normal equations of `rows` alone.
+        let own = |rows: &[usize]| {
+            let o = Observations::from_table(&table, rows, &noise, "t").unwrap();
+            let mut pr = KinematicProblem::new(&model, &o, params.clone(), (0..p).collect());
+            let mut gram = DMatrix::zeros(p, p);
+            let mut gradient = vec![0.0; p];
+            pr.set_params(&vec![0.0; p]);
+            let cost = pr.normal_equations(&scales, &mut gram, &mut gradient);
+            (cost, gram, gradient)
+        };
+        let close = |a: f64, b: f64, scale: f64| (a - b).abs() <= 1e-11 * scale;
+        let (mut sum_cost, mut sum_grad, mut sum_gram) = (0.0, vec![0.0; p], vec![0.0; p * p]);
+        for (g, part) in parts.iter().enumerate() {
+            let rows: Vec<usize> = (0..n).filter(|&r| group[r] == g).collect();
+            let (cost, gram, gradient) = own(&rows);
+            let gmax = gram.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+            assert!(close(part.cost, cost, cost), "group {g}: χ²");
+            let grad_max = gradient.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+            for a in 0..p {
+                assert!(
+                    close(part.gradient[a], gradient[a], grad_max),
+                    "group {g}: gradient {a}"
+                );
+                for b in a..p {
+                    assert!(
+                        close(part.gram[a * p + b], gram[(b, a)], gmax),
+                        "group {g}: ({b}, {a})"
+                    );
+                }
+            }
+            let r = crate::linalg::stacked_r_factor(&part.factors, p);
+            let rtr = r.transpose() * &r;
+            for a in 0..p {
+                for b in 0..p {
+                    assert!(
+                        (rtr[(a, b)] - gram[(a, b)]).abs() <= 1e-10 * gmax,
+                        "group {g}: RᵀR ({a}, {b})"
+                    );
+                }
+            }
+            sum_cost += part.cost;
+            for (s, v) in sum_grad.iter_mut().zip(&part.gradient) {
+                *s += v;
+            }
+            for (s, v) in sum_gram.iter_mut().zip(&part.gram) {
+                *s += v;
+            }
+        }
+        let (cost, gram, gradient) = own(&all_rows);
+        let gmax = gram.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        assert!(close(sum_cost, cost, cost));
+        let grad_max = gradient.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        for a in 0..p {
+            assert!(close(sum_grad[a], gradient[a], grad_max));
+            for b in a..p {
+                assert!(close(sum_gram[a * p + b], gram[(b, a)], gmax));
+            }
+        }
     }
 }

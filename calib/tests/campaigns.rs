@@ -6,7 +6,7 @@
 
 mod common;
 
-use calib::calibrate::validation::cross_validate;
+use calib::calibrate::validation::{cross_validate, cross_validate_warm, fold_calibrations};
 use calib::calibrate::{CalibrationOptions, Dataset, calibrate, calibrate_model};
 use calib::chain::{Chain, ChainScratch};
 use calib::extensions::ModelSpec;
@@ -454,4 +454,141 @@ fn per_campaign_targets_follow_a_reseated_reflector() {
     let d = own.params.p_flange_target_of(1) - own.params.p_flange_target_of(0);
     let want = b.p_flange - a.p_flange;
     assert!((d - want).norm() < 50e-6, "{d} against {want}");
+}
+
+/// The folds of `calibrate`'s cross-validation start at the all-pose solution and share one pass
+/// over every row there (their first normal equations and, when no singular value is near the
+/// threshold, their rank decision). Against folds fitted from the closed-form start (the reference):
+/// the same rank, every predicted position within 1e-3 of its standard deviation and of the noise,
+/// the held-out statistics within the largest change of a prediction (a bound for them); and the
+/// same bytes on one thread and on two.
+#[test]
+fn warm_folds_reach_the_cold_folds_minima_and_do_not_depend_on_the_thread_count() {
+    let model = robots::load_builtin("iiwa7").unwrap();
+    let mut g = StdRng::seed_from_u64(common::run_seed("warm folds"));
+    let options = CalibrationOptions::default();
+    let truth = Truth::random(&model, false, &mut g);
+    let one = noisy(&model, &truth, &random_configs(&model, 300, &mut g), &mut g);
+    let moved = moved_tracker(&truth, &mut g);
+    let other = noisy(&model, &moved, &random_configs(&model, 200, &mut g), &mut g);
+    let two = concat(&with_campaign(&one, 1), &with_campaign(&other, 4));
+    let spec = ModelSpec::kinematic();
+    for (what, table) in [("one campaign", &one), ("two campaigns", &two)] {
+        let data = Dataset::all(table, what);
+        let all = calibrate_model(&model, &data, None, &spec, &options).unwrap();
+        let cold = fold_calibrations(&model, &data, &spec, &options, 5, 3, None).unwrap();
+        let warm = fold_calibrations(&model, &data, &spec, &options, 5, 3, Some(&all)).unwrap();
+        // The parametrisation is redundant (null directions keep their start's values): what must
+        // agree is what the data determine, the predictions, in units of their standard deviation.
+        let configs = random_configs(&model, 100, &mut g);
+        let mut worst = 0.0f64;
+        for (f, (c, w)) in cold.iter().zip(&warm).enumerate() {
+            assert!(
+                c.report.was_successful() && w.report.was_successful(),
+                "{what} fold {f}"
+            );
+            assert_eq!(c.subspace.rank, w.subspace.rank, "{what} fold {f}: rank");
+            for q in &configs {
+                let (pc, _, jq) =
+                    calib::calibrate::prediction_and_jacobian(&model, &c.params, q).unwrap();
+                let (pw, _, _) =
+                    calib::calibrate::prediction_and_jacobian(&model, &w.params, q).unwrap();
+                let jp = jq.rows(0, 3);
+                let cov = jp * &c.covariance * jp.transpose();
+                for i in 0..3 {
+                    worst = worst.max((pc[i] - pw[i]).abs() / cov[(i, i)].sqrt());
+                }
+            }
+        }
+        eprintln!("{what}: largest warm − cold fold prediction difference {worst:.2e} σ");
+        assert!(
+            worst <= 1e-3,
+            "{what}: a fold's prediction moved {worst:.2e} σ"
+        );
+        let vc = cross_validate(&model, &data, &spec, &options, 5, 3).unwrap();
+        let pool = |n: usize| {
+            rayon::ThreadPoolBuilder::new()
+                .num_threads(n)
+                .build()
+                .unwrap()
+        };
+        let vw = pool(2)
+            .install(|| cross_validate_warm(&model, &data, &spec, &options, 5, 3, &all))
+            .unwrap();
+        let v1 = pool(1)
+            .install(|| cross_validate_warm(&model, &data, &spec, &options, 5, 3, &all))
+            .unwrap();
+        assert_eq!(v1, vw, "{what}: one thread and two");
+        // |RMS(a) − RMS(b)| ≤ RMS(a − b) ≤ max |a − b| (and so for the mean, the max and the ISO
+        // mean): the statistics differ by at most the largest change of a prediction. The solver
+        // stops where a full Gauss–Newton step would lower χ² by at most `tol = decrease_tol +
+        // relative_decrease_tol · χ²`, i.e. within √tol (whitened, RSS over all rows) of the
+        // minimum: two solves of one problem predict any row within 2 σ √tol of each other.
+        let obs = Observations::from_table(
+            table,
+            &(0..table.len()).collect::<Vec<_>>(),
+            &NoiseModel::default(),
+            what,
+        )
+        .unwrap();
+        let largest = |a: &KinematicParams, b: &KinematicParams| {
+            let (ea, eb) = (
+                Prediction::new(&model, a).errors(&obs),
+                Prediction::new(&model, b).errors(&obs),
+            );
+            ea.iter()
+                .zip(&eb)
+                .map(|(x, y)| (x - y).norm())
+                .fold(0.0, f64::max)
+        };
+        let lm = &options.lm;
+        let bound =
+            |chi2: f64| 2.0 * SIGMA * (lm.decrease_tol + lm.relative_decrease_tol * chi2).sqrt();
+        let (mut d_before, mut d_after) = (0.0f64, 0.0f64);
+        for (f, (c, w)) in cold.iter().zip(&warm).enumerate() {
+            let db = largest(&c.before, &w.before);
+            let da = largest(&c.params, &w.params);
+            let chi2 = |cal: &calib::calibrate::Calibration, before: bool| {
+                let stage = if before {
+                    &cal.report.before
+                } else {
+                    &cal.report.after
+                };
+                stage.solver.cost_final
+            };
+            let bb = bound(chi2(c, true).max(chi2(w, true)));
+            let ba = bound(chi2(c, false).max(chi2(w, false)));
+            eprintln!(
+                "{what} fold {f}: warm − cold prediction change {db:.1e} m (bound {bb:.1e}) before, \
+                 {da:.1e} m (bound {ba:.1e}) after"
+            );
+            assert!(
+                db <= bb && da <= ba,
+                "{what} fold {f}: predictions moved beyond the tolerance"
+            );
+            d_before = d_before.max(db);
+            d_after = d_after.max(da);
+        }
+        let within = |a: &calib::calibrate::validation::HeldOutStats,
+                      b: &calib::calibrate::validation::HeldOutStats,
+                      d: f64| {
+            assert_eq!((a.n_rows, a.n_poses), (b.n_rows, b.n_poses));
+            for (x, y) in [
+                (a.rms_m, b.rms_m),
+                (a.mean_m, b.mean_m),
+                (a.max_m, b.max_m),
+                (a.iso_mean_m, b.iso_mean_m),
+            ] {
+                assert!(
+                    (x - y).abs() <= d + 1e-12 * x.abs(),
+                    "{what}: held-out {x:e} (cold) vs {y:e} (warm), bound {d:e}"
+                );
+            }
+        };
+        within(&vc.before, &vw.before, d_before);
+        within(&vc.after, &vw.after, d_after);
+        for (fc, fw) in vc.per_fold.iter().zip(&vw.per_fold) {
+            within(&fc.held_out, &fw.held_out, d_after);
+        }
+    }
 }

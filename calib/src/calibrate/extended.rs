@@ -100,7 +100,7 @@ pub(super) fn calibrate_extended(
     settings: &ExtensionSettings,
 ) -> Result<Calibration> {
     let mut settings = settings.clone();
-    let mut cal = calibrate_with(model, train, test, options, Some(&settings), &[])?;
+    let mut cal = calibrate_with(model, train, test, options, Some(&settings), &[], None)?;
     if !settings.needs_equilibrium() {
         return Ok(cal);
     }
@@ -121,7 +121,7 @@ pub(super) fn calibrate_extended(
         } else {
             0.0
         };
-        let next = calibrate_with(model, train, test, options, Some(&settings), &at)?;
+        let next = calibrate_with(model, train, test, options, Some(&settings), &at, None)?;
         let change = next
             .params
             .extension
