@@ -24,6 +24,7 @@
 //! base twist `β` by `[−[p], I]`, the target position by `R_tracker_flange`, and the target rotation
 //! `ρ` (target frame) turns the target by `R_tracker_target ρ`.
 
+use crate::lie3::{exp_rotation, left_jacobian};
 use crate::params::{KinematicParams, ParamLayout};
 use nalgebra::{Matrix3, Vector3};
 use sim::lie::{Pose, pose_from};
@@ -128,6 +129,24 @@ impl Chain {
     /// # Panics
     /// If `q.len()` differs from the joint count.
     pub fn forward(&self, s: &mut ChainScratch, q: &[f64]) {
+        self.evaluate(s, q, None);
+    }
+
+    /// [`Chain::forward`] with everything beyond joint `i` turned about the joint's origin by the
+    /// rotation vector `bend[i]` (rad, joint frame at zero angle), applied before the joint's own
+    /// motion: `Fᵢ = Fᵢ₋₁ Oᵢ exp([φᵢ]) exp([Aᵢ] θᵢ)` (link deflection). With the bend before the joint's
+    /// rotation, `Fᵢ`'s axis is still the joint's axis, so every kinematic column of the Jacobian keeps
+    /// its form; [`Chain::bend_axis`] gives the bend's own.
+    ///
+    /// # Panics
+    /// If `q.len()` or `bend.len()` differs from the joint count.
+    pub fn forward_bent(&self, s: &mut ChainScratch, q: &[f64], bend: &[Vector3<f64>]) {
+        assert_eq!(bend.len(), self.nq(), "one bend per joint");
+        self.evaluate(s, q, Some(bend));
+    }
+
+    #[inline(always)]
+    fn evaluate(&self, s: &mut ChainScratch, q: &[f64], bend: Option<&[Vector3<f64>]>) {
         assert_eq!(q.len(), self.nq(), "joint vector length");
         let mut r = *self.t_tracker_base.rotation.matrix();
         let mut p = self.t_tracker_base.translation.vector;
@@ -135,6 +154,12 @@ impl Chain {
             let theta = qi + self.zero_offset[i];
             let o = &self.origin[i];
             p += r * o.translation.vector;
+            if let Some(b) = bend
+                && b[i] != Vector3::zeros()
+            {
+                // r Rₒ exp([φ]) = r exp([Rₒ φ]) Rₒ: the bend in the previous frame, before Oᵢ's turn.
+                r *= exp_rotation(&(o.rotation * b[i]));
+            }
             match self.kind[i] {
                 JointKind::Revolute | JointKind::Continuous => {
                     let (sn, cs) = sim::trig::sin_cos(theta);
@@ -154,6 +179,29 @@ impl Chain {
             Some(rf) => s.t_tracker_flange.rotation.matrix() * rf,
             None => Matrix3::identity(),
         };
+    }
+
+    /// The tracker-frame rotation `ω` (rad per unit) by which a unit step of the bend of joint `i` along
+    /// `local` (joint frame) turns everything beyond the joint, and the point `oᵢ` (tracker frame, m) it
+    /// turns about, at the last [`Chain::forward_bent`] evaluation with bend `phi` at that joint:
+    /// `exp([φ + δ]) = exp([J_l(φ) δ]) exp([φ])`, so `ω = R_joint J_l(φ) local`, `R_joint` the joint frame
+    /// at zero angle (`Fᵢ₋₁ Oᵢ`). A point `p` beyond the joint moves by `ω × (p − oᵢ)`.
+    pub fn bend_axis(
+        &self,
+        s: &ChainScratch,
+        i: usize,
+        local: &Vector3<f64>,
+        phi: &Vector3<f64>,
+    ) -> (Vector3<f64>, Vector3<f64>) {
+        let prev = if i == 0 {
+            &self.t_tracker_base
+        } else {
+            &s.frames[i - 1]
+        };
+        let o = &self.origin[i];
+        let r_joint = prev.rotation * o.rotation;
+        let origin = prev.translation.vector + prev.rotation * o.translation.vector;
+        (r_joint * (left_jacobian(phi) * local), origin)
     }
 
     /// `∂p_tracker/∂qᵢ` (tracker frame; m/rad, or m/m for a prismatic joint) at the last

@@ -3,7 +3,8 @@
 //!
 //! ```text
 //! θ = q + Σₑ xₑ gₑ(row)                    (joint-angle terms of the extensions)
-//! p_kin = T_tracker_base · T_base_flange(θ) · p_flange
+//! φᵢ = Σₑ xₑ gₑ(row) e_about               (bending terms, turning the chain at joint i)
+//! p_kin = T_tracker_base · T_base_flange(θ, φ) · p_flange
 //! p = t_base + (1 + γ) (p_kin − t_base),  γ = Σₑ xₑ gₑ(row)   (growth terms)
 //! p_tracker = p + r̂(q)                     (learned correction, when the model has one)
 //! ```
@@ -15,7 +16,7 @@
 
 use crate::chain::{Chain, ChainScratch};
 use crate::error::{CalibError, Result};
-use crate::extensions::{Regressors, apply};
+use crate::extensions::{Regressors, apply, bends};
 use crate::learned::LearnedResidual;
 use crate::lie3::log_rotation;
 use crate::observations::Observations;
@@ -45,6 +46,8 @@ pub struct PredictScratch {
     pub chain: ChainScratch,
     /// Effective joint values `θ` of the last row (rad or m).
     pub theta: Vec<f64>,
+    /// Bending rotation vector of each joint at the last row (rad, joint frame; link deflection).
+    pub bend: Vec<Vector3<f64>>,
 }
 
 impl PredictScratch {
@@ -53,6 +56,7 @@ impl PredictScratch {
         PredictScratch {
             chain: ChainScratch::new(n),
             theta: vec![0.0; n],
+            bend: vec![Vector3::zeros(); n],
         }
     }
 }
@@ -69,7 +73,11 @@ pub fn physical_row(
     s: &mut PredictScratch,
 ) -> RowPrediction {
     let growth = apply(regs, &params.extension, r, q, &mut s.theta);
-    chain.forward(&mut s.chain, &s.theta);
+    if bends(regs, &params.extension, r, &mut s.bend) {
+        chain.forward_bent(&mut s.chain, &s.theta, &s.bend);
+    } else {
+        chain.forward(&mut s.chain, &s.theta);
+    }
     let lever = s.chain.p_tracker - params.t_tracker_base.translation.vector;
     RowPrediction {
         p_tracker: s.chain.p_tracker + growth * lever,

@@ -529,7 +529,9 @@ fn evidence(
     let values: Vec<String> = params
         .iter()
         .filter(|p| match p.term {
-            Some(Term::JointAngle { joint }) => joints.contains(&(joint + 1)),
+            Some(Term::JointAngle { joint } | Term::Bend { joint, .. }) => {
+                joints.contains(&(joint + 1))
+            }
             Some(Term::Growth) => growth,
             None => false,
         })
@@ -703,7 +705,9 @@ pub fn diagnose_with_progress(
         f.joints = params
             .iter()
             .filter_map(|(p, term, alone)| match term {
-                Term::JointAngle { joint } if *alone && z_of(p) > options.joint_z => {
+                Term::JointAngle { joint } | Term::Bend { joint, .. }
+                    if *alone && z_of(p) > options.joint_z =>
+                {
                     Some(joint + 1)
                 }
                 _ => None,

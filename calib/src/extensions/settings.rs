@@ -87,7 +87,7 @@ impl ExtensionSettings {
                 refused.get_or_insert(e);
             }
         }
-        if settings.needs_gravity_torque()
+        if (settings.needs_gravity_torque() || settings.needs_gravity_moment())
             && let Err(e) = model.require_inertials()
         {
             return Err(CalibError::BadValue {
@@ -108,6 +108,11 @@ impl ExtensionSettings {
         self.causes
             .iter()
             .any(|c| c.model().needs_gravity_torque(self))
+    }
+
+    /// Whether any cause's regressors read the gravity moments the joints transmit.
+    pub fn needs_gravity_moment(&self) -> bool {
+        self.causes.iter().any(|c| c.model().needs_gravity_moment())
     }
 
     /// Whether any cause's regressors depend on the link angles (refits at the equilibrium).

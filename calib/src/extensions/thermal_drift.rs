@@ -190,6 +190,10 @@ impl CauseModel for ThermalDrift {
         "the temperature change".to_string()
     }
 
+    fn signature(&self) -> &'static str {
+        "follows the temperature or the warm-up, whatever the pose"
+    }
+
     fn plot_axis(&self, _term: Term) -> PlotAxis {
         PlotAxis {
             sign: 1.0,

@@ -1,0 +1,263 @@
+//! Link deflection, as the estimator models it: the arm bends at each joint about the two axes
+//! orthogonal to the joint's own, in proportion to the gravity moment the joint transmits.
+//!
+//! For joint `i` (0-based) with origin `oᵢ` and joint frame `Rᵢ` (the frame the joint turns in, fixed
+//! to the link before it: `R_base_joint` at `qᵢ = 0`), the moment of gravity on everything beyond the
+//! joint (its child link and all later links, and the payload) about the joint's origin is
+//!
+//! ```text
+//! Mᵢ = Σₖ≥ᵢ (cₖ − oᵢ) × mₖ g  (+ the payload's term)          (N m, base frame)
+//! mᵢ = Rᵢᵀ Mᵢ                                                 (the same in the joint frame)
+//! ```
+//!
+//! (`cₖ` the centres of mass, `g` gravity). Its component along the joint axis is what the joint's
+//! motor holds (`τᵢ = −aᵢ · mᵢ`, the holding torque of [`super::joint_compliance`]); the components
+//! about the two orthogonal axes `u`, `v` of the joint frame load its bearing and the links next to
+//! it. With bending compliances `c_u`, `c_v` (rad/(N m)), everything beyond the joint turns about the
+//! joint's origin by the rotation vector (joint frame)
+//!
+//! ```text
+//! φᵢ = c_u (u · mᵢ) u + c_v (v · mᵢ) v
+//! ```
+//!
+//! i.e. along the load, as a joint spring turns along its torque. The regressors are `u · mᵢ`, `v · mᵢ`
+//! (N m) and the term is [`Term::Bend`]: the chain applies `exp([φᵢ])` in the joint frame before the
+//! joint's own rotation ([`crate::chain::Chain::forward_bent`]). `u`, `v` are the joint frame's
+//! coordinate axes other than the joint axis (x and y for a joint about z); a joint whose axis is not
+//! along a coordinate axis of its frame gets no bending parameters.
+//!
+//! The moments are those of the nominal robot at the link angles of the current estimate (with joint
+//! compliance, the sagged angles, as for the holding torques); the bending itself moves the centres of
+//! mass by `φ` (about 10⁻⁴ rad) and so changes the moments by that fraction, a second-order effect
+//! (10⁻⁸ rad) left out. A joint whose bending moment does not vary over the data (the last joint
+//! without payload) cannot be identified; the solver says so and leaves its compliances at zero.
+
+use super::axis_name;
+use super::{Cause, CauseModel, ExtensionParam, ExtensionSettings, PlotAxis, RowInputs, Term};
+use crate::units::Unit;
+use nalgebra::{Point3, Vector3};
+use sim::Model;
+use sim::measurement_table::MeasurementTable;
+use sim::statics::Payload;
+
+/// Expected bending compliance (rad/(N m)): a bearing and link of a lightweight arm are stiffer than
+/// its joint (1e-4), about 1e-6 to 1e-5.
+pub const SCALE_RAD_PER_NM: f64 = 3e-6;
+
+/// Link deflection: two bending compliances per joint whose axis lies along a coordinate axis of its
+/// frame.
+pub struct LinkDeflection;
+
+/// The two bending axes (0 = x, 1 = y, 2 = z of the joint frame) of a joint with unit axis `axis`
+/// (joint frame), in cyclic order after the axis (z → x, y; x → y, z; y → z, x); `None` when the axis
+/// is not along a coordinate axis.
+pub fn bending_axes(axis: &Vector3<f64>) -> Option<[usize; 2]> {
+    (0..3)
+        .find(|&k| (axis[k].abs() - 1.0).abs() < 1e-9)
+        .map(|k| [(k + 1) % 3, (k + 2) % 3])
+}
+
+impl CauseModel for LinkDeflection {
+    fn cause(&self) -> Cause {
+        Cause::LinkDeflection
+    }
+
+    fn usable(&self, model: &Model, _table: &MeasurementTable) -> std::result::Result<(), String> {
+        model
+            .require_inertials()
+            .map_err(|e| format!("the gravity moments it needs cannot be computed: {e}"))?;
+        if model.joints.iter().all(|j| bending_axes(&j.axis).is_none()) {
+            return Err("no joint turns about a coordinate axis of its frame".into());
+        }
+        Ok(())
+    }
+
+    fn needs_gravity_torque(&self, _settings: &ExtensionSettings) -> bool {
+        false
+    }
+
+    fn needs_gravity_moment(&self) -> bool {
+        true
+    }
+
+    /// The moments are evaluated where the links are (with joint compliance in the model) and the
+    /// payload's centre of mass is estimated in the refits.
+    fn needs_equilibrium(&self) -> bool {
+        true
+    }
+
+    fn params(&self, model: &Model, _settings: &ExtensionSettings) -> Vec<ExtensionParam> {
+        model
+            .joints
+            .iter()
+            .enumerate()
+            .filter_map(|(i, j)| bending_axes(&j.axis).map(|axes| (i, axes)))
+            .flat_map(|(i, axes)| {
+                axes.map(|about| ExtensionParam {
+                    cause: Cause::LinkDeflection,
+                    term: Term::Bend { joint: i, about },
+                    quantity: "bending compliance",
+                    unit: Unit::RadianPerNewtonMetre,
+                    scale: SCALE_RAD_PER_NM,
+                })
+            })
+            .collect()
+    }
+
+    /// The components `u · mᵢ`, `v · mᵢ` (N m) of each bending joint's moment, joint frame.
+    fn regressors(&self, _settings: &ExtensionSettings, row: &RowInputs<'_>, out: &mut [f64]) {
+        let mut k = 0;
+        for (m, joint) in row.moment.iter().zip(row.joints) {
+            if let Some(axes) = bending_axes(&joint.axis) {
+                out[k] = m[axes[0]];
+                out[k + 1] = m[axes[1]];
+                k += 2;
+            }
+        }
+    }
+
+    fn evidence_subject(&self, joints: &str) -> String {
+        format!("the bending moment across {joints}")
+    }
+
+    fn remark(&self, value: f64) -> String {
+        if value > 0.0 {
+            format!(" (stiffness {:.3e} N m/rad)", 1.0 / value)
+        } else {
+            " (negative: no elastic link bends against its load)".to_string()
+        }
+    }
+
+    fn impossible(&self, value: f64) -> Option<&'static str> {
+        (value < 0.0).then_some("negative bending compliance: no link bends against its load")
+    }
+
+    fn signature(&self) -> &'static str {
+        "turns the arm about axes across a joint in proportion to the bending moment it carries"
+    }
+
+    fn plot_axis(&self, term: Term) -> PlotAxis {
+        let (joint, about) = match term {
+            Term::Bend { joint, about } => (joint + 1, axis_name(about)),
+            _ => (0, "?"),
+        };
+        PlotAxis {
+            sign: 1.0,
+            label: format!("bending moment of joint {joint} about {about} (N m)"),
+        }
+    }
+}
+
+/// Gravity moment each joint transmits, in its joint frame (N m; see the module docs): `out[i] = mᵢ`,
+/// for the joint poses in `data` (from [`sim::kinematics::forward_kinematics`] at the link angles),
+/// gravity `gravity` (base frame, m/s²) and an optional payload at the flange.
+///
+/// # Panics
+/// If `out.len()` differs from the joint count.
+pub fn gravity_moments(
+    model: &Model,
+    data: &sim::Data,
+    gravity: &Vector3<f64>,
+    payload: Option<&Payload>,
+    out: &mut [Vector3<f64>],
+) {
+    assert_eq!(out.len(), model.nq(), "one moment per joint");
+    // From the tip: mass and first moment Σ m c (base frame) of everything beyond joint i.
+    let mut mass = 0.0;
+    let mut first = Vector3::zeros();
+    if let Some(pl) = payload {
+        let c = data.flange * Point3::from(Vector3::from(pl.com));
+        mass += pl.mass;
+        first += c.coords * pl.mass;
+    }
+    for i in (0..model.nq()).rev() {
+        let body = &model.bodies[i];
+        let c = data.joint_poses[i] * Point3::from(body.com);
+        mass += body.mass;
+        first += c.coords * body.mass;
+        // The joint frame: the previous joint's frame (the base for joint 1) times this joint's origin.
+        let origin = &model.joints[i].origin;
+        let pre = if i == 0 {
+            *origin
+        } else {
+            data.joint_poses[i - 1] * origin
+        };
+        let o = pre.translation.vector;
+        let m_base = (first - o * mass).cross(gravity);
+        out[i] = pre.rotation.inverse_transform_vector(&m_base);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use sim::kinematics::forward_kinematics;
+
+    #[test]
+    fn bending_axes_follow_the_joint_axis() {
+        assert_eq!(bending_axes(&Vector3::z()), Some([0, 1]));
+        assert_eq!(bending_axes(&-Vector3::x()), Some([1, 2]));
+        assert_eq!(bending_axes(&Vector3::y()), Some([2, 0]));
+        assert_eq!(bending_axes(&Vector3::new(0.6, 0.8, 0.0)), None);
+    }
+
+    /// The moment about any axis through a joint's origin is minus the derivative of the potential
+    /// energy when everything beyond the joint turns about that axis: an independent check of every
+    /// component (the axial one is also minus the holding torque of `sim::statics`).
+    #[test]
+    fn moments_are_minus_the_potential_energy_gradient() {
+        let model = sim::robots::load_builtin("iiwa7").unwrap();
+        let g = Vector3::from(sim::statics::DEFAULT_GRAVITY);
+        let pl = Payload {
+            mass: 2.3,
+            com: [0.02, -0.01, 0.07],
+        };
+        let q = [0.4, -0.9, 1.2, 1.3, -0.6, 0.8, 0.3];
+        let mut data = sim::Data::new(&model);
+        sim::statics::gravity_torques(&model, &mut data, &q, &g, Some(&pl)).unwrap();
+        let tau = data.gravity_torque.clone();
+        let mut m = vec![Vector3::zeros(); 7];
+        gravity_moments(&model, &data, &g, Some(&pl), &mut m);
+        forward_kinematics(&model, &mut data, &q);
+        // Potential energy with everything beyond joint i turned by angle h about the base-frame unit
+        // axis w through the point o.
+        let energy = |i: usize, w: &Vector3<f64>, o: &Vector3<f64>, h: f64| -> f64 {
+            let rot = nalgebra::Rotation3::from_scaled_axis(w * h);
+            let moved = |p: Vector3<f64>| o + rot * (p - o);
+            let mut v = 0.0;
+            for k in i..7 {
+                let c = (data.joint_poses[k] * Point3::from(model.bodies[k].com)).coords;
+                v -= model.bodies[k].mass * g.dot(&moved(c));
+            }
+            let c = (data.flange * Point3::from(Vector3::from(pl.com))).coords;
+            v - pl.mass * g.dot(&moved(c))
+        };
+        for i in 0..7 {
+            let pre = if i == 0 {
+                model.joints[0].origin
+            } else {
+                data.joint_poses[i - 1] * model.joints[i].origin
+            };
+            let o = pre.translation.vector;
+            for about in 0..3 {
+                let w = pre.rotation * Vector3::ith(about, 1.0);
+                let h = 1e-6;
+                let fd = -(energy(i, &w, &o, h) - energy(i, &w, &o, -h)) / (2.0 * h);
+                assert!(
+                    (fd - m[i][about]).abs() < 1e-7 * (1.0 + fd.abs()),
+                    "joint {} about {about}: {fd} vs {}",
+                    i + 1,
+                    m[i][about]
+                );
+            }
+            let a = model.joints[i].axis;
+            assert!(
+                (a.dot(&m[i]) + tau[i]).abs() < 1e-10 * (1.0 + tau[i].abs()),
+                "joint {}: axial moment {} vs holding torque {}",
+                i + 1,
+                a.dot(&m[i]),
+                tau[i]
+            );
+        }
+    }
+}
