@@ -140,6 +140,42 @@ pub struct Finding {
     pub train_z: f64,
     /// The cause's identified parameters.
     pub parameters: Vec<FoundParameter>,
+    /// The nearest rival when it was adopted: the other candidate cause, or the probe for structure no
+    /// cause explains, that gained most on the held-out poses in that round.
+    #[serde(default)]
+    pub rival: Option<Rival>,
+}
+
+/// The nearest rival of a finding.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Rival {
+    /// A cause's word (`link_deflection`) or a probe's name (`harmonics 1-3 of joint 3`).
+    pub name: String,
+    /// Its relative test-RMS reduction in that round.
+    pub gain: f64,
+    /// Why it lost, in words.
+    pub why_not: String,
+}
+
+/// A cause that would have gained on the held-out poses but whose identified physics is impossible:
+/// not adopted, and reported as evidence of an error no known cause explains.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Rejected {
+    /// The cause.
+    pub cause: Cause,
+    /// 1-based joints whose identified parameter is impossible.
+    pub joints: Vec<usize>,
+    /// What is impossible.
+    pub reason: String,
+    /// Relative test-RMS reduction it would have brought.
+    pub gain: f64,
+    /// Paired test `z` on the test poses.
+    pub test_z: f64,
+    /// The impossible parameters (value at least [`DiagnoseOptions::joint_z`] standard deviations on the
+    /// impossible side).
+    pub parameters: Vec<FoundParameter>,
+    /// One sentence for people.
+    pub evidence: String,
 }
 
 impl Finding {
@@ -173,6 +209,15 @@ pub struct Trial {
     /// The unexplained-structure probe that predicts the test poses at least as well, if any: then the
     /// residual is not this cause's, whatever its significance.
     pub beaten_by: Option<String>,
+    /// Why its identified physics is impossible, if it is (a negative stiffness or lost motion): then
+    /// it is not adopted whatever its significance.
+    #[serde(default)]
+    pub impossible: Option<String>,
+    /// True when no parameter of it is determined on its own and differs from zero by
+    /// [`DiagnoseOptions::joint_z`] standard deviations: there is no joint (or growth) to name, so it
+    /// is not adopted whatever its gain.
+    #[serde(default)]
+    pub names_nothing: bool,
 }
 
 /// A candidate cause diagnose could not try.
@@ -516,6 +561,58 @@ fn cause_parameters(cal: &Calibration, cause: Cause) -> Vec<(FoundParameter, Ter
         .collect()
 }
 
+/// The parameters of `cause` in `cal` whose value is physically impossible by more than `joint_z`
+/// standard deviations (and determined on their own), with the reason of the first.
+fn impossible_parameters(
+    cal: &Calibration,
+    cause: Cause,
+    joint_z: f64,
+) -> Option<(String, Vec<FoundParameter>)> {
+    let model = cause.model();
+    let mut reason = None;
+    let bad: Vec<FoundParameter> = cause_parameters(cal, cause)
+        .into_iter()
+        .filter(|(p, _, alone)| {
+            *alone
+                && p.sigma > 0.0
+                && (p.value / p.sigma).abs() > joint_z
+                && model.impossible(p.value).is_some()
+        })
+        .map(|(p, _, _)| {
+            reason.get_or_insert(model.impossible(p.value).unwrap_or_default());
+            p
+        })
+        .collect();
+    reason.map(|r| (r.to_string(), bad))
+}
+
+/// 1-based joints of the parameters `params`, ascending, each once.
+fn joints_of(params: &[FoundParameter]) -> Vec<usize> {
+    let set: std::collections::BTreeSet<usize> = params
+        .iter()
+        .filter_map(|p| p.term.and_then(Term::joint).map(|j| j + 1))
+        .collect();
+    set.into_iter().collect()
+}
+
+/// The parameters as `name value ± sigma unit`, joined by `; `.
+fn parameter_values(cause: Cause, params: &[FoundParameter]) -> String {
+    params
+        .iter()
+        .map(|p| {
+            format!(
+                "{} {:.3e} ± {:.1e} {}{}",
+                p.name,
+                p.value,
+                p.sigma,
+                p.unit,
+                cause.model().remark(p.value)
+            )
+        })
+        .collect::<Vec<_>>()
+        .join("; ")
+}
+
 /// The evidence sentence of a finding of `cause` at `joints` (1-based; with `growth` when the link
 /// growth is named too): what the residual correlates with, and the named parameters' values.
 fn evidence(
@@ -524,9 +621,10 @@ fn evidence(
     params: &[FoundParameter],
     r: f64,
     growth: bool,
+    rival: Option<&Rival>,
 ) -> String {
     let model = cause.model();
-    let values: Vec<String> = params
+    let named: Vec<FoundParameter> = params
         .iter()
         .filter(|p| match p.term {
             Some(Term::JointAngle { joint } | Term::Bend { joint, .. }) => {
@@ -535,22 +633,80 @@ fn evidence(
             Some(Term::Growth) => growth,
             None => false,
         })
-        .map(|p| {
-            format!(
-                "{} {:.3e} ± {:.1e} {}{}",
-                p.name,
-                p.value,
-                p.sigma,
-                p.unit,
-                model.remark(p.value)
-            )
-        })
+        .cloned()
         .collect();
-    format!(
+    let mut s = format!(
         "residual correlates with {} (r = {r:.2}); identified {}",
         model.evidence_subject(&joint_words(joints)),
-        values.join("; ")
-    )
+        parameter_values(cause, &named)
+    );
+    if let Some(rv) = rival {
+        s.push_str(&format!("; {}", rv.why_not));
+    }
+    s
+}
+
+/// The probe of `rivals` with the largest held-out gain that `cause` does not model itself.
+fn best_rival_probe<'p>(
+    rivals: &'p [unexplained::Probe],
+    cause: Cause,
+) -> Option<&'p unexplained::Probe> {
+    rivals
+        .iter()
+        .filter(|p| !p.kind.modelled_by(cause))
+        .max_by(|a, b| a.gain.total_cmp(&b.gain))
+}
+
+/// The nearest rival of the candidate `this_round[k]` adopted in a round: the other candidate or the
+/// rival probe with the largest held-out gain, with why it lost in words.
+fn nearest_rival(this_round: &[Trial], k: usize, rivals: &[unexplained::Probe]) -> Option<Rival> {
+    let won = &this_round[k];
+    let pct = |g: f64| format!("{:.0} %", 100.0 * g);
+    let signature = won.cause.model().signature();
+    let other = this_round
+        .iter()
+        .enumerate()
+        .filter(|(i, _)| *i != k)
+        .map(|(_, t)| t)
+        .max_by(|a, b| a.gain.total_cmp(&b.gain));
+    let probe = best_rival_probe(rivals, won.cause);
+    match (other, probe) {
+        (Some(t), p) if p.is_none_or(|p| t.gain >= p.gain) => {
+            let why = match &t.impossible {
+                Some(reason) => format!(
+                    "not {}, its nearest rival: that would gain {} on the held-out poses against {} \
+                     here, but its fit needs {reason}",
+                    t.cause,
+                    pct(t.gain),
+                    pct(won.gain)
+                ),
+                None => format!(
+                    "not {}, its nearest rival: that gains {} on the held-out poses against {} here, \
+                     and this error {signature}",
+                    t.cause,
+                    pct(t.gain),
+                    pct(won.gain)
+                ),
+            };
+            Some(Rival {
+                name: t.cause.name().to_string(),
+                gain: t.gain,
+                why_not: why,
+            })
+        }
+        (_, Some(p)) => Some(Rival {
+            name: p.name.clone(),
+            gain: p.gain,
+            why_not: format!(
+                "not an error outside the known causes: the nearest probe for one ({}) gains {} on \
+                 the held-out poses against {} here",
+                p.name,
+                pct(p.gain),
+                pct(won.gain)
+            ),
+        }),
+        _ => None,
+    }
 }
 
 /// Diagnoses `table` (all rows; `name` names it in messages) for `model`.
@@ -616,6 +772,9 @@ pub fn diagnose_with_progress(
         ..Default::default()
     };
     let mut round = 0;
+    // Causes significant in the last round but for their impossible physics: evidence of something
+    // else (only the last round's: an earlier one may have stood in for a cause adopted since).
+    let mut rejected: Vec<Rejected> = Vec::new();
     loop {
         round += 1;
         let remaining: Vec<Cause> = usable
@@ -629,12 +788,12 @@ pub fn diagnose_with_progress(
         let z_crit = significance::normal_upper_quantile(options.alpha / remaining.len() as f64);
         let z_held =
             significance::normal_upper_quantile(options.held_out_alpha / remaining.len() as f64);
-        // The competitor no known cause names: an error periodic in one joint's angle. A cause that
-        // is really there explains its residual better than such a generic term can.
-        let competitor = unexplained::probes(model, &split, &current, &[], options.seed)
-            .into_iter()
-            .max_by(|a, b| a.gain.total_cmp(&b.gain));
-        let mut best: Option<(Evaluated, f64, f64)> = None;
+        // The rivals no known cause names: angle errors of one joint periodic in its angle or linear
+        // in the joint angles. A cause that is really there explains its residual better than such a
+        // generic term, except the one that models it (the transmission error, the harmonics).
+        let rivals = unexplained::probes(model, &split, &current, &[], options.seed);
+        let mut tried: Vec<(Cause, Evaluated, f64, f64, f64)> = Vec::new();
+        let mut round_rejected = Vec::new();
         for cause in remaining {
             let spec = current.spec.with(cause);
             progress(&spec.name());
@@ -647,12 +806,37 @@ pub fn diagnose_with_progress(
             let tz = significance::paired(&current.pose_sq, &cand.pose_sq).z;
             let trz = train_z(&current.cal, &cand.cal);
             let gain = 1.0 - cand.step.test_rms_m / current.step.test_rms_m;
-            let beaten_by = competitor
-                .as_ref()
+            let beaten_by = best_rival_probe(&rivals, cause)
                 .filter(|p| p.gain >= gain)
                 .map(|p| p.name.clone());
+            let impossible = impossible_parameters(&cand.cal, cause, options.joint_z);
+            let names_nothing = !cause_parameters(&cand.cal, cause)
+                .iter()
+                .any(|(p, _, alone)| {
+                    *alone && p.sigma > 0.0 && (p.value / p.sigma).abs() > options.joint_z
+                });
+            let passes = tz > z_held && trz > z_crit && gain >= options.min_gain;
             let significant =
-                tz > z_held && trz > z_crit && gain >= options.min_gain && beaten_by.is_none();
+                passes && beaten_by.is_none() && impossible.is_none() && !names_nothing;
+            if let (true, None, Some((reason, params))) = (passes, &beaten_by, &impossible) {
+                let joints = joints_of(params);
+                round_rejected.push(Rejected {
+                    cause,
+                    evidence: format!(
+                        "{cause} at {} would gain {:.0} % on the held-out poses (z = {tz:.1}), but its \
+                         fit needs {reason} ({}): not adopted, it stands in for an error no known cause \
+                         explains",
+                        joint_words(&joints),
+                        100.0 * gain,
+                        parameter_values(cause, params)
+                    ),
+                    joints,
+                    reason: reason.clone(),
+                    gain,
+                    test_z: tz,
+                    parameters: params.clone(),
+                });
+            }
             trials.push(Trial {
                 round,
                 cause,
@@ -662,18 +846,24 @@ pub fn diagnose_with_progress(
                 gain,
                 significant,
                 beaten_by,
+                impossible: impossible.map(|(reason, _)| reason),
+                names_nothing,
             });
-            if significant && best.as_ref().is_none_or(|(_, z, _)| tz > *z) {
-                best = Some((cand, tz, trz));
-            }
+            tried.push((cause, cand, tz, trz, gain));
         }
-        let Some((next, tz, trz)) = best else { break };
-        let cause = *next
-            .spec
-            .causes
+        let this_round = &trials[trials.len() - tried.len()..];
+        let best = this_round
             .iter()
-            .find(|c| !current.spec.causes.contains(c))
-            .expect("one new cause");
+            .enumerate()
+            .filter(|(_, t)| t.significant)
+            .max_by(|a, b| a.1.test_z.total_cmp(&b.1.test_z))
+            .map(|(k, _)| k);
+        let Some(k) = best else {
+            rejected = round_rejected;
+            break;
+        };
+        let rival = nearest_rival(this_round, k, &rivals);
+        let (cause, next, tz, trz, gain) = tried.swap_remove(k);
         let r = explained_correlation(&current.test_err, &next.test_err);
         findings.push(Finding {
             cause,
@@ -681,11 +871,12 @@ pub fn diagnose_with_progress(
             joints: Vec::new(),
             test_rms_m_before: current.step.test_rms_m,
             test_rms_m_after: next.step.test_rms_m,
-            gain: 1.0 - next.step.test_rms_m / current.step.test_rms_m,
+            gain,
             r,
             test_z: tz,
             train_z: trz,
             parameters: Vec::new(),
+            rival,
         });
         steps.push(next.step.clone());
         current = next;
@@ -702,22 +893,28 @@ pub fn diagnose_with_progress(
                 0.0
             }
         };
-        f.joints = params
+        let named: Vec<FoundParameter> = params
             .iter()
-            .filter_map(|(p, term, alone)| match term {
-                Term::JointAngle { joint } | Term::Bend { joint, .. }
-                    if *alone && z_of(p) > options.joint_z =>
-                {
-                    Some(joint + 1)
-                }
-                _ => None,
+            .filter(|(p, term, alone)| {
+                matches!(term, Term::JointAngle { .. } | Term::Bend { .. })
+                    && *alone
+                    && z_of(p) > options.joint_z
             })
+            .map(|(p, _, _)| p.clone())
             .collect();
+        f.joints = joints_of(&named);
         let growth = params
             .iter()
             .any(|(p, term, alone)| *term == Term::Growth && *alone && z_of(p) > options.joint_z);
         f.parameters = params.into_iter().map(|(p, _, _)| p).collect();
-        f.evidence = evidence(cause, &f.joints, &f.parameters, f.r, growth);
+        f.evidence = evidence(
+            cause,
+            &f.joints,
+            &f.parameters,
+            f.r,
+            growth,
+            f.rival.as_ref(),
+        );
         plots.regressors.extend(finding_plots(
             model, &split, &current, cause, &f.joints, growth,
         ));
@@ -727,7 +924,8 @@ pub fn diagnose_with_progress(
         None => noise_floor::estimate(table, &split.test.rows, &options.calibration.noise),
     };
     progress("unexplained structure");
-    let unexplained = unexplained::analyse(model, &split, &current, noise_floor_m, options)?;
+    let unexplained =
+        unexplained::analyse(model, &split, &current, noise_floor_m, options, rejected)?;
     plots.test_errors_final_m = current.test_err.iter().map(|e| e.norm()).collect();
     if let Some(j) = unexplained.correlates_with.as_ref().and_then(|p| p.joint) {
         plots.unexplained = Some(report::RegressorPlot {

@@ -60,11 +60,12 @@ pub trait CauseModel: Sync {
     /// the robot's inertials. `Err` says why not, in one sentence.
     fn usable(&self, model: &Model, table: &MeasurementTable) -> std::result::Result<(), String>;
 
-    /// Fills this cause's part of `settings` from the training rows `rows` of `table` (`source` names
-    /// the table in errors). Default: nothing to set.
+    /// Fills this cause's part of `settings` for `model` from the training rows `rows` of `table`
+    /// (`source` names the table in errors). Default: nothing to set.
     fn configure(
         &self,
         _settings: &mut ExtensionSettings,
+        _model: &Model,
         _table: &MeasurementTable,
         _rows: &[usize],
         _source: &str,

@@ -52,6 +52,10 @@ pub struct ExtensionSettings {
     pub backlash_sign: BacklashSign,
     /// Source of `ΔT`, with thermal drift.
     pub thermal: Option<ThermalInput>,
+    /// 0-based joints with transmission-error harmonics: those that turn over at least half a
+    /// revolution in the training data ([`super::transmission_error::MIN_SPAN_RAD`]).
+    #[serde(default)]
+    pub transmission_joints: Vec<usize>,
 }
 
 impl ExtensionSettings {
@@ -80,10 +84,14 @@ impl ExtensionSettings {
                 BacklashSign::GravityTorque
             },
             thermal: None,
+            transmission_joints: Vec::new(),
         };
         let mut refused = None;
         for c in settings.causes.clone() {
-            if let Err(e) = c.model().configure(&mut settings, table, rows, source) {
+            if let Err(e) = c
+                .model()
+                .configure(&mut settings, model, table, rows, source)
+            {
                 refused.get_or_insert(e);
             }
         }

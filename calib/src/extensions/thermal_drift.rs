@@ -86,6 +86,7 @@ impl CauseModel for ThermalDrift {
     fn configure(
         &self,
         settings: &mut ExtensionSettings,
+        _model: &Model,
         table: &MeasurementTable,
         rows: &[usize],
         source: &str,

@@ -6,12 +6,22 @@
 //!
 //! `aᵢₖ`, `bᵢₖ` (rad) are the sine and cosine amplitudes of harmonic `k` per revolution of joint `i`:
 //! the eccentricity of a gear or an encoder disc (k = 1), the elliptic flexspline of a harmonic drive
-//! (k = 2) and their products (k = 3). Six parameters per rotational joint (prismatic joints have none:
-//! a lead screw's error is periodic in its pitch, not in a revolution). They are linear in the
-//! regressors `sin k qᵢ`, `cos k qᵢ` of the commanded angle, so they enter as joint-angle terms. No
-//! harmonic is a geometric error: a constant error twist or zero offset changes the angle about the
-//! joint's axis by a constant, never by `sin k qᵢ`, so each is identifiable when the joint moves over
-//! enough of a turn (a joint that hardly moves leaves them in the solver's null space).
+//! (k = 2) and their products (k = 3). Six parameters per rotational joint that turns over at least
+//! half a revolution ([`MIN_SPAN_RAD`]) in the training data (prismatic joints have none: a lead
+//! screw's error is periodic in its pitch, not in a revolution). They are linear in the regressors
+//! `sin k qᵢ`, `cos k qᵢ` of the commanded angle, so they enter as joint-angle terms. No harmonic is a
+//! geometric error: a constant error twist or zero offset changes the angle about the joint's axis by a
+//! constant, never by `sin k qᵢ`.
+//!
+//! # What the data can tell
+//! Over less than a full turn a periodic error is not told from a smooth one: within 340° a first
+//! harmonic is 99.5 % a cubic in the angle, and harmonics 1–3 represent `q²` or `q⁴` as well
+//! (`scripts/`-free arithmetic in docs/diagnose.md). So this cause stands for *an angle error of a
+//! joint that depends on its own angle alone*, smooth at the scale of a third of a turn: gear and
+//! encoder eccentricity, a harmonic drive's two-per-revolution error, a wrong gear ratio. Below half
+//! a turn even the third harmonic is 80 % a cubic and the amplitudes lose their meaning, so such a
+//! joint gets none. An amplitude beyond [`MAX_AMPLITUDE_RAD`] is no gear's ([`CauseModel::impossible`]):
+//! it is what harmonics fitted to something else over part of a turn look like.
 
 use super::{Cause, CauseModel, ExtensionParam, ExtensionSettings, PlotAxis, RowInputs, Term};
 use crate::units::Unit;
@@ -24,6 +34,30 @@ pub const HARMONICS: usize = 3;
 /// Expected amplitude of one harmonic (rad): harmonic drives have 1 arc-min (2.9e-4 rad) of
 /// transmission error peak to peak.
 pub const SCALE_RAD: f64 = 1e-4;
+
+/// Smallest span of a joint's angles in the training data (rad) for it to get harmonics: half a turn.
+pub const MIN_SPAN_RAD: f64 = std::f64::consts::PI;
+
+/// Largest plausible amplitude of one harmonic (rad): 5 mrad, 17 arc-min, over ten times the
+/// transmission error of a harmonic drive or a worn spur gear.
+pub const MAX_AMPLITUDE_RAD: f64 = 5e-3;
+
+/// 0-based rotational joints of `model` whose angles span at least [`MIN_SPAN_RAD`] over `rows` of
+/// `table`.
+pub fn turning_joints(model: &Model, table: &MeasurementTable, rows: &[usize]) -> Vec<usize> {
+    (0..model.nq())
+        .filter(|&j| model.joints[j].kind.is_rotational())
+        .filter(|&j| {
+            let (lo, hi) = rows
+                .iter()
+                .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &r| {
+                    let v = table.q_row(r)[j];
+                    (lo.min(v), hi.max(v))
+                });
+            hi - lo >= MIN_SPAN_RAD
+        })
+        .collect()
+}
 
 /// Parameter names, in order: sine and cosine of each harmonic.
 const QUANTITIES: [&str; 2 * HARMONICS] = [
@@ -43,25 +77,40 @@ impl CauseModel for TransmissionError {
         Cause::TransmissionError
     }
 
-    fn usable(&self, model: &Model, _table: &MeasurementTable) -> std::result::Result<(), String> {
-        if model.joints.iter().any(|j| j.kind.is_rotational()) {
-            Ok(())
-        } else {
-            Err("the robot has no rotational joint".into())
+    fn usable(&self, model: &Model, table: &MeasurementTable) -> std::result::Result<(), String> {
+        let all: Vec<usize> = (0..table.len()).collect();
+        if turning_joints(model, table, &all).is_empty() {
+            return Err(format!(
+                "no rotational joint turns over half a revolution in the data ({:.0}°): an error \
+                 periodic in its angle cannot be told from a smooth one",
+                MIN_SPAN_RAD.to_degrees()
+            ));
         }
+        Ok(())
+    }
+
+    /// The joints that turn over half a revolution in the training rows.
+    fn configure(
+        &self,
+        settings: &mut ExtensionSettings,
+        model: &Model,
+        table: &MeasurementTable,
+        rows: &[usize],
+        _source: &str,
+    ) -> crate::error::Result<()> {
+        settings.transmission_joints = turning_joints(model, table, rows);
+        Ok(())
     }
 
     fn needs_gravity_torque(&self, _settings: &ExtensionSettings) -> bool {
         false
     }
 
-    fn params(&self, model: &Model, _settings: &ExtensionSettings) -> Vec<ExtensionParam> {
-        model
-            .joints
+    fn params(&self, _model: &Model, settings: &ExtensionSettings) -> Vec<ExtensionParam> {
+        settings
+            .transmission_joints
             .iter()
-            .enumerate()
-            .filter(|(_, j)| j.kind.is_rotational())
-            .flat_map(|(i, _)| {
+            .flat_map(|&i| {
                 QUANTITIES.iter().map(move |&quantity| ExtensionParam {
                     cause: Cause::TransmissionError,
                     term: Term::JointAngle { joint: i },
@@ -73,16 +122,20 @@ impl CauseModel for TransmissionError {
             .collect()
     }
 
-    /// `sin k qᵢ`, `cos k qᵢ` (dimensionless) of each rotational joint's commanded angle.
-    fn regressors(&self, _settings: &ExtensionSettings, row: &RowInputs<'_>, out: &mut [f64]) {
-        let mut k = 0;
-        for (&q, joint) in row.q.iter().zip(row.joints) {
-            if !joint.kind.is_rotational() {
-                continue;
-            }
-            harmonics(q, &mut out[k..k + 2 * HARMONICS]);
-            k += 2 * HARMONICS;
+    /// `sin k qᵢ`, `cos k qᵢ` (dimensionless) of each harmonic joint's commanded angle.
+    fn regressors(&self, settings: &ExtensionSettings, row: &RowInputs<'_>, out: &mut [f64]) {
+        for (&j, o) in settings
+            .transmission_joints
+            .iter()
+            .zip(out.chunks_exact_mut(2 * HARMONICS))
+        {
+            harmonics(row.q[j], o);
         }
+    }
+
+    fn impossible(&self, value: f64) -> Option<&'static str> {
+        (value.abs() > MAX_AMPLITUDE_RAD)
+            .then_some("a harmonic amplitude beyond 5 mrad: no gear errs by that much")
     }
 
     fn evidence_subject(&self, joints: &str) -> String {
