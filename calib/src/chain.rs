@@ -62,6 +62,11 @@ pub struct ChainScratch {
     pub p_tracker: Vector3<f64>,
     /// Predicted target orientation, tracker frame (identity without orientation parameters).
     pub r_tracker_target: Matrix3<f64>,
+    /// Whether the last evaluation bent the chain ([`Chain::forward_bent`]).
+    pub bent: bool,
+    /// With a bent chain: each joint's axis, tracker frame, before its bend (the frames then carry
+    /// the bend after the joint's rotation).
+    pub axes: Vec<Vector3<f64>>,
 }
 
 impl ChainScratch {
@@ -72,6 +77,8 @@ impl ChainScratch {
             t_tracker_flange: Pose::identity(),
             p_tracker: Vector3::zeros(),
             r_tracker_target: Matrix3::identity(),
+            bent: false,
+            axes: vec![Vector3::zeros(); n],
         }
     }
 }
@@ -133,10 +140,11 @@ impl Chain {
     }
 
     /// [`Chain::forward`] with everything beyond joint `i` turned about the joint's origin by the
-    /// rotation vector `bend[i]` (rad, joint frame at zero angle), applied before the joint's own
-    /// motion: `Fᵢ = Fᵢ₋₁ Oᵢ exp([φᵢ]) exp([Aᵢ] θᵢ)` (link deflection). With the bend before the joint's
-    /// rotation, `Fᵢ`'s axis is still the joint's axis, so every kinematic column of the Jacobian keeps
-    /// its form; [`Chain::bend_axis`] gives the bend's own.
+    /// rotation vector `bend[i]` (rad, joint frame `i`: the child link's frame, turning with the
+    /// joint), after the joint's own motion: `Fᵢ = Fᵢ₋₁ Oᵢ exp([Aᵢ] θᵢ) exp([φᵢ])` (link deflection).
+    /// The joint-twist columns of the Jacobian keep their form (they depend on `Fᵢ` only through
+    /// `Pᵢ = Fᵢ H'ᵢ⁻¹`); the zero-offset column turns about the axis before the bend, which
+    /// [`ChainScratch::axes`] keeps; [`Chain::bend_axis`] gives the bend's own column.
     ///
     /// # Panics
     /// If `q.len()` or `bend.len()` differs from the joint count.
@@ -154,12 +162,6 @@ impl Chain {
             let theta = qi + self.zero_offset[i];
             let o = &self.origin[i];
             p += r * o.translation.vector;
-            if let Some(b) = bend
-                && b[i] != Vector3::zeros()
-            {
-                // r Rₒ exp([φ]) = r exp([Rₒ φ]) Rₒ: the bend in the previous frame, before Oᵢ's turn.
-                r *= exp_rotation(&(o.rotation * b[i]));
-            }
             match self.kind[i] {
                 JointKind::Revolute | JointKind::Continuous => {
                     let (sn, cs) = sim::trig::sin_cos(theta);
@@ -171,8 +173,15 @@ impl Chain {
                     p += r * (self.axis[i] * theta);
                 }
             }
+            if let Some(b) = bend {
+                s.axes[i] = r * self.axis[i];
+                if b[i] != Vector3::zeros() {
+                    r *= exp_rotation(&b[i]);
+                }
+            }
             s.frames[i] = pose_from(r, p);
         }
+        s.bent = bend.is_some();
         s.t_tracker_flange = s.frames[self.nq() - 1] * self.flange_offset;
         s.p_tracker = (s.t_tracker_flange * nalgebra::Point3::from(self.p_flange_target)).coords;
         s.r_tracker_target = match &self.r_flange_target {
@@ -184,8 +193,8 @@ impl Chain {
     /// The tracker-frame rotation `ω` (rad per unit) by which a unit step of the bend of joint `i` along
     /// `local` (joint frame) turns everything beyond the joint, and the point `oᵢ` (tracker frame, m) it
     /// turns about, at the last [`Chain::forward_bent`] evaluation with bend `phi` at that joint:
-    /// `exp([φ + δ]) = exp([J_l(φ) δ]) exp([φ])`, so `ω = R_joint J_l(φ) local`, `R_joint` the joint frame
-    /// at zero angle (`Fᵢ₋₁ Oᵢ`). A point `p` beyond the joint moves by `ω × (p − oᵢ)`.
+    /// `exp([φ + δ]) = exp([φ]) exp([J_r(φ) δ])` with the right Jacobian `J_r(φ) = J_l(φ)ᵀ`, so
+    /// `ω = R(Fᵢ) J_l(φ)ᵀ local`. A point `p` beyond the joint moves by `ω × (p − oᵢ)`.
     pub fn bend_axis(
         &self,
         s: &ChainScratch,
@@ -193,15 +202,22 @@ impl Chain {
         local: &Vector3<f64>,
         phi: &Vector3<f64>,
     ) -> (Vector3<f64>, Vector3<f64>) {
-        let prev = if i == 0 {
-            &self.t_tracker_base
+        let f = &s.frames[i];
+        (
+            f.rotation * (left_jacobian(phi).tr_mul(local)),
+            f.translation.vector,
+        )
+    }
+
+    /// Joint `i`'s axis (tracker frame) at the last evaluation: the frame's axis, or with a bent chain
+    /// the axis before the bend.
+    #[inline]
+    fn axis_now(&self, s: &ChainScratch, i: usize) -> Vector3<f64> {
+        if s.bent {
+            s.axes[i]
         } else {
-            &s.frames[i - 1]
-        };
-        let o = &self.origin[i];
-        let r_joint = prev.rotation * o.rotation;
-        let origin = prev.translation.vector + prev.rotation * o.translation.vector;
-        (r_joint * (left_jacobian(phi) * local), origin)
+            s.frames[i].rotation.matrix() * self.axis[i]
+        }
     }
 
     /// `∂p_tracker/∂qᵢ` (tracker frame; m/rad, or m/m for a prismatic joint) at the last
@@ -210,7 +226,7 @@ impl Chain {
     #[inline]
     pub fn joint_direction(&self, s: &ChainScratch, i: usize) -> Vector3<f64> {
         let f = &s.frames[i];
-        let w = f.rotation.matrix() * self.axis[i];
+        let w = self.axis_now(s, i);
         if self.kind[i].is_rotational() {
             w.cross(&(s.p_tracker - f.translation.vector))
         } else {
@@ -293,7 +309,7 @@ impl Chain {
                 }
             }
             if self.kind[i].is_rotational() {
-                let w = fr * self.axis[i];
+                let w = self.axis_now(s, i);
                 let kz = layout.zero_offset(i);
                 for row in 0..3 {
                     out[row * np + kz] = w[row];

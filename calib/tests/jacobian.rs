@@ -270,29 +270,33 @@ fn extended_jacobian_matches_central_differences() {
     }
 }
 
-/// A bent chain is the robot whose joint frames are turned by the bends: `Chain::forward_bent` with
-/// nominal parameters against `sim`'s forward kinematics of a model whose joint origins carry the
-/// bend rotations (`Oᵢ ← Oᵢ exp([φᵢ])`).
+/// A bent chain is the robot whose links are turned by the bends: `Chain::forward_bent` with nominal
+/// parameters against `sim`'s forward kinematics of a model in which each link's frame is turned by
+/// its joint's bend after the joint's rotation: the next joint's origin (or the flange offset)
+/// becomes `exp([φᵢ]) Oᵢ₊₁`.
 #[test]
-fn bent_chain_equals_the_robot_with_turned_joint_frames() {
+fn bent_chain_equals_the_robot_with_turned_links() {
     use calib::lie3::exp_rotation;
     use nalgebra::Vector3;
+    use sim::lie::{Pose, pose_from};
     for name in ["iiwa7", "ur5", "wam"] {
         let model = robots::load_builtin(name).unwrap();
         let mut g = rng(51);
         let params = KinematicParams::nominal(model.nq(), false);
         let chain = Chain::new(&model, &params);
         let mut s = ChainScratch::new(model.nq());
+        let n = model.nq();
         for q in random_configs(&model, 20, &mut g) {
-            let bend: Vec<Vector3<f64>> = (0..model.nq())
+            let bend: Vec<Vector3<f64>> = (0..n)
                 .map(|i| Vector3::new(1e-3 * (i as f64 - 2.0), -2e-3, 5e-4 * i as f64) * q[0].cos())
                 .collect();
+            let turn = |b: &Vector3<f64>| -> Pose { pose_from(exp_rotation(b), Vector3::zeros()) };
             let mut bent = model.clone();
-            for (j, b) in bent.joints.iter_mut().zip(&bend) {
-                let r = j.origin.rotation.matrix() * exp_rotation(b);
-                j.origin = sim::lie::pose_from(r, j.origin.translation.vector);
-                j.refresh_derived();
+            for i in 1..n {
+                bent.joints[i].origin = turn(&bend[i - 1]) * model.joints[i].origin;
+                bent.joints[i].refresh_derived();
             }
+            bent.flange_offset = turn(&bend[n - 1]) * model.flange_offset;
             let mut data = sim::Data::new(&bent);
             let flange = sim::flange_pose(&bent, &mut data, &q);
             chain.forward_bent(&mut s, &q, &bend);

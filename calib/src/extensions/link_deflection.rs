@@ -1,8 +1,8 @@
 //! Link deflection, as the estimator models it: the arm bends at each joint about the two axes
 //! orthogonal to the joint's own, in proportion to the gravity moment the joint transmits.
 //!
-//! For joint `i` (0-based) with origin `oᵢ` and joint frame `Rᵢ` (the frame the joint turns in, fixed
-//! to the link before it: `R_base_joint` at `qᵢ = 0`), the moment of gravity on everything beyond the
+//! For joint `i` (0-based) with origin `oᵢ` and joint frame `Rᵢ` (the child link's frame, which turns
+//! with the joint: `R_base_joint` at the link angle), the moment of gravity on everything beyond the
 //! joint (its child link and all later links, and the payload) about the joint's origin is
 //!
 //! ```text
@@ -12,19 +12,21 @@
 //!
 //! (`cₖ` the centres of mass, `g` gravity). Its component along the joint axis is what the joint's
 //! motor holds (`τᵢ = −aᵢ · mᵢ`, the holding torque of [`super::joint_compliance`]); the components
-//! about the two orthogonal axes `u`, `v` of the joint frame load its bearing and the links next to
-//! it. With bending compliances `c_u`, `c_v` (rad/(N m)), everything beyond the joint turns about the
-//! joint's origin by the rotation vector (joint frame)
+//! about the two orthogonal axes `u`, `v` of the joint frame load its bearing and the link beyond it,
+//! whose bending stiffness turns with the joint. With bending compliances `c_u`, `c_v` (rad/(N m)),
+//! everything beyond the joint turns about the joint's origin by the rotation vector (joint frame)
 //!
 //! ```text
 //! φᵢ = c_u (u · mᵢ) u + c_v (v · mᵢ) v
 //! ```
 //!
 //! i.e. along the load, as a joint spring turns along its torque. The regressors are `u · mᵢ`, `v · mᵢ`
-//! (N m) and the term is [`Term::Bend`]: the chain applies `exp([φᵢ])` in the joint frame before the
-//! joint's own rotation ([`crate::chain::Chain::forward_bent`]). `u`, `v` are the joint frame's
-//! coordinate axes other than the joint axis (x and y for a joint about z); a joint whose axis is not
-//! along a coordinate axis of its frame gets no bending parameters.
+//! (N m) and the term is [`Term::Bend`]: the chain applies `exp([φᵢ])` after the joint's own rotation
+//! ([`crate::chain::Chain::forward_bent`]). `u`, `v` are the joint frame's coordinate axes other than
+//! the joint axis, in x, y, z order (x and y for a joint about z, x and z for one about y); a joint
+//! whose axis is not along a coordinate axis of its frame gets no bending parameters. (Two hinges in
+//! series, `Rot(u, α) Rot(v, β)`, differ from `exp([α u + β v])` by `αβ/2`, 10⁻⁸ rad for bends of
+//! 10⁻⁴ rad: ten nanometres at a metre.)
 //!
 //! The moments are those of the nominal robot at the link angles of the current estimate (with joint
 //! compliance, the sagged angles, as for the holding torques); the bending itself moves the centres of
@@ -49,12 +51,16 @@ pub const SCALE_RAD_PER_NM: f64 = 3e-6;
 pub struct LinkDeflection;
 
 /// The two bending axes (0 = x, 1 = y, 2 = z of the joint frame) of a joint with unit axis `axis`
-/// (joint frame), in cyclic order after the axis (z → x, y; x → y, z; y → z, x); `None` when the axis
-/// is not along a coordinate axis.
+/// (joint frame): the other two coordinate axes in x, y, z order (z → x, y; y → x, z; x → y, z);
+/// `None` when the axis is not along a coordinate axis.
 pub fn bending_axes(axis: &Vector3<f64>) -> Option<[usize; 2]> {
     (0..3)
         .find(|&k| (axis[k].abs() - 1.0).abs() < 1e-9)
-        .map(|k| [(k + 1) % 3, (k + 2) % 3])
+        .map(|k| match k {
+            0 => [1, 2],
+            1 => [0, 2],
+            _ => [0, 1],
+        })
 }
 
 impl CauseModel for LinkDeflection {
@@ -148,7 +154,8 @@ impl CauseModel for LinkDeflection {
     }
 }
 
-/// Gravity moment each joint transmits, in its joint frame (N m; see the module docs): `out[i] = mᵢ`,
+/// Gravity moment each joint transmits, in its joint frame (the child link's; N m; see the module
+/// docs): `out[i] = mᵢ`,
 /// for the joint poses in `data` (from [`sim::kinematics::forward_kinematics`] at the link angles),
 /// gravity `gravity` (base frame, m/s²) and an optional payload at the flange.
 ///
@@ -171,20 +178,14 @@ pub fn gravity_moments(
         first += c.coords * pl.mass;
     }
     for i in (0..model.nq()).rev() {
+        let frame = &data.joint_poses[i];
         let body = &model.bodies[i];
-        let c = data.joint_poses[i] * Point3::from(body.com);
+        let c = frame * Point3::from(body.com);
         mass += body.mass;
         first += c.coords * body.mass;
-        // The joint frame: the previous joint's frame (the base for joint 1) times this joint's origin.
-        let origin = &model.joints[i].origin;
-        let pre = if i == 0 {
-            *origin
-        } else {
-            data.joint_poses[i - 1] * origin
-        };
-        let o = pre.translation.vector;
+        let o = frame.translation.vector;
         let m_base = (first - o * mass).cross(gravity);
-        out[i] = pre.rotation.inverse_transform_vector(&m_base);
+        out[i] = frame.rotation.inverse_transform_vector(&m_base);
     }
 }
 
@@ -197,7 +198,7 @@ mod tests {
     fn bending_axes_follow_the_joint_axis() {
         assert_eq!(bending_axes(&Vector3::z()), Some([0, 1]));
         assert_eq!(bending_axes(&-Vector3::x()), Some([1, 2]));
-        assert_eq!(bending_axes(&Vector3::y()), Some([2, 0]));
+        assert_eq!(bending_axes(&Vector3::y()), Some([0, 2]));
         assert_eq!(bending_axes(&Vector3::new(0.6, 0.8, 0.0)), None);
     }
 
@@ -233,14 +234,10 @@ mod tests {
             v - pl.mass * g.dot(&moved(c))
         };
         for i in 0..7 {
-            let pre = if i == 0 {
-                model.joints[0].origin
-            } else {
-                data.joint_poses[i - 1] * model.joints[i].origin
-            };
-            let o = pre.translation.vector;
+            let frame = data.joint_poses[i];
+            let o = frame.translation.vector;
             for about in 0..3 {
-                let w = pre.rotation * Vector3::ith(about, 1.0);
+                let w = frame.rotation * Vector3::ith(about, 1.0);
                 let h = 1e-6;
                 let fd = -(energy(i, &w, &o, h) - energy(i, &w, &o, -h)) / (2.0 * h);
                 assert!(

@@ -232,8 +232,8 @@ pub enum Term {
     /// Scales the target's base-frame position by `1 + x · g` (growth of every link about the base).
     Growth,
     /// Turns everything beyond joint `joint` by `x · g` (rad) about axis `about` (0 = x, 1 = y, 2 = z)
-    /// of the joint's frame (the frame the joint turns in, fixed to the link before it), through the
-    /// joint's origin; the axis is orthogonal to the joint's own.
+    /// of the joint's frame (the child link's frame, turning with the joint), through the joint's
+    /// origin, after the joint's own rotation; the axis is orthogonal to the joint's own.
     Bend {
         /// 0-based joint index.
         joint: usize,
