@@ -53,8 +53,10 @@ fn every_shipped_scenario_generates_a_valid_dataset() {
         "iiwa7_clean",
         "iiwa7_compliance",
         "iiwa7_compliance_rapier",
+        "iiwa7_deflection",
         "iiwa7_kinematic",
         "iiwa7_thermal",
+        "iiwa7_transmission",
         "ur5_kinematic",
     ];
     for name in expected {

@@ -1,13 +1,17 @@
 //! Speed of the analytic truth on the iiwa 7 with every effect on (thermal drift, kinematic offsets,
-//! gravity-mode backlash, joint compliance with a payload). Target (issue 3): ≥ 200,000 poses per
-//! second per core, i.e. ≤ 5 µs per pose, on the project's 2-core machine.
+//! transmission error, joint coupling, gravity-mode backlash, joint compliance with a payload, link
+//! deflection on every joint). Target (issue 3): ≥ 200,000 poses per second per core, i.e. ≤ 5 µs
+//! per pose, on the project's 2-core machine.
 
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use nalgebra::Vector3;
 use sim::effects::gear_backlash::GearBacklash;
 use sim::effects::joint_compliance::JointCompliance;
+use sim::effects::joint_coupling::JointCoupling;
 use sim::effects::kinematic_offsets::KinematicOffsets;
+use sim::effects::link_deflection::LinkDeflection;
 use sim::effects::thermal_drift::ThermalDrift;
+use sim::effects::transmission_error::TransmissionError;
 use sim::effects::{Conditions, Effects, Truth};
 use sim::{Payload, robots};
 use std::hint::black_box;
@@ -46,6 +50,16 @@ fn effects() -> Effects {
                 .with_zero_drift(vec![2e-6; 7])
                 .unwrap(),
         ),
+        transmission: Some(
+            TransmissionError::new(
+                vec![1, 2, 3],
+                (0..7).map(|k| vec![8e-5, -3e-5, 1e-5 * k as f64]).collect(),
+                (0..7).map(|k| vec![0.1 * k as f64, 1.0, -0.5]).collect(),
+            )
+            .unwrap(),
+        ),
+        coupling: Some(JointCoupling::single(6, 4, 2e-4).unwrap()),
+        deflection: Some(LinkDeflection::uniform(7, 2e-6).unwrap()),
     }
 }
 
@@ -63,11 +77,19 @@ fn bench(c: &mut Criterion) {
         mass: 3.0,
         com: [0.0, 0.0, 0.06],
     });
-    // Breakdown: no effects (four chain evaluations' worth of bookkeeping reduce to one), geometry only
-    // (thermal + kinematic), and everything (adds gravity backlash and the compliance equilibrium).
+    // Breakdown: no effects (the stages' bookkeeping reduces to one chain evaluation), geometry only
+    // (thermal + kinematic), everything but link deflection, and everything (adds the joint +
+    // deflection equilibrium).
     let geometry = Effects {
         compliance: None,
         backlash: None,
+        deflection: None,
+        transmission: None,
+        coupling: None,
+        ..effects()
+    };
+    let no_deflection = Effects {
+        deflection: None,
         ..effects()
     };
     let variants = [
@@ -78,6 +100,10 @@ fn bench(c: &mut Criterion) {
         (
             "true_target_thermal_kinematic",
             Truth::new(&model, &geometry).unwrap(),
+        ),
+        (
+            "true_target_all_but_deflection",
+            Truth::new(&model, &no_deflection).unwrap(),
         ),
     ];
     let mut group = c.benchmark_group("iiwa7");

@@ -7,9 +7,12 @@ use rand::rngs::StdRng;
 use rand::{RngExt, SeedableRng};
 use sim::effects::gear_backlash::GearBacklash;
 use sim::effects::joint_compliance::JointCompliance;
+use sim::effects::joint_coupling::{CouplingTerm, JointCoupling};
 use sim::effects::kinematic_offsets::KinematicOffsets;
+use sim::effects::link_deflection::LinkDeflection;
 use sim::effects::thermal_drift::ThermalDrift;
-use sim::effects::{Conditions, Effects, Truth, true_target};
+use sim::effects::transmission_error::TransmissionError;
+use sim::effects::{Conditions, EffectId, Effects, Truth, true_target};
 use sim::kinematics::poe_pose;
 use sim::lie::{adjoint_apply, exp_twist, log_pose};
 use sim::urdf::load_str;
@@ -858,6 +861,41 @@ fn all_effects(m: &Model, rng: &mut StdRng) -> Effects {
                 .with_zero_drift(vec![3e-6; 7])
                 .unwrap(),
         ),
+        transmission: Some(
+            TransmissionError::new(
+                vec![1, 2, 3, 7],
+                (0..7)
+                    .map(|_| (0..4).map(|_| (rng.random::<f64>() - 0.5) * 4e-4).collect())
+                    .collect(),
+                (0..7)
+                    .map(|_| (0..4).map(|_| (rng.random::<f64>() - 0.5) * 6.0).collect())
+                    .collect(),
+            )
+            .unwrap(),
+        ),
+        coupling: Some(
+            JointCoupling::new(vec![
+                CouplingTerm {
+                    joint: 6,
+                    source: 4,
+                    ratio_rad_per_rad: 3e-4,
+                },
+                CouplingTerm {
+                    joint: 2,
+                    source: 2,
+                    ratio_rad_per_rad: -2e-4,
+                },
+            ])
+            .unwrap(),
+        ),
+        deflection: Some(
+            LinkDeflection::new(
+                (0..7)
+                    .map(|_| [rng.random::<f64>() * 4e-6, rng.random::<f64>() * 4e-6])
+                    .collect(),
+            )
+            .unwrap(),
+        ),
     }
 }
 
@@ -887,6 +925,12 @@ fn no_effects_give_exactly_the_nominal_forward_kinematics() {
         compliance: None,
         backlash: Some(GearBacklash::direction(vec![0.0; 7]).unwrap()),
         thermal: Some(ThermalDrift::uniform(7, 20.0, 23e-6).unwrap()),
+        transmission: Some(
+            TransmissionError::new(vec![1, 2, 3], vec![vec![0.0; 3]; 7], vec![vec![0.4; 3]; 7])
+                .unwrap(),
+        ),
+        coupling: Some(JointCoupling::single(3, 1, 0.0).unwrap()),
+        deflection: Some(LinkDeflection::uniform(7, 0.0).unwrap()),
     };
     let truth = Truth::new(&m, &zero).unwrap();
     let mut s = truth.scratch();
@@ -922,8 +966,11 @@ fn contributions_sum_to_the_total_and_the_prepared_path_equals_the_one_shot() {
         for (name, v) in [
             ("thermal", t.contribution.thermal),
             ("kinematic", t.contribution.kinematic),
+            ("transmission", t.contribution.transmission),
+            ("coupling", t.contribution.coupling),
             ("backlash", t.contribution.backlash),
             ("compliance", t.contribution.compliance),
+            ("deflection", t.contribution.deflection),
         ] {
             let n = Vector3::from(v).norm();
             assert!(n > 1e-6 && n < 5e-2, "{name}: {n} m");
@@ -1148,4 +1195,396 @@ fn truth_is_shareable_across_threads() {
     fn send_sync<T: Send + Sync>() {}
     send_sync::<Truth>();
     send_sync::<sim::effects::TruthScratch>();
+}
+
+// ---------------------------------------------------------------------------------------------------
+// Transmission error, joint coupling and link deflection.
+
+#[test]
+fn planar_transmission_error_and_coupling_match_closed_form() {
+    let m = two_link();
+    let p = Vector3::new(0.05, 0.0, 0.02);
+    // Joint 1: orders 1 and 2; joint 2: order 5 (beyond the estimator's 1–3).
+    let te = TransmissionError::new(
+        vec![1, 2, 5],
+        vec![vec![2e-4, -1e-4, 0.0], vec![0.0, 0.0, 5e-5]],
+        vec![vec![0.3, 1.1, 0.0], vec![0.0, 0.0, -0.4]],
+    )
+    .unwrap();
+    let effects = Effects {
+        transmission: Some(te),
+        ..Effects::default()
+    };
+    for q in [[0.0, 0.0], [0.4, -1.1], [-2.7, 2.0]] {
+        let t = true_target(&m, &effects, &cond(&q, None, 20.0, None), &p, &gravity()).unwrap();
+        // By hand: θ₁ = q₁ + 2e-4 sin(q₁ + 0.3) − 1e-4 sin(2 q₁ + 1.1), θ₂ = q₂ + 5e-5 sin(5 q₂ − 0.4).
+        let th1 = q[0] + 2e-4 * (q[0] + 0.3).sin() - 1e-4 * (2.0 * q[0] + 1.1).sin();
+        let th2 = q[1] + 5e-5 * (5.0 * q[1] - 0.4).sin();
+        assert!((t.q_link[0] - th1).abs() < 1e-16 && (t.q_link[1] - th2).abs() < 1e-16);
+        let expect = planar(th1, th2, 0.2, 1.0, 0.5, p);
+        assert!(close3(&t.p_base, &expect) < 1e-15);
+        let nominal = planar(q[0], q[1], 0.2, 1.0, 0.5, p);
+        assert!(arr_close(t.contribution.transmission, &(expect - nominal)) < 1e-15);
+        assert_eq!(t.contribution.coupling, [0.0; 3]);
+    }
+    // Coupling: joint 2 gains 3e-4 q₁, joint 1 a scale error of −2e-4.
+    let effects = Effects {
+        coupling: Some(
+            JointCoupling::new(vec![
+                CouplingTerm {
+                    joint: 2,
+                    source: 1,
+                    ratio_rad_per_rad: 3e-4,
+                },
+                CouplingTerm {
+                    joint: 1,
+                    source: 1,
+                    ratio_rad_per_rad: -2e-4,
+                },
+            ])
+            .unwrap(),
+        ),
+        ..Effects::default()
+    };
+    for q in [[0.0, 0.5], [0.4, -1.1], [-2.7, 2.0]] {
+        let t = true_target(&m, &effects, &cond(&q, None, 20.0, None), &p, &gravity()).unwrap();
+        let (th1, th2) = (q[0] * (1.0 - 2e-4), q[1] + 3e-4 * q[0]);
+        assert!((t.q_link[0] - th1).abs() < 1e-16 && (t.q_link[1] - th2).abs() < 1e-16);
+        let expect = planar(th1, th2, 0.2, 1.0, 0.5, p);
+        assert!(close3(&t.p_base, &expect) < 1e-15);
+        let nominal = planar(q[0], q[1], 0.2, 1.0, 0.5, p);
+        assert!(arr_close(t.contribution.coupling, &(expect - nominal)) < 1e-15);
+        if q[0] == 0.0 {
+            assert_eq!(t.contribution.coupling, [0.0; 3], "q₁ = 0: nothing moves");
+        }
+    }
+}
+
+/// Joint 1 about z at height 0.2 m (link 1: 1 kg at 0.15 m up its axis), joint 2 about y 0.3 m above
+/// it, link 2 of 1 m along x (2 kg at 0.5 m) to the tip.
+const ZY_ARM: &str = r#"<robot name="zy">
+  <link name="base"/>
+  <joint name="j1" type="revolute"><parent link="base"/><child link="l1"/><origin xyz="0 0 0.2"/>
+    <axis xyz="0 0 1"/><limit lower="-3" upper="3" effort="1" velocity="1"/></joint>
+  <link name="l1"><inertial><origin xyz="0 0 0.15"/><mass value="1"/>
+    <inertia ixx="0.1" ixy="0" ixz="0" iyy="0.1" iyz="0" izz="0.1"/></inertial></link>
+  <joint name="j2" type="revolute"><parent link="l1"/><child link="l2"/><origin xyz="0 0 0.3"/>
+    <axis xyz="0 1 0"/><limit lower="-3" upper="3" effort="1" velocity="1"/></joint>
+  <link name="l2"><inertial><origin xyz="0.5 0 0"/><mass value="2"/>
+    <inertia ixx="0.1" ixy="0" ixz="0" iyy="0.1" iyz="0" izz="0.1"/></inertial></link>
+  <joint name="tool" type="fixed"><parent link="l2"/><child link="tip"/><origin xyz="1 0 0"/></joint>
+  <link name="tip"/>
+</robot>"#;
+
+/// Rotation about +z by `a` applied to `v`.
+fn rz(a: f64, v: Vector3<f64>) -> Vector3<f64> {
+    let (s, c) = a.sin_cos();
+    Vector3::new(c * v.x - s * v.y, s * v.x + c * v.y, v.z)
+}
+
+#[test]
+fn zy_arm_deflection_and_joint_compliance_settle_together_as_derived_by_hand() {
+    // Joint 1's axis is z: its deflection axes are u = x, v = y. Everything hangs in the x-z plane of
+    // link 1's frame, so the moment across joint 1 is about v only (α = 0) and tilts the whole arm by
+    // β about y, a rotation that adds to joint 2's angle: with φ = θ₂ + β the angle of link 2 below
+    // the horizontal, the holding torque of joint 2 is τ₂ = −g m₂ l cos φ, joint 1 (vertical) holds
+    // nothing (θ₁ = q₁ whatever its stiffness), and the moment about y at joint 1's origin is
+    // M = g [m₁ h₁ sin β + m₂ (l cos φ + h sin β)] (the lever of a point (x, 0, z) is x cos β + z sin β).
+    // Equilibrium: θ₂ = q₂ + g m₂ l cos φ / k₂ and β = c M.
+    let m = load_str(ZY_ARM, "zy", &ChainSpec::default()).unwrap();
+    let (m1, h1, m2, l, h) = (1.0, 0.15, 2.0, 0.5, 0.3);
+    let p = Vector3::new(0.05, 0.0, 0.0);
+    let c = 4e-4; // rad/(N m): soft, so that the coupling is far above rounding
+    for (k2, q) in [
+        (f64::INFINITY, [0.3, 0.0]),
+        (800.0, [0.3, 0.0]),
+        (800.0, [-1.2, 0.7]),
+        (1500.0, [2.0, -0.9]),
+    ] {
+        let effects = Effects {
+            compliance: Some(JointCompliance::new(vec![2000.0, k2]).unwrap()),
+            deflection: Some(LinkDeflection::new(vec![[c, c], [0.0, 0.0]]).unwrap()),
+            ..Effects::default()
+        };
+        let t = true_target(&m, &effects, &cond(&q, None, 20.0, None), &p, &gravity()).unwrap();
+        // The two equations by fixed-point iteration (a contraction: c g m l ≈ 4e-3, g m l / k ≈ 0.01).
+        let (mut th2, mut beta) = (q[1], 0.0f64);
+        for _ in 0..200 {
+            let phi = th2 + beta;
+            th2 = q[1] + G * m2 * l * phi.cos() / k2;
+            beta = c * G * (m1 * h1 * beta.sin() + m2 * (l * phi.cos() + h * beta.sin()));
+        }
+        assert!(beta > 1e-3, "a real tilt: {beta}");
+        assert!(
+            (t.q_link[0] - q[0]).abs() < 1e-15,
+            "vertical joint 1 holds nothing"
+        );
+        assert!(
+            (t.q_link[1] - th2).abs() < 1e-13,
+            "{} vs {th2}",
+            t.q_link[1]
+        );
+        // Tip: base height, then Rz(q₁) Ry(β) [(0, 0, h) + Ry(θ₂) (1 m + p)].
+        let arm = Vector3::new(0.0, 0.0, h) + ry(th2, Vector3::new(1.0, 0.0, 0.0) + p);
+        let expect = Vector3::new(0.0, 0.0, 0.2) + rz(q[0], ry(beta, arm));
+        assert!(
+            close3(&t.p_base, &expect) < 1e-13,
+            "{}",
+            close3(&t.p_base, &expect)
+        );
+        // The joint sag alone (no tilt) is the compliance contribution; the rest is the deflection's.
+        let th2_alone = if k2.is_finite() {
+            bisect(
+                |th| k2 * (q[1] - th) + G * m2 * l * th.cos(),
+                q[1] - 0.2,
+                q[1] + 0.2,
+            )
+        } else {
+            q[1]
+        };
+        let alone = Vector3::new(0.0, 0.0, 0.2)
+            + rz(
+                q[0],
+                Vector3::new(0.0, 0.0, h) + ry(th2_alone, Vector3::new(1.0, 0.0, 0.0) + p),
+            );
+        let nominal = Vector3::new(0.0, 0.0, 0.2)
+            + rz(
+                q[0],
+                Vector3::new(0.0, 0.0, h) + ry(q[1], Vector3::new(1.0, 0.0, 0.0) + p),
+            );
+        assert!(arr_close(t.contribution.compliance, &(alone - nominal)) < 1e-13);
+        assert!(arr_close(t.contribution.deflection, &(expect - alone)) < 1e-13);
+    }
+}
+
+#[test]
+fn planar_arm_does_not_deflect_across_parallel_horizontal_axes() {
+    // Both axes +y, gravity in the arm's plane: the moments are about y only, so the deflection
+    // about u = x and v = −z is zero and the joints settle as without it.
+    let m = two_link();
+    let p = Vector3::new(0.05, 0.0, 0.0);
+    let k = vec![1500.0, 800.0];
+    let with = Effects {
+        compliance: Some(JointCompliance::new(k.clone()).unwrap()),
+        deflection: Some(LinkDeflection::uniform(2, 1e-4).unwrap()),
+        ..Effects::default()
+    };
+    let without = Effects {
+        compliance: Some(JointCompliance::new(k).unwrap()),
+        ..Effects::default()
+    };
+    for q in [[0.0, 0.0], [0.4, -1.1]] {
+        let a = true_target(&m, &with, &cond(&q, None, 20.0, None), &p, &gravity()).unwrap();
+        let b = true_target(&m, &without, &cond(&q, None, 20.0, None), &p, &gravity()).unwrap();
+        assert!(close3(&a.p_base, &b.p_base) < 1e-15);
+        assert!(Vector3::from(a.contribution.deflection).amax() < 1e-15);
+    }
+}
+
+/// The iiwa 7's URDF with two revolute joints (massless links between) after every joint `i` whose
+/// deflection compliance is given: `u`, `v` of the module docs written out for its axes (+z: x, y;
+/// +y: x, −z; −y: x, +z), both hinges at the joint origin.
+fn iiwa_with_hinges(deflecting: &[bool; 7]) -> Model {
+    let axes = [
+        ([1, 0, 0], [0, 1, 0]),
+        ([1, 0, 0], [0, 0, -1]),
+        ([1, 0, 0], [0, 1, 0]),
+        ([1, 0, 0], [0, 0, 1]),
+        ([1, 0, 0], [0, 1, 0]),
+        ([1, 0, 0], [0, 0, -1]),
+        ([1, 0, 0], [0, 1, 0]),
+    ];
+    let mut text = iiwa_text().to_string();
+    let mut extra = String::new();
+    for i in 0..7 {
+        if !deflecting[i] {
+            continue;
+        }
+        let link = format!("iiwa7_link_{}", i + 1);
+        let child = format!("<child link=\"{link}\"/>");
+        assert_eq!(text.matches(&child).count(), 1);
+        text = text.replace(&child, &format!("<child link=\"{link}_du\"/>"));
+        let (u, v) = axes[i];
+        for (name, from, to, a) in [
+            ("u", format!("{link}_du"), format!("{link}_dv"), u),
+            ("v", format!("{link}_dv"), link.clone(), v),
+        ] {
+            extra.push_str(&format!(
+                "<link name=\"{from}\"/><joint name=\"A{}_{name}\" type=\"revolute\"><parent link=\"{from}\"/>\
+                 <child link=\"{to}\"/><axis xyz=\"{} {} {}\"/>\
+                 <limit lower=\"-1\" upper=\"1\" effort=\"1\" velocity=\"1\"/></joint>\n",
+                i + 1,
+                a[0],
+                a[1],
+                a[2]
+            ));
+        }
+    }
+    let text = text.replace("</robot>", &format!("{extra}</robot>"));
+    load_str(&text, "iiwa7_hinged", &ChainSpec::default()).unwrap()
+}
+
+/// Holding torques of `model` at `x` from its forward kinematics, straight from the definition
+/// `τₖ = −wₖ · (Σ_{bodies beyond k} m (c − pₖ)) × g` (bodies of mass 0 skipped), payload at the flange.
+fn holding_torques(model: &Model, x: &[f64], pl: &Payload) -> Vec<f64> {
+    let mut d = Data::new(model);
+    forward_kinematics(model, &mut d, x);
+    let g = gravity();
+    let mut points: Vec<(usize, f64, Vector3<f64>)> = Vec::new();
+    for (b, body) in model.bodies.iter().enumerate() {
+        if body.mass > 0.0 {
+            points.push((
+                b,
+                body.mass,
+                (d.joint_poses[b] * Point3::from(body.com)).coords,
+            ));
+        }
+    }
+    let pc = (d.flange * Point3::from(Vector3::from(pl.com))).coords;
+    points.push((model.nq() - 1, pl.mass, pc));
+    (0..model.nq())
+        .map(|k| {
+            let t = &d.joint_poses[k];
+            let w = t.rotation * model.joints[k].axis;
+            let mut r = Vector3::zeros();
+            for (b, mass, c) in &points {
+                if *b >= k {
+                    r += (c - t.translation.vector) * *mass;
+                }
+            }
+            -w.dot(&r.cross(&g))
+        })
+        .collect()
+}
+
+#[test]
+fn iiwa_joint_and_deflection_equilibrium_holds_on_the_urdf_with_hinges() {
+    // The settled joint angles with the hinge angles (found here, given the joints, by their own
+    // fixed point) put the hinged URDF in equilibrium: every joint spring and every bearing spring
+    // balances its holding torque (computed here from the URDF's forward kinematics) to rounding,
+    // and the hinged URDF's flange is the truth's.
+    let m = iiwa();
+    let cd: [[f64; 2]; 7] = [
+        [2e-6, 3e-6],
+        [4e-6, 5e-6],
+        [0.0, 0.0],
+        [3e-6, 6e-6],
+        [0.0, 0.0],
+        [8e-6, 2e-6],
+        [0.0, 0.0],
+    ];
+    let deflecting = cd.map(|c| c[0] > 0.0);
+    let hinged = iiwa_with_hinges(&deflecting);
+    assert_eq!(hinged.nq(), 15);
+    let mut rng = StdRng::seed_from_u64(12);
+    let pl = Payload {
+        mass: 3.0,
+        com: [0.02, -0.01, 0.08],
+    };
+    let p = Vector3::new(0.0, 0.0, 0.05);
+    for with_joints in [false, true] {
+        let k = iiwa_stiffness();
+        let effects = Effects {
+            compliance: with_joints.then(|| JointCompliance::new(k.clone()).unwrap()),
+            deflection: Some(LinkDeflection::new(cd.to_vec()).unwrap()),
+            ..Effects::default()
+        };
+        let truth = Truth::new(&m, &effects).unwrap();
+        let mut s = truth.scratch();
+        let mut worst = 0.0f64;
+        for _ in 0..20 {
+            let q = random_q(&mut rng);
+            let t = truth
+                .target(&cond(&q, None, 20.0, Some(pl)), &p, &gravity(), &mut s)
+                .unwrap();
+            // Unknowns of the hinged URDF: each joint, then its u and v hinges.
+            let mut x = Vec::new();
+            let mut hinge_c = Vec::new();
+            for i in 0..7 {
+                x.push(s.q_link()[i]);
+                hinge_c.push(None);
+                if deflecting[i] {
+                    x.extend([0.0, 0.0]);
+                    hinge_c.extend([Some(cd[i][0]), Some(cd[i][1])]);
+                }
+            }
+            for _ in 0..100 {
+                let tau = holding_torques(&hinged, &x, &pl);
+                for (k, c) in hinge_c.iter().enumerate() {
+                    if let Some(c) = c {
+                        x[k] = -c * tau[k];
+                    }
+                }
+            }
+            let tau = holding_torques(&hinged, &x, &pl);
+            let mut joint = 0;
+            for (kx, c) in hinge_c.iter().enumerate() {
+                let res = match c {
+                    Some(c) => -x[kx] / c - tau[kx],
+                    None => {
+                        let r = if with_joints {
+                            k[joint] * (q[joint] - x[kx]) - tau[kx]
+                        } else {
+                            q[joint] - x[kx]
+                        };
+                        joint += 1;
+                        r
+                    }
+                };
+                // Bearing stiffness up to 5e5 N m/rad times an angle rounding of 1e-16 rad.
+                assert!(res.abs() < 1e-9, "unknown {kx}: residual {res:e}");
+                worst = worst.max(res.abs());
+            }
+            let fh = fk(&hinged, &x);
+            assert!(
+                pose_diff(&fh, &t.flange) < 1e-14,
+                "{}",
+                pose_diff(&fh, &t.flange)
+            );
+            assert!(close3(&t.p_base, &(fh * Point3::from(p)).coords) < 1e-14);
+            assert!(Vector3::from(t.contribution.deflection).norm() > 1e-5);
+        }
+        eprintln!("joints {with_joints}: worst equilibrium residual {worst:.1e}");
+    }
+}
+
+#[test]
+fn each_absent_new_effect_contributes_exactly_zero_and_the_rest_still_sum() {
+    let m = iiwa();
+    let mut rng = StdRng::seed_from_u64(21);
+    let all = all_effects(&m, &mut rng);
+    let p = Vector3::new(0.01, -0.02, 0.08);
+    let pl = Some(Payload {
+        mass: 3.0,
+        com: [0.0, 0.0, 0.06],
+    });
+    for id in [
+        EffectId::TransmissionError,
+        EffectId::JointCoupling,
+        EffectId::LinkDeflection,
+    ] {
+        let mut e = all.clone();
+        match id {
+            EffectId::TransmissionError => e.transmission = None,
+            EffectId::JointCoupling => e.coupling = None,
+            _ => e.deflection = None,
+        }
+        let truth = Truth::new(&m, &e).unwrap();
+        let mut s = truth.scratch();
+        for k in 0..5 {
+            let q = random_q(&mut rng);
+            let dir = [1i8, -1, 0, 1, -1, 0, 1];
+            let t = truth
+                .target(
+                    &cond(&q, Some(&dir), 22.0 + k as f64, pl),
+                    &p,
+                    &gravity(),
+                    &mut s,
+                )
+                .unwrap();
+            assert_eq!(t.contribution.get(id), [0.0; 3], "{id:?}");
+            let pn = (fk(&m, &q) * Point3::from(p)).coords;
+            assert!(arr_close(t.contribution.total(), &(t.p_base - pn)) < 1e-15);
+        }
+    }
 }

@@ -12,7 +12,7 @@ fn vec6(a: &[f64; 6]) -> Vector6<f64> {
 }
 
 /// One joint of a [`Chain`]: local axis, folded rotation terms and a temperature-affine origin.
-#[derive(Clone, Debug)]
+#[derive(Clone, Copy, Debug)]
 pub(crate) struct ChainJoint {
     /// Revolute or continuous (true) vs prismatic.
     pub rotational: bool,

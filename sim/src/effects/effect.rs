@@ -207,8 +207,21 @@ pub struct State<'t, 's> {
     pub(crate) q_link: &'s mut [f64],
     /// As `q_link` with the first-order compliance sag.
     pub(crate) q_link_first: &'s mut [f64],
-    /// Iterations of an iterative stage (Newton steps or engine steps; 0 if none ran).
+    /// Iterations of the iterative stages, summed (Newton steps or engine steps; 0 if none ran).
     pub(crate) iterations: usize,
+    /// The joint springs of the compliance stage, once it has run: what a later stage that settles
+    /// in the same static equilibrium (link deflection) needs. `None` = rigid joints.
+    pub(crate) springs: Option<JointSprings<'t>>,
+    /// Motor-side anchor of the joint springs (chain angles before the compliance stage, rad or m);
+    /// set by the compliance stage, meaningful while [`State::springs`] is `Some`.
+    pub(crate) anchor: &'s mut [f64],
+}
+
+/// The joint springs a compliance stage settled, as later stages see them.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct JointSprings<'t> {
+    /// `1/kᵢ` per joint (rad/(N m) or m/N; 0 = rigid).
+    pub compliance: &'t [f64],
 }
 
 /// One injected physical effect (see the module docs). Implemented by the parameter type of each

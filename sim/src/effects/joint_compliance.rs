@@ -31,7 +31,9 @@
 //! Centres of mass are not moved by thermal growth (see [`super::thermal_drift`]).
 
 use super::chain::Chain;
-use super::effect::{ComplianceSolver, Effect, Moved, Needs, Prepare, ResolveCx, State};
+use super::effect::{
+    ComplianceSolver, Effect, JointSprings, Moved, Needs, Prepare, ResolveCx, State,
+};
 use super::gravity::{BodyMasses, GravityWork, chain_gravity_hessian, chain_gravity_torques};
 use super::rapier_compliance::{RapierCache, RapierCompliance};
 use crate::error::{Result, SimError};
@@ -257,11 +259,28 @@ impl Equilibrium<'_> {
         theta: &mut [f64],
         first: &mut [f64],
         poses: &mut [Pose],
+        flange: Pose,
+        ws: &mut GravityWork,
+    ) -> Result<(usize, Pose)> {
+        theta.copy_from_slice(q_motor);
+        self.newton(q_motor, theta, Some(first), poses, flange, ws)
+    }
+
+    /// Newton's method on `F(θ) = θ − q_motor + K⁻¹ τ_g(θ)` from the initial guess in `theta` (chain
+    /// angles, rad or m; the root on return). On entry `poses` and `flange` must hold the chain
+    /// evaluated at that guess. When `first` is given it receives `q_motor − K⁻¹ τ_g(guess)` (the
+    /// first-order solution when the guess is `q_motor`). Returns the Newton steps taken and the
+    /// flange pose at the root; `poses` holds the joint frames at the root afterwards.
+    pub fn newton(
+        &self,
+        q_motor: &[f64],
+        theta: &mut [f64],
+        mut first: Option<&mut [f64]>,
+        poses: &mut [Pose],
         mut flange: Pose,
         ws: &mut GravityWork,
     ) -> Result<(usize, Pose)> {
         let n = self.chain.nq();
-        theta.copy_from_slice(q_motor);
         let mut last_step = f64::NAN;
         for it in 1..=MAX_ITERATIONS {
             if it > 1 {
@@ -276,7 +295,9 @@ impl Equilibrium<'_> {
                 self.gravity,
                 ws,
             );
-            if it == 1 {
+            if it == 1
+                && let Some(first) = first.as_deref_mut()
+            {
                 for i in 0..n {
                     first[i] = q_motor[i] - self.compliance[i] * ws.tau[i];
                 }
@@ -424,7 +445,9 @@ impl Effect for JointCompliance {
 
     /// The link side settles where the springs balance gravity and payload, anchored at the angles
     /// after backlash: `φ ← θ` with `K (φ − θ) = τ_g(θ)`. With the rapier solver the flange comes from
-    /// the engine and the joint frames in the state stay those of the anchor angles.
+    /// the engine and the joint frames in the state stay those of the anchor angles. The springs and
+    /// their anchor are left in the state for a later stage that settles in the same equilibrium
+    /// ([`super::link_deflection`]).
     fn act<'t>(
         stage: &'t ComplianceStage,
         st: &mut State<'t, '_>,
@@ -473,9 +496,13 @@ impl Effect for JointCompliance {
             st.q_link[i] -= st.angles[i] - sc.theta[i];
             st.q_link_first[i] -= st.angles[i] - sc.first[i];
         }
+        st.anchor.copy_from_slice(st.angles);
+        st.springs = Some(JointSprings {
+            compliance: &stage.compliance,
+        });
         st.angles.copy_from_slice(&sc.theta);
         st.flange = f;
-        st.iterations = it;
+        st.iterations += it;
         Ok(Moved::Evaluated)
     }
 }

@@ -4,14 +4,18 @@
 //! records the displacement each one adds to the target position (base frame, m):
 //! 1. thermal drift (link growth and joint-zero drift at the pose's temperature),
 //! 2. kinematic offsets (adjoint error twists, joint zero offsets, base and tool errors),
-//! 3. gear backlash (link-side angle shifted by half the dead band),
-//! 4. joint compliance (link-side angle settles where the joint springs balance gravity and payload),
+//! 3. transmission error (link angle periodic in the joint's own reported angle),
+//! 4. joint coupling (link angle error proportional to a reported joint angle),
+//! 5. gear backlash (link-side angle shifted by half the dead band),
+//! 6. joint compliance (link-side angle settles where the joint springs balance gravity and payload),
 //!    solved analytically or, with [`ComplianceSolver::Rapier`], by the rapier physics engine on the
-//!    same real geometry ([`rapier_compliance`]).
+//!    same real geometry ([`rapier_compliance`]),
+//! 7. link deflection (the child side of each joint tilts about two axes across the joint axis under
+//!    the moment it carries), settled in one equilibrium with the joint springs ([`link_deflection`]).
 //!
 //! The contributions are successive increments, so they add up to the total deviation from nominal:
 //! with `p₀` the nominal target position and `pₖ` the position with effects 1 … k applied,
-//! contribution `k` is `pₖ − pₖ₋₁` and `Σ contributions = p₄ − p₀`. An absent effect contributes
+//! contribution `k` is `pₖ − pₖ₋₁` and `Σ contributions = p₇ − p₀`. An absent effect contributes
 //! exactly zero.
 //!
 //! # The real robot
@@ -20,15 +24,18 @@
 //! exponentials of the thermally grown chain with kinematic errors (see [`kinematic_offsets`]),
 //!
 //! ```text
-//! T_base_flange = exp([ξ_base]) exp([S₁'] φ₁) ⋯ exp([Sₙ'] φₙ) M' exp([ξ_tool])
-//! φᵢ = θᵢ + δqᵢ + βᵢ ΔT,      θᵢ = qᵢ − sᵢ − cᵢ
+//! T_base_flange = exp([ξ_base]) exp([S₁'] φ₁) D₁ ⋯ exp([Sₙ'] φₙ) Dₙ M' exp([ξ_tool])
+//! φᵢ = θᵢ + δqᵢ + βᵢ ΔT,      θᵢ = qᵢ + eᵢ(q) − sᵢ − cᵢ
 //! ```
 //!
-//! where `q` is the motor-side position the controller reports, `sᵢ` the backlash shift
+//! where `q` is the motor-side position the controller reports, `eᵢ(q)` the transmission error and
+//! joint coupling ([`transmission_error`], [`joint_coupling`]), `sᵢ` the backlash shift
 //! ([`gear_backlash`]), `cᵢ` the compliance sag ([`joint_compliance`]), `δqᵢ` the zero offset
-//! ([`kinematic_offsets`]) and `βᵢ ΔT` the zero drift ([`thermal_drift`]). `θ` is the link-side position
-//! in the controller's joint coordinates, reported as [`TrueTarget::q_link`]. Gravity torques for
-//! backlash and compliance are those of the nominal inertials in this real geometry.
+//! ([`kinematic_offsets`]), `βᵢ ΔT` the zero drift ([`thermal_drift`]) and `Dᵢ` the link deflection
+//! (identity without it; a rotation about axes through joint `i`'s origin, [`link_deflection`]). `θ`
+//! is the link-side position in the controller's joint coordinates, reported as
+//! [`TrueTarget::q_link`]. Gravity torques for backlash, compliance and deflection are those of the
+//! nominal inertials in this real geometry.
 //!
 //! # One effect, one file
 //!
@@ -78,10 +85,13 @@ pub mod effect;
 pub mod gear_backlash;
 pub(crate) mod gravity;
 pub mod joint_compliance;
+pub mod joint_coupling;
 pub mod kinematic_offsets;
+pub mod link_deflection;
 pub mod rapier_compliance;
 pub(crate) mod stiffness;
 pub mod thermal_drift;
+pub mod transmission_error;
 
 pub use effect::{ComplianceSolver, Conditions, Effect, Moved, Needs, Prepare, ResolveCx, State};
 
@@ -348,13 +358,15 @@ pub struct TrueTarget {
     pub p_base: Vector3<f64>,
     /// Displacement added by each effect, in the order of the module docs (base frame, m).
     pub contribution: Contributions,
-    /// Link-side joint positions after backlash and compliance (rad or m), in the controller's joint
-    /// coordinates: `q − backlash shift − compliance sag` (zero offsets and zero drift not included).
+    /// Link-side joint positions (rad or m), in the controller's joint coordinates: `q + transmission
+    /// error + coupling − backlash shift − compliance sag` (the sag of the joint equilibrium with link
+    /// deflection when it is present; zero offsets and zero drift not included).
     pub q_link: Vec<f64>,
     /// Link-side positions from the first-order compliance solution, for comparison (rad or m).
     pub q_link_first_order: Vec<f64>,
     /// Newton iterations the compliance equilibrium took, or rapier engine steps with
-    /// [`ComplianceSolver::Rapier`] (0 without compliance).
+    /// [`ComplianceSolver::Rapier`], plus the Newton iterations of the joint + deflection equilibrium
+    /// with link deflection (0 without compliance and deflection).
     pub compliance_iterations: usize,
 }
 
@@ -368,7 +380,8 @@ pub struct TruePoint {
     /// Displacement added by each effect (base frame, m).
     pub contribution: Contributions,
     /// Newton iterations the compliance equilibrium took, or rapier engine steps with
-    /// [`ComplianceSolver::Rapier`] (0 without compliance).
+    /// [`ComplianceSolver::Rapier`], plus the Newton iterations of the joint + deflection equilibrium
+    /// with link deflection (0 without compliance and deflection).
     pub compliance_iterations: usize,
 }
 
@@ -397,6 +410,8 @@ pub struct TruthScratch {
     angles: Vec<f64>,
     q_link: Vec<f64>,
     q_link_first: Vec<f64>,
+    /// Motor-side anchor of the joint springs (see [`State`]).
+    anchor: Vec<f64>,
     work: GravityWork,
     stages: StageScratch,
 }
@@ -493,6 +508,7 @@ impl Truth {
             angles: vec![0.0; n],
             q_link: vec![0.0; n],
             q_link_first: vec![0.0; n],
+            anchor: vec![0.0; n],
             work: GravityWork::new(n),
             stages: self.stages.scratch(n),
         }
@@ -593,6 +609,8 @@ impl Truth {
             q_link: &mut s.q_link,
             q_link_first: &mut s.q_link_first,
             iterations: 0,
+            springs: None,
+            anchor: &mut s.anchor,
         };
         // 1 … n. The effects, in registry order.
         self.stages
@@ -639,8 +657,15 @@ registry! {
     thermal: thermal_drift::ThermalDrift => ThermalDrift,
     /// Kinematic offsets (geometric errors).
     kinematic: kinematic_offsets::KinematicOffsets => KinematicOffsets,
+    /// Transmission error (periodic in the joint's own angle).
+    transmission: transmission_error::TransmissionError => TransmissionError,
+    /// Joint coupling (link angle error proportional to a joint angle).
+    coupling: joint_coupling::JointCoupling => JointCoupling,
     /// Gear backlash.
     backlash: gear_backlash::GearBacklash => GearBacklash,
     /// Joint compliance.
     compliance: joint_compliance::JointCompliance => JointCompliance,
+    /// Link deflection (compliance across the joint axes), settled with the joint springs; the last
+    /// stage.
+    deflection: link_deflection::LinkDeflection => LinkDeflection,
 }

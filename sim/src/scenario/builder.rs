@@ -30,8 +30,11 @@ use crate::campaign::DirectionRule;
 use crate::effects::Registered;
 use crate::effects::gear_backlash::{BacklashMode, BacklashSection};
 use crate::effects::joint_compliance::ComplianceSection;
+use crate::effects::joint_coupling::CouplingSection;
 use crate::effects::kinematic_offsets::KinematicSection;
+use crate::effects::link_deflection::DeflectionSection;
 use crate::effects::thermal_drift::{TemperatureProfile, ThermalSection};
+use crate::effects::transmission_error::TransmissionSection;
 use crate::error::{Result, scenario_err};
 use crate::scenario::build::{Overrides, Resolved, Scenario};
 use crate::scenario::magnitude::Magnitude;
@@ -344,6 +347,46 @@ impl ScenarioBuilder {
         })
     }
 
+    /// `[effects.transmission]` with harmonic orders 1, 2, 3: `amplitude_rad` and `phase_rad` (rad,
+    /// shape `[n][3]`, row `i` for joint `i + 1`). For other orders use [`ScenarioBuilder::effect`]
+    /// with a full [`TransmissionSection`].
+    pub fn transmission_error(
+        self,
+        amplitude_rad: Magnitude,
+        phase_rad: Magnitude,
+    ) -> ScenarioBuilder {
+        self.effect::<crate::effects::transmission_error::TransmissionError>(TransmissionSection {
+            enabled: None,
+            harmonics: None,
+            amplitude_rad,
+            phase_rad: Some(phase_rad),
+        })
+    }
+
+    /// `[effects.coupling]`: each `[joint, source]` pair (joints numbered from 1) gives joint `joint`
+    /// a link angle error `ratio · q_source`; `ratio_rad_per_rad` (rad/rad) has shape
+    /// `[pairs.len()]`.
+    pub fn joint_coupling(
+        self,
+        pairs: Vec<[usize; 2]>,
+        ratio_rad_per_rad: Magnitude,
+    ) -> ScenarioBuilder {
+        self.effect::<crate::effects::joint_coupling::JointCoupling>(CouplingSection {
+            enabled: None,
+            pairs,
+            ratio_rad_per_rad,
+        })
+    }
+
+    /// `[effects.deflection] compliance_rad_per_nm` (rad/(N m), shape `[n][2]`: about the `u` and `v`
+    /// axes of each joint; 0 = rigid).
+    pub fn link_deflection(self, compliance_rad_per_nm: Magnitude) -> ScenarioBuilder {
+        self.effect::<crate::effects::link_deflection::LinkDeflection>(DeflectionSection {
+            enabled: None,
+            compliance_rad_per_nm,
+        })
+    }
+
     /// `[truth] model`.
     pub fn truth_model(mut self, model: TruthModel) -> ScenarioBuilder {
         self.file.truth.model = Some(model);
@@ -429,6 +472,125 @@ mod tests {
         assert_eq!(built.tracker, written.tracker);
         assert_eq!(built.campaign, written.campaign);
         assert_eq!(built.seed, written.seed);
+    }
+
+    /// The three effects of issue 12 from code resolve exactly as the same sections written by hand.
+    #[test]
+    fn transmission_coupling_and_deflection_from_code_equal_the_written_file() {
+        let text = "seed = 9\n[robot]\nname = \"iiwa7\"\n[campaign]\nposes = 10\n\
+                    [effects.transmission]\namplitude_rad = { normal = [0.0, 5e-5] }\n\
+                    phase_rad = { uniform = [-3.0, 3.0] }\n\
+                    [effects.coupling]\npairs = [[6, 4], [2, 2]]\nratio_rad_per_rad = [2e-4, -1e-4]\n\
+                    [effects.deflection]\ncompliance_rad_per_nm = [[0, 0], [3e-6, 3e-6], [0, 0], \
+                    [4e-6, { uniform = [3e-6, 5e-6] }], [0, 0], [0, 0], [0, 0]]\n";
+        let written = Scenario::parse(text, "t.toml", Path::new("."))
+            .unwrap()
+            .resolve(&Overrides::default())
+            .unwrap();
+        let zero = || Magnitude::List(vec![Magnitude::Number(0.0); 2]);
+        let built = ScenarioBuilder::builtin("iiwa7")
+            .seed(9)
+            .poses(10)
+            .transmission_error(
+                Magnitude::Draw(Draw::Normal([0.0, 5e-5])),
+                Magnitude::Draw(Draw::Uniform([-3.0, 3.0])),
+            )
+            .joint_coupling(
+                vec![[6, 4], [2, 2]],
+                Magnitude::List(vec![Magnitude::Number(2e-4), Magnitude::Number(-1e-4)]),
+            )
+            .link_deflection(Magnitude::List(vec![
+                zero(),
+                Magnitude::Number(3e-6),
+                zero(),
+                Magnitude::List(vec![
+                    Magnitude::Number(4e-6),
+                    Magnitude::Draw(Draw::Uniform([3e-6, 5e-6])),
+                ]),
+                zero(),
+                zero(),
+                zero(),
+            ]))
+            .label("t.toml")
+            .resolve(&Overrides::default())
+            .unwrap();
+        assert_eq!(built.effects, written.effects);
+        let t = built.effects.transmission.as_ref().unwrap();
+        assert_eq!(t.harmonics(), &[1, 2, 3]);
+        assert!(
+            t.amplitude_rad()
+                .iter()
+                .flatten()
+                .all(|a| *a != 0.0 && a.abs() < 5e-4)
+        );
+        let c = built.effects.coupling.as_ref().unwrap().terms();
+        assert_eq!(
+            (c[0].joint, c[0].source, c[0].ratio_rad_per_rad),
+            (6, 4, 2e-4)
+        );
+        let d = built
+            .effects
+            .deflection
+            .as_ref()
+            .unwrap()
+            .compliance_rad_per_nm();
+        assert_eq!(d[1], [3e-6, 3e-6]);
+        assert!(d[3][1] >= 3e-6 && d[3][1] <= 5e-6);
+        // Refusals name the scenario key.
+        let e = ScenarioBuilder::builtin("iiwa7")
+            .joint_coupling(vec![[8, 1]], Magnitude::Number(1e-4))
+            .build()
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("effects.coupling") && e.contains("8"), "{e}");
+        let e = ScenarioBuilder::builtin("iiwa7")
+            .joint_coupling(vec![[2, 1]], Magnitude::Number(0.2))
+            .build()
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("effects.coupling.ratio_rad_per_rad[0]"), "{e}");
+        let e = ScenarioBuilder::builtin("iiwa7")
+            .link_deflection(Magnitude::Number(2.5e5))
+            .build()
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("effects.deflection.compliance_rad_per_nm[0][0]"),
+            "{e}"
+        );
+        let e = ScenarioBuilder::builtin("iiwa7")
+            .transmission_error(Magnitude::Number(1.0), Magnitude::Number(0.0))
+            .build()
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("effects.transmission.amplitude_rad[0][0]"),
+            "{e}"
+        );
+        let e = ScenarioBuilder::builtin("iiwa7")
+            .effect::<crate::effects::transmission_error::TransmissionError>(TransmissionSection {
+                enabled: None,
+                harmonics: Some(vec![1, 1]),
+                amplitude_rad: Magnitude::Number(1e-5),
+                phase_rad: None,
+            })
+            .build()
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("effects.transmission.harmonics[1]"), "{e}");
+        // Deflection settles with the joint springs: refused with the rapier truth, naming it.
+        let s = ScenarioBuilder::builtin("iiwa7")
+            .compliance(Magnitude::Number(1e4))
+            .link_deflection(Magnitude::Number(2e-6))
+            .truth_model(TruthModel::Rapier)
+            .build()
+            .unwrap();
+        let res = s.resolve(&Overrides::default()).unwrap();
+        let e = crate::generate::truth_of(&res).unwrap_err().to_string();
+        assert!(
+            e.contains("truth.model") && e.contains("link_deflection") && !e.contains('\n'),
+            "{e}"
+        );
     }
 
     #[test]

@@ -67,6 +67,15 @@
 //! t_ref_c = 20.0
 //! alpha_per_k = 23e-6         # [n + 1], links 0 … n
 //! beta_rad_per_k = 0.0        # [n]
+//! [effects.transmission]      # link angle q + Σ A sin(h q + φ) of the reported angle q
+//! harmonics = [1, 2, 3]       # orders h (cycles per revolution; default 1, 2, 3; up to 1000)
+//! amplitude_rad = { normal = [0.0, 5e-5] }          # [n][len(harmonics)]
+//! phase_rad = { uniform = [-3.14159, 3.14159] }     # [n][len(harmonics)], default 0
+//! [effects.coupling]          # link angle of `joint` gains ratio · q_source
+//! pairs = [[6, 4]]            # [joint, source], numbered from 1 (joint = source: scale error)
+//! ratio_rad_per_rad = 2e-4    # [len(pairs)]
+//! [effects.deflection]        # compliance across each joint axis, about u and v
+//! compliance_rad_per_nm = [[0, 0], [2e-6, 2e-6], [0, 0], [3e-6, 3e-6], [0, 0], [0, 0], [0, 0]]  # [n][2]
 //!
 //! [truth]
 //! model = "analytic"          # or "rapier": joint compliance settled by the rapier physics engine
@@ -92,8 +101,11 @@ pub mod schema;
 pub use crate::effects::EffectsSection;
 pub use crate::effects::gear_backlash::BacklashSection;
 pub use crate::effects::joint_compliance::ComplianceSection;
+pub use crate::effects::joint_coupling::CouplingSection;
 pub use crate::effects::kinematic_offsets::KinematicSection;
+pub use crate::effects::link_deflection::DeflectionSection;
 pub use crate::effects::thermal_drift::ThermalSection;
+pub use crate::effects::transmission_error::TransmissionSection;
 pub use build::{Overrides, Resolved, RobotSource, Scenario};
 pub use builder::ScenarioBuilder;
 pub use magnitude::{Draw, Magnitude, fnv1a64};
