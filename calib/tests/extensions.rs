@@ -495,25 +495,26 @@ fn transmission_error_and_link_deflection_are_recovered_within_their_standard_de
             &truth,
         ));
 
-        // Deflection across joints 2 and 4 (1-5e-6 rad/(N m) per axis), compliance at joints 2 and 4
-        // (5e3-2e4 N m/rad), a payload of up to 6 kg.
-        let c: Vec<[f64; 2]> = (0..2)
+        // Deflection across joints 2, 3 and 4 (1-5e-6 rad/(N m) per axis), compliance at joints 2
+        // and 4 (5e3-2e4 N m/rad), a payload of up to 6 kg. Joints 2 and 4 bend about x only: their
+        // z axes are the axes of joints 3 and 5, where bending is those joints' compliance.
+        let c: Vec<[f64; 2]> = (0..3)
             .map(|_| [0; 2].map(|_| g.random_range(1e-6..5e-6)))
             .collect();
         let k: Vec<f64> = (0..2).map(|_| g.random_range(5e3..2e4)).collect();
         let effects = format!(
-            "[effects.deflection]\ncompliance_rad_per_nm = [[0.0, 0.0], [{:e}, {:e}], [0.0, 0.0], \
-             [{:e}, {:e}], [0.0, 0.0], [0.0, 0.0], [0.0, 0.0]]\n\
+            "[effects.deflection]\ncompliance_rad_per_nm = [[0.0, 0.0], [{:e}, 0.0], [{:e}, {:e}], \
+             [{:e}, 0.0], [0.0, 0.0], [0.0, 0.0], [0.0, 0.0]]\n\
              [effects.compliance]\nstiffness_nm_per_rad = [inf, {:e}, inf, {:e}, inf, inf, inf]\n\
              [campaign.payload]\nchoice_kg = [0.0, 3.0, 6.0]\ncom_m = [0.0, 0.0, 0.06]\n",
-            c[0][0], c[0][1], c[1][0], c[1][1], k[0], k[1]
+            c[0][0], c[1][0], c[1][1], c[2][0], k[0], k[1]
         );
         let truth = |name: &str| -> f64 {
             match name {
                 "joint 2 bending compliance about x" => c[0][0],
-                "joint 2 bending compliance about z" => c[0][1],
-                "joint 4 bending compliance about x" => c[1][0],
-                "joint 4 bending compliance about z" => c[1][1],
+                "joint 3 bending compliance about x" => c[1][0],
+                "joint 3 bending compliance about y" => c[1][1],
+                "joint 4 bending compliance about x" => c[2][0],
                 "joint 2 compliance" => 1.0 / k[0],
                 "joint 4 compliance" => 1.0 / k[1],
                 _ => 0.0,

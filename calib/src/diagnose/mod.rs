@@ -271,6 +271,7 @@ pub struct Diagnosis {
 }
 
 /// A fitted model with its held-out errors.
+#[derive(Clone)]
 pub(crate) struct Evaluated {
     pub spec: ModelSpec,
     pub cal: Calibration,
@@ -487,10 +488,19 @@ fn finding_plots(
 }
 
 /// Training `χ²` drop of `big` over `small` as a normal `z`, with the variance factor of `big`.
+///
+/// The degrees of freedom are the identifiable parameters `big` adds. When its rank does not grow
+/// (the models are not nested: adding joint compliance to link deflection hands the bending about the
+/// next joint's axis to the compliance, and weakly determined combinations fall below the rank
+/// threshold differently), they are the parameters it adds, a conservative count.
 fn train_z(small: &Calibration, big: &Calibration) -> f64 {
     let c0 = small.report.after.solver.cost_final;
     let c1 = big.report.after.solver.cost_final;
-    let k = big.subspace.rank.saturating_sub(small.subspace.rank) as f64;
+    let added = big.layout.len().saturating_sub(small.layout.len());
+    let k = match big.subspace.rank.saturating_sub(small.subspace.rank) {
+        0 => added,
+        k => k,
+    } as f64;
     let vf = if big.report.dof > 0 {
         c1 / big.report.dof as f64
     } else {
@@ -614,7 +624,8 @@ fn parameter_values(cause: Cause, params: &[FoundParameter]) -> String {
 }
 
 /// The evidence sentence of a finding of `cause` at `joints` (1-based; with `growth` when the link
-/// growth is named too): what the residual correlates with, and the named parameters' values.
+/// growth is named too): what the residual correlates with, the values of the parameters that name
+/// them (beyond `joint_z` standard deviations), and why not the nearest rival.
 fn evidence(
     cause: Cause,
     joints: &[usize],
@@ -622,10 +633,12 @@ fn evidence(
     r: f64,
     growth: bool,
     rival: Option<&Rival>,
+    joint_z: f64,
 ) -> String {
     let model = cause.model();
     let named: Vec<FoundParameter> = params
         .iter()
+        .filter(|p| p.sigma > 0.0 && (p.value / p.sigma).abs() > joint_z)
         .filter(|p| match p.term {
             Some(Term::JointAngle { joint } | Term::Bend { joint, .. }) => {
                 joints.contains(&(joint + 1))
@@ -635,11 +648,19 @@ fn evidence(
         })
         .cloned()
         .collect();
-    let mut s = format!(
-        "residual correlates with {} (r = {r:.2}); identified {}",
-        model.evidence_subject(&joint_words(joints)),
-        parameter_values(cause, &named)
-    );
+    let mut s = if named.is_empty() {
+        format!(
+            "residual correlates with {} (r = {r:.2}); no joint's parameter is determined on its own \
+             beyond {joint_z} standard deviations (their effects are not told apart), so no joint is named",
+            model.evidence_subject("its joints"),
+        )
+    } else {
+        format!(
+            "residual correlates with {} (r = {r:.2}); identified {}",
+            model.evidence_subject(&joint_words(joints)),
+            parameter_values(cause, &named)
+        )
+    };
     if let Some(rv) = rival {
         s.push_str(&format!("; {}", rv.why_not));
     }
@@ -709,6 +730,168 @@ fn nearest_rival(this_round: &[Trial], k: usize, rivals: &[unexplained::Probe]) 
     }
 }
 
+/// What a forward selection ends with.
+struct Selection {
+    /// The final model.
+    current: Evaluated,
+    /// The models fitted, kinematic first.
+    steps: Vec<Step>,
+    /// The causes adopted, in order (joints and evidence filled later, from the final model).
+    findings: Vec<Finding>,
+}
+
+/// What a selection adds to across passes.
+struct Bookkeeping<'b> {
+    round: &'b mut usize,
+    trials: &'b mut Vec<Trial>,
+    health: &'b mut Health,
+    progress: &'b mut dyn FnMut(&str),
+}
+
+/// Forward selection from `start` over `candidates`: each round extends the current model by every
+/// remaining candidate, judges each ([`Trial`]) and adopts the significant one with the largest
+/// held-out `z`, until none is significant. Impossible physics does not stop a candidate here: fitted
+/// alone, a cause often stands in for another one with a wrong sign somewhere, which the joint fit
+/// with that other cause then puts right; [`invalid_finding`] judges the final joint fit.
+fn select(
+    model: &Model,
+    split: &Split<'_>,
+    start: Evaluated,
+    candidates: &[Cause],
+    options: &DiagnoseOptions,
+    book: &mut Bookkeeping<'_>,
+) -> Result<Selection> {
+    let mut current = start;
+    let mut steps = vec![current.step.clone()];
+    let mut findings = Vec::new();
+    loop {
+        *book.round += 1;
+        let round = *book.round;
+        let remaining: Vec<Cause> = candidates
+            .iter()
+            .copied()
+            .filter(|c| !current.spec.causes.contains(c))
+            .collect();
+        if remaining.is_empty() {
+            break;
+        }
+        let z_crit = significance::normal_upper_quantile(options.alpha / remaining.len() as f64);
+        let z_held =
+            significance::normal_upper_quantile(options.held_out_alpha / remaining.len() as f64);
+        // The rivals no known cause names: angle errors of one joint periodic in its angle or linear
+        // in the joint angles. A cause that is really there explains its residual better than such a
+        // generic term, except the one that models it (the transmission error, the harmonics).
+        let rivals = unexplained::probes(model, split, &current, &[], options.seed);
+        let mut tried: Vec<(Cause, Evaluated, f64, f64, f64)> = Vec::new();
+        for cause in remaining {
+            let spec = current.spec.with(cause);
+            (book.progress)(&spec.name());
+            let cand = match evaluate(model, split, &spec, options) {
+                Ok(c) => c,
+                Err(CalibError::TooFewPoses { .. }) => continue,
+                Err(e) => return Err(e),
+            };
+            book.health.merge(&cand.cal.report.health);
+            let tz = significance::paired(&current.pose_sq, &cand.pose_sq).z;
+            let trz = train_z(&current.cal, &cand.cal);
+            let gain = 1.0 - cand.step.test_rms_m / current.step.test_rms_m;
+            let beaten_by = best_rival_probe(&rivals, cause)
+                .filter(|p| p.gain >= gain)
+                .map(|p| p.name.clone());
+            let significant =
+                tz > z_held && trz > z_crit && gain >= options.min_gain && beaten_by.is_none();
+            book.trials.push(Trial {
+                round,
+                cause,
+                test_rms_m: cand.step.test_rms_m,
+                test_z: tz,
+                train_z: trz,
+                gain,
+                significant,
+                beaten_by,
+                impossible: impossible_parameters(&cand.cal, cause, options.joint_z)
+                    .map(|(reason, _)| reason),
+                names_nothing: names_nothing(&cand.cal, cause, options.joint_z),
+            });
+            tried.push((cause, cand, tz, trz, gain));
+        }
+        let this_round = &book.trials[book.trials.len() - tried.len()..];
+        let best = this_round
+            .iter()
+            .enumerate()
+            .filter(|(_, t)| t.significant)
+            .max_by(|a, b| a.1.test_z.total_cmp(&b.1.test_z))
+            .map(|(k, _)| k);
+        let Some(k) = best else { break };
+        let rival = nearest_rival(this_round, k, &rivals);
+        let (cause, next, tz, trz, gain) = tried.swap_remove(k);
+        let r = explained_correlation(&current.test_err, &next.test_err);
+        findings.push(Finding {
+            cause,
+            evidence: String::new(),
+            joints: Vec::new(),
+            test_rms_m_before: current.step.test_rms_m,
+            test_rms_m_after: next.step.test_rms_m,
+            gain,
+            r,
+            test_z: tz,
+            train_z: trz,
+            parameters: Vec::new(),
+            rival,
+        });
+        steps.push(next.step.clone());
+        current = next;
+    }
+    Ok(Selection {
+        current,
+        steps,
+        findings,
+    })
+}
+
+/// True when no parameter of `cause` in `cal` is determined on its own and differs from zero by
+/// more than `joint_z` standard deviations: nothing to name.
+fn names_nothing(cal: &Calibration, cause: Cause, joint_z: f64) -> bool {
+    !cause_parameters(cal, cause)
+        .iter()
+        .any(|(p, _, alone)| *alone && p.sigma > 0.0 && (p.value / p.sigma).abs() > joint_z)
+}
+
+/// The first cause adopted by `sel` that does not hold in the final joint fit, one whose named
+/// parameters are impossible, as a rejection.
+fn invalid_finding(sel: &Selection, options: &DiagnoseOptions) -> Option<Rejected> {
+    let cal = &sel.current.cal;
+    sel.findings.iter().find_map(|f| {
+        let cause = f.cause;
+        let (reason, params) = impossible_parameters(cal, cause, options.joint_z)?;
+        let joints = joints_of(&params);
+        let values = if params.is_empty() {
+            String::new()
+        } else {
+            format!(" ({})", parameter_values(cause, &params))
+        };
+        Some(Rejected {
+            cause,
+            evidence: format!(
+                "{cause}{} would gain {:.0} % on the held-out poses (z = {:.1}), but its fit needs \
+                 {reason}{values}: not adopted, it stands in for an error no known cause explains",
+                if joints.is_empty() {
+                    String::new()
+                } else {
+                    format!(" at {}", joint_words(&joints))
+                },
+                100.0 * f.gain,
+                f.test_z,
+            ),
+            joints,
+            reason,
+            gain: f.gain,
+            test_z: f.test_z,
+            parameters: params,
+        })
+    })
+}
+
 /// Diagnoses `table` (all rows; `name` names it in messages) for `model`.
 ///
 /// Errors: input the calibration refuses (too few poses, a bad `sigma`), or too few poses to hold out
@@ -762,125 +945,46 @@ pub fn diagnose_with_progress(
         }
     }
     progress("kinematic");
-    let mut current = evaluate(model, &split, &ModelSpec::kinematic(), options)?;
-    let mut health = current.cal.report.health;
-    let mut steps = vec![current.step.clone()];
-    let mut findings = Vec::new();
+    let kinematic = evaluate(model, &split, &ModelSpec::kinematic(), options)?;
+    let mut health = kinematic.cal.report.health;
     let mut trials = Vec::new();
     let mut plots = report::PlotData {
-        test_errors_kinematic_m: current.test_err.iter().map(|e| e.norm()).collect(),
+        test_errors_kinematic_m: kinematic.test_err.iter().map(|e| e.norm()).collect(),
         ..Default::default()
     };
-    let mut round = 0;
-    // Causes significant in the last round but for their impossible physics: evidence of something
-    // else (only the last round's: an earlier one may have stood in for a cause adopted since).
+    // Forward selection, then the adopted causes checked in their joint fit: one whose named
+    // parameters are impossible there (or that names nothing) is rejected, and the selection runs
+    // again without it (it may have stood in for another cause), until every adopted cause holds.
     let mut rejected: Vec<Rejected> = Vec::new();
-    loop {
-        round += 1;
-        let remaining: Vec<Cause> = usable
+    let mut round = 0;
+    let Selection {
+        current,
+        steps,
+        mut findings,
+    } = loop {
+        let candidates: Vec<Cause> = usable
             .iter()
             .copied()
-            .filter(|c| !current.spec.causes.contains(c))
+            .filter(|c| rejected.iter().all(|r| r.cause != *c))
             .collect();
-        if remaining.is_empty() {
-            break;
+        let sel = select(
+            model,
+            &split,
+            kinematic.clone(),
+            &candidates,
+            options,
+            &mut Bookkeeping {
+                round: &mut round,
+                trials: &mut trials,
+                health: &mut health,
+                progress,
+            },
+        )?;
+        match invalid_finding(&sel, options) {
+            None => break sel,
+            Some(r) => rejected.push(r),
         }
-        let z_crit = significance::normal_upper_quantile(options.alpha / remaining.len() as f64);
-        let z_held =
-            significance::normal_upper_quantile(options.held_out_alpha / remaining.len() as f64);
-        // The rivals no known cause names: angle errors of one joint periodic in its angle or linear
-        // in the joint angles. A cause that is really there explains its residual better than such a
-        // generic term, except the one that models it (the transmission error, the harmonics).
-        let rivals = unexplained::probes(model, &split, &current, &[], options.seed);
-        let mut tried: Vec<(Cause, Evaluated, f64, f64, f64)> = Vec::new();
-        let mut round_rejected = Vec::new();
-        for cause in remaining {
-            let spec = current.spec.with(cause);
-            progress(&spec.name());
-            let cand = match evaluate(model, &split, &spec, options) {
-                Ok(c) => c,
-                Err(CalibError::TooFewPoses { .. }) => continue,
-                Err(e) => return Err(e),
-            };
-            health.merge(&cand.cal.report.health);
-            let tz = significance::paired(&current.pose_sq, &cand.pose_sq).z;
-            let trz = train_z(&current.cal, &cand.cal);
-            let gain = 1.0 - cand.step.test_rms_m / current.step.test_rms_m;
-            let beaten_by = best_rival_probe(&rivals, cause)
-                .filter(|p| p.gain >= gain)
-                .map(|p| p.name.clone());
-            let impossible = impossible_parameters(&cand.cal, cause, options.joint_z);
-            let names_nothing = !cause_parameters(&cand.cal, cause)
-                .iter()
-                .any(|(p, _, alone)| {
-                    *alone && p.sigma > 0.0 && (p.value / p.sigma).abs() > options.joint_z
-                });
-            let passes = tz > z_held && trz > z_crit && gain >= options.min_gain;
-            let significant =
-                passes && beaten_by.is_none() && impossible.is_none() && !names_nothing;
-            if let (true, None, Some((reason, params))) = (passes, &beaten_by, &impossible) {
-                let joints = joints_of(params);
-                round_rejected.push(Rejected {
-                    cause,
-                    evidence: format!(
-                        "{cause} at {} would gain {:.0} % on the held-out poses (z = {tz:.1}), but its \
-                         fit needs {reason} ({}): not adopted, it stands in for an error no known cause \
-                         explains",
-                        joint_words(&joints),
-                        100.0 * gain,
-                        parameter_values(cause, params)
-                    ),
-                    joints,
-                    reason: reason.clone(),
-                    gain,
-                    test_z: tz,
-                    parameters: params.clone(),
-                });
-            }
-            trials.push(Trial {
-                round,
-                cause,
-                test_rms_m: cand.step.test_rms_m,
-                test_z: tz,
-                train_z: trz,
-                gain,
-                significant,
-                beaten_by,
-                impossible: impossible.map(|(reason, _)| reason),
-                names_nothing,
-            });
-            tried.push((cause, cand, tz, trz, gain));
-        }
-        let this_round = &trials[trials.len() - tried.len()..];
-        let best = this_round
-            .iter()
-            .enumerate()
-            .filter(|(_, t)| t.significant)
-            .max_by(|a, b| a.1.test_z.total_cmp(&b.1.test_z))
-            .map(|(k, _)| k);
-        let Some(k) = best else {
-            rejected = round_rejected;
-            break;
-        };
-        let rival = nearest_rival(this_round, k, &rivals);
-        let (cause, next, tz, trz, gain) = tried.swap_remove(k);
-        let r = explained_correlation(&current.test_err, &next.test_err);
-        findings.push(Finding {
-            cause,
-            evidence: String::new(),
-            joints: Vec::new(),
-            test_rms_m_before: current.step.test_rms_m,
-            test_rms_m_after: next.step.test_rms_m,
-            gain,
-            r,
-            test_z: tz,
-            train_z: trz,
-            parameters: Vec::new(),
-            rival,
-        });
-        steps.push(next.step.clone());
-        current = next;
-    }
+    };
     // Joints, values and evidence from the final model, where every adopted cause is fitted jointly
     // (a cause adopted early may have taken up part of a later one before that was in the model).
     for f in &mut findings {
@@ -914,6 +1018,7 @@ pub fn diagnose_with_progress(
             f.r,
             growth,
             f.rival.as_ref(),
+            options.joint_z,
         );
         plots.regressors.extend(finding_plots(
             model, &split, &current, cause, &f.joints, growth,

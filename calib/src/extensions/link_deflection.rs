@@ -28,6 +28,18 @@
 //! series, `Rot(u, α) Rot(v, β)`, differ from `exp([α u + β v])` by `αβ/2`, 10⁻⁸ rad for bends of
 //! 10⁻⁴ rad: ten nanometres at a metre.)
 //!
+//! # Bending that is the next joint's compliance
+//! When a bending axis of joint `i` lies on the axis line of joint `i + 1` (fixed in the same link),
+//! bending about it turns everything beyond about that very line, by an angle in proportion to the
+//! moment about it: the moment of everything beyond joint `i`, which differs from the moment joint
+//! `i + 1` holds only by link `i`'s own weight about a line through it. That is joint `i + 1`'s
+//! compliance to any measurement ([`aliased_with_next_joint`]). In a model with joint compliance the
+//! estimator leaves that direction to the compliance and gives joint `i` no bending parameter about
+//! it (the two would be one parameter); without, joint `i` bends about both axes. On the iiwa 7 the
+//! bending of joints 2 and 4 about z (the upper arm and forearm axes) is joints 3 and 5's compliance,
+//! so with compliance they bend about x only (joint 6 keeps z: joint 7's axis runs 6 cm beside its
+//! origin).
+//!
 //! The moments are those of the nominal robot at the link angles of the current estimate (with joint
 //! compliance, the sagged angles, as for the holding torques); the bending itself moves the centres of
 //! mass by `φ` (about 10⁻⁴ rad) and so changes the moments by that fraction, a second-order effect
@@ -63,6 +75,39 @@ pub fn bending_axes(axis: &Vector3<f64>) -> Option<[usize; 2]> {
         })
 }
 
+/// Whether bending of joint `i` about axis `about` (0, 1, 2: x, y, z of its frame) is joint `i + 1`'s
+/// rotation: the line through joint `i`'s origin along that axis is the axis line of joint `i + 1`
+/// (rotational, directions within 1e-9, the origin within 1 µm of the line).
+pub fn aliased_with_next_joint(joints: &[sim::Joint], i: usize, about: usize) -> bool {
+    let Some(next) = joints.get(i + 1) else {
+        return false;
+    };
+    if !next.kind.is_rotational() {
+        return false;
+    }
+    let e = Vector3::ith(about, 1.0);
+    let axis = next.origin.rotation * next.axis;
+    let point = next.origin.translation.vector;
+    axis.cross(&e).norm() < 1e-9 && point.cross(&e).norm() < 1e-6
+}
+
+/// The bending axes of joint `i` that get parameters: [`bending_axes`], less those
+/// [`aliased_with_next_joint`] when the model has joint compliance (`with_compliance`).
+pub fn modelled_axes(joints: &[sim::Joint], i: usize, with_compliance: bool) -> Vec<usize> {
+    bending_axes(&joints[i].axis)
+        .map(|axes| {
+            axes.into_iter()
+                .filter(|&about| !(with_compliance && aliased_with_next_joint(joints, i, about)))
+                .collect()
+        })
+        .unwrap_or_default()
+}
+
+/// Whether `settings` model joint compliance too.
+fn with_compliance(settings: &ExtensionSettings) -> bool {
+    settings.causes.contains(&Cause::JointCompliance)
+}
+
 impl CauseModel for LinkDeflection {
     fn cause(&self) -> Cause {
         Cause::LinkDeflection
@@ -92,32 +137,31 @@ impl CauseModel for LinkDeflection {
         true
     }
 
-    fn params(&self, model: &Model, _settings: &ExtensionSettings) -> Vec<ExtensionParam> {
-        model
-            .joints
-            .iter()
-            .enumerate()
-            .filter_map(|(i, j)| bending_axes(&j.axis).map(|axes| (i, axes)))
-            .flat_map(|(i, axes)| {
-                axes.map(|about| ExtensionParam {
-                    cause: Cause::LinkDeflection,
-                    term: Term::Bend { joint: i, about },
-                    quantity: "bending compliance",
-                    unit: Unit::RadianPerNewtonMetre,
-                    scale: SCALE_RAD_PER_NM,
-                })
+    fn params(&self, model: &Model, settings: &ExtensionSettings) -> Vec<ExtensionParam> {
+        let compliance = with_compliance(settings);
+        (0..model.nq())
+            .flat_map(|i| {
+                modelled_axes(&model.joints, i, compliance)
+                    .into_iter()
+                    .map(move |about| ExtensionParam {
+                        cause: Cause::LinkDeflection,
+                        term: Term::Bend { joint: i, about },
+                        quantity: "bending compliance",
+                        unit: Unit::RadianPerNewtonMetre,
+                        scale: SCALE_RAD_PER_NM,
+                    })
             })
             .collect()
     }
 
     /// The components `u · mᵢ`, `v · mᵢ` (N m) of each bending joint's moment, joint frame.
-    fn regressors(&self, _settings: &ExtensionSettings, row: &RowInputs<'_>, out: &mut [f64]) {
+    fn regressors(&self, settings: &ExtensionSettings, row: &RowInputs<'_>, out: &mut [f64]) {
+        let compliance = with_compliance(settings);
         let mut k = 0;
-        for (m, joint) in row.moment.iter().zip(row.joints) {
-            if let Some(axes) = bending_axes(&joint.axis) {
-                out[k] = m[axes[0]];
-                out[k + 1] = m[axes[1]];
-                k += 2;
+        for (i, m) in row.moment.iter().enumerate() {
+            for about in modelled_axes(row.joints, i, compliance) {
+                out[k] = m[about];
+                k += 1;
             }
         }
     }
@@ -193,6 +237,31 @@ pub fn gravity_moments(
 mod tests {
     use super::*;
     use sim::kinematics::forward_kinematics;
+
+    #[test]
+    fn the_iiwa_bends_about_x_only_where_z_is_the_next_joint() {
+        let model = sim::robots::load_builtin("iiwa7").unwrap();
+        let axes: Vec<Vec<usize>> = (0..7)
+            .map(|i| modelled_axes(&model.joints, i, true))
+            .collect();
+        let alone: Vec<Vec<usize>> = (0..7)
+            .map(|i| modelled_axes(&model.joints, i, false))
+            .collect();
+        assert!(alone.iter().all(|a| a.len() == 2));
+        // Joint 2's and 4's z axes run along the upper arm and forearm, the axes of joints 3 and 5.
+        assert_eq!(
+            axes,
+            vec![
+                vec![0, 1],
+                vec![0],
+                vec![0, 1],
+                vec![0],
+                vec![0, 1],
+                vec![0, 2],
+                vec![0, 1]
+            ]
+        );
+    }
 
     #[test]
     fn bending_axes_follow_the_joint_axis() {
