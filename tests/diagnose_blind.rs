@@ -181,7 +181,11 @@ fn transmission(
         .collect();
     let phase: Vec<Vec<f64>> = joints
         .iter()
-        .map(|_| (0..k).map(|_| rng.random_range(-3.14..3.14)).collect())
+        .map(|_| {
+            (0..k)
+                .map(|_| rng.random_range(-std::f64::consts::PI..std::f64::consts::PI))
+                .collect()
+        })
         .collect();
     let section = TransmissionSection {
         enabled: None,

@@ -412,8 +412,10 @@ fn as_joint_angle_urad(
 }
 
 /// Plots of a finding: per named joint (and the growth), against the parameter's regressor, the
-/// partial residual (the adopted model's residual plus this parameter's own contribution: what the
-/// data show of the term) and the adopted model's residual.
+/// partial residual (the adopted model's residual plus this term's own contribution: what the data
+/// show of the term) and the adopted model's residual. A joint with several joint-angle parameters of
+/// the cause (the harmonics of a transmission error) is drawn against its angle, with the identified
+/// curve; a bending parameter as the residual's rotation about its axis, against the bending moment.
 fn finding_plots(
     model: &Model,
     split: &Split<'_>,
@@ -423,33 +425,122 @@ fn finding_plots(
     growth: bool,
 ) -> Vec<report::RegressorPlot> {
     let layout = &after.cal.layout;
+    let n_test = split.test.rows.len();
+    let regressor = |e: usize| -> Vec<f64> { (0..n_test).map(|r| after.test_regs.row(r)[e]).collect() };
     let mut out = Vec::new();
+    for &j in joints {
+        let angle_params: Vec<usize> = (0..layout.extensions.len())
+            .filter(|&e| {
+                let p = &layout.extensions[e];
+                p.cause == cause && p.term == Term::JointAngle { joint: j - 1 }
+            })
+            .collect();
+        if angle_params.is_empty() {
+            continue;
+        }
+        let resid = as_joint_angle_urad(model, split, after, &after.test_err, j - 1);
+        // This joint's angle change by the cause per test row (µrad).
+        let contribution: Vec<f64> = (0..n_test)
+            .map(|r| {
+                angle_params
+                    .iter()
+                    .map(|&e| after.cal.params.extension[e] * after.test_regs.row(r)[e] * 1e6)
+                    .sum()
+            })
+            .collect();
+        let before: Vec<f64> = resid.iter().zip(&contribution).map(|(r, c)| r + c).collect();
+        let base = report::RegressorPlot {
+            file: format!("{}_joint{j}", cause.name()),
+            title: format!("{}: joint {j}", cause.name()),
+            y_label: format!("residual as joint {j} angle (µrad)"),
+            before,
+            after: resid,
+            ..Default::default()
+        };
+        if let [e] = angle_params[..] {
+            let axis = cause.model().plot_axis(layout.extensions[e].term);
+            out.push(report::RegressorPlot {
+                x_label: axis.label,
+                x: regressor(e).iter().map(|v| axis.sign * v).collect(),
+                slope: axis.sign * after.cal.params.extension[e] * 1e6,
+                ..base
+            });
+        } else {
+            let q: Vec<f64> = split
+                .test
+                .rows
+                .iter()
+                .map(|&r| split.test.table.q_row(r)[j - 1])
+                .collect();
+            let mut curve: Vec<(f64, f64)> = q.iter().copied().zip(contribution).collect();
+            curve.sort_by(|a, b| a.0.total_cmp(&b.0));
+            out.push(report::RegressorPlot {
+                x_label: cause.model().plot_axis(Term::JointAngle { joint: j - 1 }).label,
+                x: q,
+                curve,
+                ..base
+            });
+        }
+    }
+    let prediction = Prediction::new(model, &after.cal.params);
+    let mut scratch = prediction.scratch();
     for (e, p) in layout.extensions.iter().enumerate() {
         if p.cause != cause {
             continue;
         }
         let value = after.cal.params.extension[e];
-        let g: Vec<f64> = (0..split.test.rows.len())
-            .map(|r| after.test_regs.row(r)[e])
-            .collect();
+        let g = regressor(e);
         match p.term {
-            Term::JointAngle { joint } if joints.contains(&(joint + 1)) => {
+            Term::Bend { joint, about } if joints.contains(&(joint + 1)) => {
+                // The residual as the rotation about this bending axis that would explain it (µrad).
+                let local = Vector3::ith(about, 1.0);
+                let resid: Vec<f64> = (0..n_test)
+                    .map(|r| {
+                        let q = split.test.table.q_row(split.test.rows[r]);
+                        prediction.physical(&after.test_regs, r, q, &mut scratch);
+                        let s = &scratch;
+                        let (w, o) =
+                            prediction
+                                .chain()
+                                .bend_axis(&s.chain, joint, &local, &s.bend[joint]);
+                        let d = w.cross(&(s.chain.p_tracker - o));
+                        let n2 = d.norm_squared();
+                        if n2 >= MIN_PLOT_LEVER_M * MIN_PLOT_LEVER_M {
+                            -after.test_err[r].dot(&d) / n2 * 1e6
+                        } else {
+                            f64::NAN
+                        }
+                    })
+                    .collect();
                 let axis = cause.model().plot_axis(p.term);
-                let (sign, x_label) = (axis.sign, axis.label);
-                let resid = as_joint_angle_urad(model, split, after, &after.test_err, joint);
                 out.push(report::RegressorPlot {
-                    file: format!("{}_joint{}", cause.name(), joint + 1),
-                    title: format!("{}: joint {}", cause.name(), joint + 1),
-                    x_label,
-                    y_label: format!("residual as joint {} angle (µrad)", joint + 1),
-                    x: g.iter().map(|v| sign * v).collect(),
+                    file: format!(
+                        "{}_joint{}_{}",
+                        cause.name(),
+                        joint + 1,
+                        crate::extensions::axis_name(about)
+                    ),
+                    title: format!(
+                        "{}: joint {} about {}",
+                        cause.name(),
+                        joint + 1,
+                        crate::extensions::axis_name(about)
+                    ),
+                    x_label: axis.label,
+                    y_label: format!(
+                        "residual as bending of joint {} about {} (µrad)",
+                        joint + 1,
+                        crate::extensions::axis_name(about)
+                    ),
+                    x: g.iter().map(|v| axis.sign * v).collect(),
                     before: resid
                         .iter()
                         .zip(&g)
                         .map(|(r, g)| r + value * g * 1e6)
                         .collect(),
                     after: resid,
-                    slope: sign * value * 1e6,
+                    slope: axis.sign * value * 1e6,
+                    curve: Vec::new(),
                 });
             }
             Term::Growth if growth => {
@@ -479,6 +570,7 @@ fn finding_plots(
                     after: rel(&after.test_err),
                     x: g,
                     slope: value * 1e6,
+                    curve: Vec::new(),
                 });
             }
             _ => {}
@@ -668,19 +760,26 @@ fn evidence(
 }
 
 /// The probe of `rivals` with the largest held-out gain that `cause` does not model itself.
-fn best_rival_probe<'p>(
-    rivals: &'p [unexplained::Probe],
-    cause: Cause,
-) -> Option<&'p unexplained::Probe> {
+fn best_rival_probe(rivals: &[unexplained::Probe], cause: Cause) -> Option<&unexplained::Probe> {
     rivals
         .iter()
         .filter(|p| !p.kind.modelled_by(cause))
         .max_by(|a, b| a.gain.total_cmp(&b.gain))
 }
 
+/// A larger candidate must predict the held-out poses better than a smaller significant one by this
+/// paired `z` (one-sided 5 %) to be named instead of it.
+pub const TIE_Z: f64 = 1.645;
+
 /// The nearest rival of the candidate `this_round[k]` adopted in a round: the other candidate or the
-/// rival probe with the largest held-out gain, with why it lost in words.
-fn nearest_rival(this_round: &[Trial], k: usize, rivals: &[unexplained::Probe]) -> Option<Rival> {
+/// rival probe with the largest held-out gain, with why it lost in words; `better_than(i)` is the
+/// paired `z` by which candidate `i`'s held-out errors exceed the adopted one's.
+fn nearest_rival(
+    this_round: &[Trial],
+    k: usize,
+    rivals: &[unexplained::Probe],
+    better_than: &dyn Fn(usize) -> f64,
+) -> Option<Rival> {
     let won = &this_round[k];
     let pct = |g: f64| format!("{:.0} %", 100.0 * g);
     let signature = won.cause.model().signature();
@@ -688,12 +787,20 @@ fn nearest_rival(this_round: &[Trial], k: usize, rivals: &[unexplained::Probe]) 
         .iter()
         .enumerate()
         .filter(|(i, _)| *i != k)
-        .map(|(_, t)| t)
-        .max_by(|a, b| a.gain.total_cmp(&b.gain));
+        .max_by(|a, b| a.1.gain.total_cmp(&b.1.gain));
     let probe = best_rival_probe(rivals, won.cause);
     match (other, probe) {
-        (Some(t), p) if p.is_none_or(|p| t.gain >= p.gain) => {
+        (Some((i, t)), p) if p.is_none_or(|p| t.gain >= p.gain) => {
             let why = match &t.impossible {
+                _ if t.gain > won.gain => format!(
+                    "not {}, its nearest rival: that gains {} on the held-out poses against {} here, \
+                     no better to a paired test (z = {:.1}) and with more parameters, so the simpler \
+                     is named; the data hardly tell them apart",
+                    t.cause,
+                    pct(t.gain),
+                    pct(won.gain),
+                    better_than(i)
+                ),
                 Some(reason) => format!(
                     "not {}, its nearest rival: that would gain {} on the held-out poses against {} \
                      here, but its fit needs {reason}",
@@ -822,8 +929,27 @@ fn select(
             .filter(|(_, t)| t.significant)
             .max_by(|a, b| a.1.test_z.total_cmp(&b.1.test_z))
             .map(|(k, _)| k);
-        let Some(k) = best else { break };
-        let rival = nearest_rival(this_round, k, &rivals);
+        let Some(mut k) = best else { break };
+        // Parsimony: a significant candidate with fewer parameters whose held-out errors are not
+        // significantly worse than the best one's is named instead (the data do not tell the two
+        // apart, and the larger model can mimic the smaller: bending of joint 1 about the horizontal
+        // axis under joint 2 is joint 2's compliance moved 0.19 m down).
+        let added = |i: usize| tried[i].1.cal.layout.len() - current.cal.layout.len();
+        let better_than = |i: usize, j: usize| {
+            significance::paired(&tried[i].1.pose_sq, &tried[j].1.pose_sq).z
+        };
+        if let Some(i) = (0..tried.len())
+            .filter(|&i| this_round[i].significant && added(i) < added(k))
+            .filter(|&i| better_than(i, k) < TIE_Z)
+            .min_by(|&a, &b| {
+                added(a)
+                    .cmp(&added(b))
+                    .then(this_round[b].test_z.total_cmp(&this_round[a].test_z))
+            })
+        {
+            k = i;
+        }
+        let rival = nearest_rival(this_round, k, &rivals, &|i| better_than(k, i));
         let (cause, next, tz, trz, gain) = tried.swap_remove(k);
         let r = explained_correlation(&current.test_err, &next.test_err);
         findings.push(Finding {
@@ -1047,6 +1173,7 @@ pub fn diagnose_with_progress(
             before: as_joint_angle_urad(model, &split, &current, &current.test_err, j - 1),
             after: Vec::new(),
             slope: 0.0,
+            curve: Vec::new(),
         });
     }
     Ok(Diagnosis {
