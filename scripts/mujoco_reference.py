@@ -46,12 +46,23 @@ angles theta solve qfrc_passive = qfrc_bias at qvel = 0, i.e. K (q - theta) = ta
 MuJoCo's own forces. See the comment above SETTLE_ROBOTS for why Newton rather than stepping, and for the
 checks done on every run (residual, the numpy torque balance, a dynamic mj_step settle of a few poses).
 
+Deflection experiment (same robots): `golden/settle_deflection_<robot>.csv` holds the arm with link
+deflection (sim::effects::link_deflection: the child side of a joint tilts about two axes u, v across the
+joint axis under the moment it carries) at rest under gravity, for 200 configurations
+(numpy.random.default_rng(20261125)) x two compliance sets (deflection across every axis with rigid joints;
+deflection at joints 2, 4, 6 together with the stiff joint springs) x payload 0 and 3 kg: each deflecting
+joint's child body gets two more MuJoCo hinges about u and v with stiffness [1/c, 0, 0] and springref 0, and
+joints and hinges settle together (Newton on MuJoCo's forces). Checked on every run against the numpy URDF
+reference of the same chain written as URDF with the hinges as revolute joints. See the comment above
+DEFLECTION_SEED.
+
 Usage:
   python scripts/mujoco_reference.py [--out DIR] [--shared DIR] [--robots a,b,...] [--compare-to DIR]
-                                     [--experiment all|kinematics|settle]
+                                     [--experiment all|kinematics|settle|deflection]
 
-`--experiment` (default all) selects kinematics_<robot>.csv, settle_<robot>.csv or both; the kinematics
-files are the same bytes whichever is chosen.
+`--experiment` (default all) selects kinematics_<robot>.csv, the settle files (settle_<robot>.csv and
+settle_deflection_<robot>.csv), the deflection file alone, or all of them; each file is the same bytes
+whichever is chosen.
 
 Exit status: 0 OK; 1 a --compare-to mismatch; 2 a URDF that was asked for is missing or unparsable (or
 an unknown robot name); 3 an internal consistency check failed.
@@ -809,6 +820,301 @@ def compare_settle(robot, text, other_path):
     return worst[0] <= SETTLE_COMPARE_TOL, worst[0], msg
 
 
+# ----------------------------------------------------------------------------------------------------
+# Deflection experiment: joint springs plus bearing/link compliance across the joint axes, at rest under
+# gravity (golden/settle_deflection_<robot>.csv)
+#
+# Link deflection (sim::effects::link_deflection): the child side of joint i tilts by alpha_i about u_i,
+# then beta_i about v_i, two axes across the joint axis a_i through the joint origin, in the joint's
+# (child link's) frame: u = the coordinate axis least aligned with a (first of x, y, z on ties) made
+# orthogonal to a, v = a x u. In MuJoCo each deflecting joint's child body gets two more hinge joints
+# after the URDF joint (joints of one body apply in order, each about its axis in the body frame as
+# turned by the joints before it, at the body origin where the URDF importer puts the joint), with
+# stiffness [1/c, 0, 0] and springref 0; a hinge of compliance 0 is left out. Joint springs are as in
+# the settle experiment ([k, 0, 0], springref = q); a joint without a spring is held rigidly at q (its
+# degree of freedom is not an unknown). The rest state solves qfrc_passive = qfrc_bias on every
+# unknown (compliant joints and hinges) at qvel = 0, by Newton on MuJoCo's own forces as above.
+#
+# Independent self-check on every row: the same URDF text with two massless links and revolute joints
+# inserted after each deflecting joint (the hinged chain written out as URDF), evaluated by the numpy
+# URDF reference: its tip pose at the settled angles must equal MuJoCo's (1e-12) and its torques must
+# balance every spring (DEFLECTION_NUMPY_TOL). No dynamic (mj_step) check: the bearing springs
+# (1e5-1e6 N m/rad on light bodies) would need steps of ~1e-5 s with MuJoCo's explicit springs, and the
+# settle experiment already shows that the Newton root is the dynamic rest state.
+
+DEFLECTION_SEED = 20261125
+N_DEFLECTION = 200
+INF = float("inf")
+# (name, joint stiffness in N m/rad (inf = rigid), [(c_u, c_v)] in rad/(N m) per joint, root to tip).
+# "bearing": every joint rigid, deflection across every axis; "bearing_and_joints": the stiff joint set
+# of the settle experiment plus deflection at the shoulder, elbow and wrist (joints 2, 4, 6) only.
+DEFLECTION_SETS = (
+    ("bearing", (INF,) * 7,
+     ((2e-6, 3e-6), (3e-6, 3e-6), (2e-6, 2e-6), (4e-6, 4e-6), (3e-6, 3e-6), (5e-6, 5e-6), (6e-6, 6e-6))),
+    ("bearing_and_joints", SETTLE_STIFFNESS[0][1],
+     ((0.0, 0.0), (4e-6, 6e-6), (0.0, 0.0), (5e-6, 5e-6), (0.0, 0.0), (8e-6, 4e-6), (0.0, 0.0))),
+)
+DEFLECTION_NUMPY_TOL = 1e-9  # N m, max |spring torque - numpy holding torque| per unknown
+DEFLECTION_COMPARE_TOL = 1e-12  # rad and m
+
+
+def deflection_axes(a):
+    """(u, v) across the unit joint axis a (see the section comment)."""
+    a = np.asarray(a, dtype=float) / np.linalg.norm(a)
+    k = 0
+    for j in (1, 2):
+        if abs(a[j]) < abs(a[k]):
+            k = j
+    e = np.zeros(3)
+    e[k] = 1.0
+    u = e - a * (a @ e)
+    u = u / np.linalg.norm(u)
+    return u, np.cross(a, u)
+
+
+def hinged_urdf(xml, desc, compliance):
+    """The cleaned URDF text with, after every joint with a nonzero compliance, massless links and
+    revolute joints about u then v (those with nonzero compliance) at the joint's child frame origin.
+    Returns (text, names of the unknowns' joints in chain order, compliance per hinge joint name)."""
+    root = ET.fromstring(xml)
+    by_name = {j.get("name"): j for j in root.findall("joint")}
+    hinge_c = {}
+    for j, (cu, cv) in zip(desc["movable"], compliance):
+        hinges = [(nm, ax, c) for nm, ax, c in zip(("u", "v"), deflection_axes(j["axis"]), (cu, cv)) if c > 0.0]
+        if not hinges:
+            continue
+        child = j["child"]
+        parent = child + "_robocal_d0"
+        by_name[j["name"]].find("child").set("link", parent)
+        for k, (nm, ax, c) in enumerate(hinges):
+            ET.SubElement(root, "link", name=parent)
+            to = child if k + 1 == len(hinges) else "%s_robocal_d%d" % (child, k + 1)
+            name = "%s_robocal_%s" % (j["name"], nm)
+            je = ET.SubElement(root, "joint", name=name, type="revolute")
+            ET.SubElement(je, "parent", link=parent)
+            ET.SubElement(je, "child", link=to)
+            ET.SubElement(je, "axis", xyz=" ".join(repr(float(x)) for x in ax))
+            ET.SubElement(je, "limit", lower="-1", upper="1", effort="1", velocity="1")
+            hinge_c[name] = c
+            parent = to
+    return ET.tostring(root, encoding="unicode"), hinge_c
+
+
+def build_deflection_model(xml, desc, stiffness, compliance, payload_kg):
+    """The settle model (joint springs where the stiffness is finite) plus the deflection hinges in the
+    child bodies. Returns (model, unknowns: qpos indices of the compliant joints and hinges, in chain
+    order; hinge joint names in the same order as the hinged URDF's)."""
+    spec = mujoco.MjSpec.from_string(xml)
+    c = spec.compiler
+    c.fusestatic = False
+    c.discardvisual = False
+    c.balanceinertia = False
+    c.boundmass = 0.0
+    c.boundinertia = 0.0
+    c.settotalmass = -1.0
+    c.inertiafromgeom = mujoco.mjtInertiaFromGeom.mjINERTIAFROMGEOM_FALSE
+    spec.option.gravity = GRAVITY
+    spec.option.disableflags |= mujoco.mjtDisableBit.mjDSBL_CONTACT | mujoco.mjtDisableBit.mjDSBL_LIMIT
+    for j, k, (cu, cv) in zip(desc["movable"], stiffness, compliance):
+        js = spec.joint(j["name"])
+        js.damping = np.zeros_like(np.asarray(js.damping))
+        js.frictionloss = 0.0
+        js.armature = 0.0
+        js.stiffness = [k if math.isfinite(k) else 0.0, 0.0, 0.0]
+        js.springref = 0.0
+        js.springyield = 0.0
+        body = spec.body(j["child"])
+        for nm, ax, cc in zip(("u", "v"), deflection_axes(j["axis"]), (cu, cv)):
+            if cc > 0.0:
+                body.add_joint(name="%s_robocal_%s" % (j["name"], nm), type=mujoco.mjtJoint.mjJNT_HINGE,
+                               axis=list(ax), pos=[0.0, 0.0, 0.0], stiffness=[1.0 / cc, 0.0, 0.0], springref=0.0)
+    if payload_kg > 0.0:
+        b = spec.body(desc["tip"]).add_body(name="robocal_payload", pos=list(SETTLE_PAYLOAD_COM))
+        b.explicitinertial = True
+        b.mass = payload_kg
+        b.ipos = [0.0, 0.0, 0.0]
+        b.iquat = [1.0, 0.0, 0.0, 0.0]
+        b.inertia = [0.0, 0.0, 0.0]
+    model = spec.compile()
+    names = [model.joint(i).name for i in range(model.njnt)]
+    if model.nq != model.njnt or list(model.jnt_qposadr) != list(range(model.njnt)):
+        raise CheckError("deflection model: one qpos per hinge expected")
+    if np.any(model.jnt_pos != 0.0) or np.any(model.jnt_stiffnesspoly != 0) or np.any(model.dof_damping != 0.0):
+        raise CheckError("deflection model: a joint off its body origin, or higher-order stiffness or damping left on")
+    unknowns = [i for i, nm in enumerate(names) if model.jnt_stiffness[i] > 0.0]
+    return model, names, unknowns
+
+
+def settle_subset(model, data, x0, unknowns):
+    """Newton on qfrc_passive - qfrc_bias over the unknowns (the others held at x0); model.qpos_spring
+    must be set. Returns (x, residual on the unknowns, iterations)."""
+    x = np.array(x0, dtype=float)
+    u = np.array(unknowns)
+    m = len(u)
+    J = np.empty((m, m))
+    for it in range(1, SETTLE_MAX_NEWTON + 1):
+        r = settle_residual(model, data, x)[u]
+        for jj in range(m):
+            xp, xm = x.copy(), x.copy()
+            xp[u[jj]] += SETTLE_FD_STEP
+            xm[u[jj]] -= SETTLE_FD_STEP
+            J[:, jj] = (settle_residual(model, data, xp)[u] - settle_residual(model, data, xm)[u]) / (2 * SETTLE_FD_STEP)
+        step = np.linalg.solve(J, -r)
+        x[u] += step
+        if np.max(np.abs(step)) < SETTLE_STEP_TOL:
+            r = settle_residual(model, data, x)[u]
+            return x, float(np.max(np.abs(r))), it
+    raise CheckError("deflection: Newton did not converge in %d iterations" % SETTLE_MAX_NEWTON)
+
+
+def compute_deflection(robot, path, rel_label, tip):
+    xml, desc = load_urdf(path, tip)
+    with open(path, "rb") as f:
+        sha = hashlib.sha256(f.read()).hexdigest()
+    n = len(desc["movable"])
+    lower = np.array([j["lower"] for j in desc["movable"]])
+    upper = np.array([j["upper"] for j in desc["movable"]])
+    Q = np.random.default_rng(DEFLECTION_SEED).uniform(lower, upper, size=(N_DEFLECTION, n))
+    rows = []
+    worst = {"residual": 0.0, "numpy": 0.0, "numpy_pos": 0.0, "newton": 0, "tilt": 0.0}
+    joint_names = [j["name"] for j in desc["movable"]]
+    for name, stiffness, compliance in DEFLECTION_SETS:
+        if len(stiffness) != n or len(compliance) != n:
+            raise CheckError("%s: deflection set %s does not have %d joints" % (robot, name, n))
+        htext, hinge_c = hinged_urdf(xml, desc, compliance)
+        with tempfile.TemporaryDirectory() as d:
+            hp = os.path.join(d, "hinged.urdf")
+            with open(hp, "w") as f:
+                f.write(htext)
+            _, hdesc = load_urdf(hp, tip)
+        for payload_kg in SETTLE_PAYLOAD_KG:
+            model, names, unknowns = build_deflection_model(xml, desc, stiffness, compliance, payload_kg)
+            if names != [j["name"] for j in hdesc["movable"]]:
+                raise CheckError("%s: MuJoCo joint order %r differs from the hinged URDF's" % (robot, names))
+            data = mujoco.MjData(model)
+            root_id, tip_id = model.body(desc["root"]).id, model.body(tip).id
+            pdesc = payload_desc(hdesc, payload_kg)
+            jidx = [names.index(nm) for nm in joint_names]
+            for k in range(N_DEFLECTION):
+                q = Q[k]
+                x0 = np.zeros(model.nq)
+                x0[jidx] = q
+                model.qpos_spring[:] = x0
+                x, res, its = settle_subset(model, data, x0, unknowns)
+                p, R, _tau = mujoco_eval(model, data, root_id, tip_id, x)
+                pn, Rn, taun = numpy_reference(pdesc, x)
+                spring = -model.jnt_stiffness * (x - x0)  # torque of each spring on the link side
+                bal = np.abs(spring - taun)[unknowns]
+                worst["residual"] = max(worst["residual"], res)
+                worst["numpy"] = max(worst["numpy"], float(np.max(bal)))
+                worst["numpy_pos"] = max(worst["numpy_pos"], float(np.max(np.abs(p - pn))), float(np.max(np.abs(R - Rn))))
+                worst["newton"] = max(worst["newton"], its)
+                alpha, beta = np.zeros(n), np.zeros(n)
+                for i, jn in enumerate(joint_names):
+                    for arr, nm in ((alpha, "u"), (beta, "v")):
+                        hn = "%s_robocal_%s" % (jn, nm)
+                        if hn in names:
+                            arr[i] = x[names.index(hn)]
+                worst["tilt"] = max(worst["tilt"], float(np.max(np.abs(alpha))), float(np.max(np.abs(beta))))
+                rows.append([float(k)] + list(stiffness) + [c[0] for c in compliance] + [c[1] for c in compliance]
+                            + [payload_kg] + list(SETTLE_PAYLOAD_COM) + list(q) + list(x[jidx]) + list(alpha)
+                            + list(beta) + list(p) + list(R.ravel()) + [res])
+    if worst["residual"] > SETTLE_RESIDUAL_TOL:
+        raise CheckError("%s: deflection residual %.3g N m > %g" % (robot, worst["residual"], SETTLE_RESIDUAL_TOL))
+    if worst["numpy"] > DEFLECTION_NUMPY_TOL or worst["numpy_pos"] > SELF_POS_TOL:
+        raise CheckError("%s: settled poses fail the numpy hinged-URDF cross-check: torque %.3g N m, pose %.3g"
+                         % (robot, worst["numpy"], worst["numpy_pos"]))
+
+    header = (["config"] + ["k%d" % (i + 1) for i in range(n)] + ["cu%d" % (i + 1) for i in range(n)]
+              + ["cv%d" % (i + 1) for i in range(n)] + ["payload_kg", "payload_x", "payload_y", "payload_z"]
+              + ["q%d" % (i + 1) for i in range(n)] + ["theta%d" % (i + 1) for i in range(n)]
+              + ["alpha%d" % (i + 1) for i in range(n)] + ["beta%d" % (i + 1) for i in range(n)] + ["px", "py", "pz"]
+              + ["r%d%d" % (i, j) for i in (1, 2, 3) for j in (1, 2, 3)] + ["residual"])
+    short = lambda v: "%g" % (round(float(v), 12) + 0.0)
+    axes = "; ".join("%s: u = (%s), v = (%s)" % ((j["name"],) + tuple(" ".join(short(v) for v in w)
+                                                                         for w in deflection_axes(j["axis"])))
+                     for j in desc["movable"])
+    comments = [
+        "generated by %s -- do not edit; regenerate with: python %s" % (SCRIPT_REL, SCRIPT_REL),
+        "mujoco %s, numpy %s" % (mujoco.__version__, np.__version__),
+        "urdf: %s" % rel_label,
+        "urdf sha256: %s" % sha,
+        "root link: %s (frame of px..r33); tip link: %s" % (desc["root"], tip),
+        "joints (root to tip): %s" % " ".join("%s(%s)" % (j["name"], j["type"]) for j in desc["movable"]),
+        "experiment: joint springs and link deflection at rest under gravity. Joint i: a linear spring k_i between the "
+        "commanded angle q_i and the link-side angle theta_i (MuJoCo joint stiffness [k_i, 0, 0], springref = q_i; "
+        "k_i = inf: rigid, theta_i = q_i). Deflection: the child side of joint i turns by alpha_i about u_i, then "
+        "beta_i about v_i (axes across the joint axis a_i, in the joint's child frame, through its origin: u = the "
+        "frame axis least aligned with a, first of x, y, z on ties, made orthogonal to a; v = a x u), two MuJoCo "
+        "hinges after the joint in its child body with stiffness [1/c, 0, 0] and springref 0 (c = 0: no hinge, "
+        "angle 0). The rest state solves qfrc_passive = qfrc_bias on every compliant joint and hinge at qvel = 0, "
+        "by Newton on MuJoCo's forces to |step| < %g rad" % SETTLE_STEP_TOL,
+        "deflection axes: %s" % axes,
+        "configurations: %d, numpy.random.default_rng(%d).uniform(lower, upper, size=(%d, %d)) within the URDF "
+        "limits; every configuration for every set and payload, in the order set, payload, configuration"
+        % (N_DEFLECTION, DEFLECTION_SEED, N_DEFLECTION, n),
+        "sets: %s" % "; ".join("%s: k [N m/rad] = %s, (c_u, c_v) [rad/(N m)] = %s"
+                               % (nm, ", ".join(repr(v) for v in ks), ", ".join("(%r, %r)" % c for c in cs))
+                               for nm, ks, cs in DEFLECTION_SETS),
+        "payload: point mass of payload_kg at (payload_x, payload_y, payload_z) in the tip link frame, welded to it "
+        "(masses %s kg)" % ", ".join(repr(m) for m in SETTLE_PAYLOAD_KG),
+        "gravity: (%r, %r, %r) m/s^2 in the root link frame; contacts and joint limits disabled; no joint damping, "
+        "friction or armature" % GRAVITY,
+        "self-checks: max |qfrc_passive - qfrc_bias| on the unknowns %.1e N m; the hinged chain written as URDF "
+        "(massless links between the hinges) in the numpy reference: spring balance %.1e N m, pose %.1e; Newton "
+        "iterations <= %d; largest deflection angle %.2e rad"
+        % (worst["residual"], worst["numpy"], worst["numpy_pos"], worst["newton"], worst["tilt"]),
+        "columns: config 0-based index of the configuration; k1..k%d joint stiffness [N m/rad] (inf = rigid); "
+        "cu1..cu%d, cv1..cv%d deflection compliance about u and v [rad/(N m)] (0 = rigid); payload_kg [kg], "
+        "payload_x..z [m]; q1..q%d commanded joint angles [rad]; theta1..theta%d settled joint angles [rad]; "
+        "alpha1..alpha%d, beta1..beta%d settled deflection angles about u and v [rad]; px,py,pz settled tip "
+        "position in the root frame [m]; r11..r33 settled tip rotation, row-major [1]; residual max "
+        "|qfrc_passive - qfrc_bias| over the compliant joints and hinges [N m]" % ((n,) * 7),
+        "numbers are Python repr() of float64 (round-trip exact)",
+    ]
+    text = "".join("# " + c + "\n" for c in comments)
+    text += ",".join(header) + "\n"
+    text += "".join(",".join(fmt(x) for x in r) + "\n" for r in rows)
+    return text, worst
+
+
+def compare_deflection(robot, text, other_path):
+    """As compare_settle for settle_deflection_<robot>.csv: inputs (config, k, cu, cv, payload, q) exact;
+    angles and pose within DEFLECTION_COMPARE_TOL; the residual only below SETTLE_RESIDUAL_TOL."""
+    try:
+        with open(other_path) as f:
+            h2, r2 = parse_csv(f.read())
+    except (OSError, ValueError, IndexError) as e:
+        return False, math.inf, "%s: cannot read %s: %s" % (robot, other_path, e)
+    h1, r1 = parse_csv(text)
+    if h1 != h2:
+        return False, math.inf, "%s: header differs from %s" % (robot, other_path)
+    if len(r1) != len(r2):
+        return False, math.inf, "%s: %d rows here, %d in %s" % (robot, len(r1), len(r2), other_path)
+    exact = {c for c, h in enumerate(h1) if h == "config" or h.startswith(("k", "cu", "cv", "payload", "q"))}
+    res_col = h1.index("residual")
+    worst = (0.0, 1, h1[0])
+    for i, (a, b) in enumerate(zip(r1, r2)):
+        for c, (x, y) in enumerate(zip(a, b)):
+            if c in exact:
+                if x != y:
+                    return False, math.inf, "%s: row %d column %s: input differs (%r vs %r)" % (robot, i + 1, h1[c],
+                                                                                              x, y)
+                continue  # (inf - inf is nan: rigid joints are exact inputs, not compared values)
+            if c == res_col:
+                if not (y <= SETTLE_RESIDUAL_TOL):
+                    return False, math.inf, "%s: row %d: residual %r in %s" % (robot, i + 1, y, other_path)
+                continue
+            d = abs(x - y)
+            if math.isnan(d):
+                d = math.inf
+            if d > worst[0]:
+                worst = (d, i + 1, h1[c])
+    msg = "%s deflection: worst |difference| %.3g at row %d column %s (vs %s)" % (robot, worst[0], worst[1],
+                                                                                worst[2], other_path)
+    return worst[0] <= DEFLECTION_COMPARE_TOL, worst[0], msg
+
+
 def write_atomic(path, text):
     d = os.path.dirname(path)
     os.makedirs(d, exist_ok=True)
@@ -874,12 +1180,14 @@ def main(argv=None):
     ap.add_argument("--robots", default=None, help="comma-separated robot names (default: all that exist)")
     ap.add_argument("--compare-to", default=None, metavar="DIR",
                     help="compare with the files of the same name in DIR; exit 1 on a difference > %g" % COMPARE_TOL)
-    ap.add_argument("--experiment", choices=("all", "kinematics", "settle"), default="all",
-                    help="which golden files to compute: kinematics_<robot>.csv, settle_<robot>.csv (robots %s "
-                         "only), or both (default)" % ", ".join(sorted(SETTLE_ROBOTS)))
+    ap.add_argument("--experiment", choices=("all", "kinematics", "settle", "deflection"), default="all",
+                    help="which golden files to compute: kinematics_<robot>.csv; settle: settle_<robot>.csv and "
+                         "settle_deflection_<robot>.csv (robots %s only); deflection: settle_deflection_<robot>.csv "
+                         "only; all (default)" % ", ".join(sorted(SETTLE_ROBOTS)))
     args = ap.parse_args(argv)
     do_kin = args.experiment in ("all", "kinematics")
     do_settle = args.experiment in ("all", "settle")
+    do_deflection = args.experiment in ("all", "settle", "deflection")
 
     explicit = args.robots is not None
     names = [r.strip() for r in args.robots.split(",") if r.strip()] if explicit else list(ROBOTS)
@@ -890,6 +1198,7 @@ def main(argv=None):
 
     results = []
     settle_results = []
+    deflection_results = []
     for r in names:
         base, rel, tip = ROBOTS[r]
         base_dir = REPO if base == "repo" else args.shared
@@ -928,6 +1237,19 @@ def main(argv=None):
                   "%.1e rad; largest sag %.4f rad" % (r, N_SETTLE * len(SETTLE_STIFFNESS) * len(SETTLE_PAYLOAD_KG),
                                                       worst["residual"], worst["numpy"], worst["dynamic"], worst["sag"]))
             settle_results.append((r, text))
+        if do_deflection and r in SETTLE_ROBOTS:
+            try:
+                text, worst = compute_deflection(r, path, label, tip)
+            except UrdfError as e:
+                print("error: %s: %s" % (r, e), file=sys.stderr)
+                return 2
+            except CheckError as e:
+                print("check failed: %s" % e, file=sys.stderr)
+                return 3
+            print("%s deflection: %d rows; residual %.1e N m; numpy hinged-URDF spring balance %.1e N m, pose %.1e; "
+                  "largest deflection %.2e rad" % (r, N_DEFLECTION * len(DEFLECTION_SETS) * len(SETTLE_PAYLOAD_KG),
+                                                   worst["residual"], worst["numpy"], worst["numpy_pos"], worst["tilt"]))
+            deflection_results.append((r, text))
 
     # compare before writing, so that --out and --compare-to may name the same directory
     status = 0
@@ -943,6 +1265,11 @@ def main(argv=None):
             print(("OK " if ok else "MISMATCH ") + msg)
             if not ok:
                 failed.append((d, msg))
+        for r, text in deflection_results:
+            ok, d, msg = compare_deflection(r, text, os.path.join(args.compare_to, "settle_deflection_%s.csv" % r))
+            print(("OK " if ok else "MISMATCH ") + msg)
+            if not ok:
+                failed.append((d, msg))
         if failed:
             print("compare failed (tolerance %g, q exact); worst: %s" % (COMPARE_TOL, max(failed)[1]),
                   file=sys.stderr)
@@ -954,6 +1281,10 @@ def main(argv=None):
         print("wrote %s" % out)
     for r, text in settle_results:
         out = os.path.join(args.out, "settle_%s.csv" % r)
+        write_atomic(out, text)
+        print("wrote %s" % out)
+    for r, text in deflection_results:
+        out = os.path.join(args.out, "settle_deflection_%s.csv" % r)
         write_atomic(out, text)
         print("wrote %s" % out)
     return status

@@ -3,6 +3,8 @@
 # against. Sets up a Python venv (.venv, pinned by scripts/requirements.txt) on first use.
 #   ./scripts/test.sh            run everything
 #   ROBOCAL_SKIP_LINT=1 ...      skip cargo fmt/clippy
+#   ROBOCAL_SKIP_SLURM=1 ...     skip the sweep on a one-node Slurm cluster (it installs slurm-wlm and
+#                                munge with apt-get when missing, which needs root)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -41,8 +43,43 @@ fi
 echo "== cargo test" >&2
 cargo test --workspace --no-fail-fast
 
+echo "== the Python package (python/): built on the test build's dependencies, checked against the CLI" >&2
+pyvenv="target/python-venv"
+if [ ! -x "$pyvenv/bin/python" ] || ! cmp -s python/requirements-test.txt "$pyvenv/.requirements"; then
+  rm -rf "$pyvenv"
+  python3 -m venv "$pyvenv"
+  "$pyvenv/bin/pip" install --quiet --disable-pip-version-check -r python/requirements-test.txt
+  # numpy, pandas and polars come from the main venv (a .pth line), which stays as it is.
+  site=$("$pyvenv/bin/python" -c 'import sysconfig; print(sysconfig.get_paths()["purelib"])')
+  "$py" -c 'import sysconfig; print(sysconfig.get_paths()["purelib"])' > "$site/robocal_main_venv.pth"
+  cp python/requirements-test.txt "$pyvenv/.requirements"
+fi
+pkg=$(./scripts/python_package.sh)
+PYTHONPATH="$pkg" ROBOCAL_BIN="$PWD/target/debug/robocal" "$pyvenv/bin/python" -m pytest -q python/tests
+
 echo "== pandas, polars and DuckDB read robocal's own tables identically" >&2
 cargo test --workspace --quiet --test measurement_table -- --ignored write_files_for_check_readers
 tmp="${TMPDIR:-/tmp}"
 "$py" scripts/check_readers.py "$tmp/robocal_table.parquet" "$tmp/robocal_table.csv"
 "$py" scripts/check_readers.py "$tmp/robocal_ur5.parquet" "$tmp/robocal_ur5.csv"
+
+# The binary the integration tests ran (cargo test builds it; the line prints its path).
+robocal=$(cargo test --workspace --quiet --no-run --message-format=json 2>/dev/null \
+  | "$py" -c 'import json, sys
+found = []
+for line in sys.stdin:
+    m = json.loads(line)
+    t = m.get("target", {})
+    if m.get("reason") == "compiler-artifact" and t.get("name") == "robocal" and "bin" in t.get("kind", []) \
+            and not m["profile"]["test"]:
+        found.append(m["executable"])
+print(found[0] if found else "")')
+[ -x "$robocal" ] || { echo "no robocal binary from cargo test" >&2; exit 1; }
+
+echo "== the calibrated URDF: XML diff and MuJoCo forward kinematics against robocal predict" >&2
+"$py" scripts/check_urdf_out.py "$robocal"
+
+if [ -z "${ROBOCAL_SKIP_SLURM:-}" ]; then
+  echo "== a sweep as a Slurm job array on a one-node cluster, merged: the bytes of one machine" >&2
+  ROBOCAL="$robocal" ./scripts/slurm_check.sh
+fi

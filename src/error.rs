@@ -70,7 +70,10 @@ impl From<CalibError> for CliError {
     fn from(e: CalibError) -> Self {
         match e {
             CalibError::Sim(inner) => CliError::from(*inner),
-            CalibError::Io { .. } | CalibError::Misuse(_) => CliError::Runtime(e.to_string()),
+            // A stop asked for by the caller (Ctrl-C in Python) is no fault of the input.
+            CalibError::Io { .. } | CalibError::Misuse(_) | CalibError::Cancelled => {
+                CliError::Runtime(e.to_string())
+            }
             _ => CliError::Input(e.to_string()),
         }
     }
@@ -129,6 +132,7 @@ mod tests {
             problem: "not finite".into(),
         };
         assert_eq!(CliError::from(bad).exit_code(), 2);
+        assert_eq!(CliError::from(CalibError::Cancelled).exit_code(), 1);
     }
 
     #[test]

@@ -573,7 +573,11 @@ fn env_or<T: std::str::FromStr>(name: &str, default: T) -> T {
 fn diagnose_names_the_hidden_cause_and_its_joints() {
     let seed = env_or("ROBOCAL_BLIND_SEED", DEFAULT_SEED);
     let n = env_or("ROBOCAL_BLIND_CASES", DEFAULT_CASES);
-    let cases = cases(seed, n);
+    let mut cases = cases(seed, n);
+    // `ROBOCAL_BLIND_ONLY=K` reruns case K alone (with ROBOCAL_BLIND_KEEP to look at it).
+    if let Some(k) = std::env::var("ROBOCAL_BLIND_ONLY").ok().and_then(|s| s.parse().ok()) {
+        cases = vec![cases.swap_remove(k)];
+    }
     let start = std::time::Instant::now();
     let outcomes = run_cases(&cases);
     eprintln!(

@@ -73,6 +73,9 @@ pub enum CalibError {
     /// The API was called with arguments that do not fit together (a programming error of the caller).
     #[error("invalid argument: {0}")]
     Misuse(String),
+    /// The caller asked the work to stop ([`crate::cancel`]: Ctrl-C in Python); nothing is returned.
+    #[error("cancelled")]
+    Cancelled,
 }
 
 impl From<sim::SimError> for CalibError {

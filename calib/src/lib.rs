@@ -88,6 +88,7 @@
 #![warn(missing_docs)]
 
 pub mod calibrate;
+pub mod cancel;
 pub mod chain;
 pub mod diagnose;
 pub mod error;
@@ -108,6 +109,7 @@ pub mod problem;
 pub mod robot;
 pub mod stats;
 pub mod units;
+pub mod urdf_export;
 
 pub use calibrate::{Calibration, CalibrationOptions, CalibrationReport, Dataset, calibrate};
 pub use error::{CalibError, Result};

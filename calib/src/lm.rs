@@ -140,6 +140,8 @@ pub enum TerminationReason {
     /// A residual or Jacobian entry was NaN or infinite at the start (or `χ²` overflowed); the
     /// report's [`MinimizationReport::health`] names the rows.
     NonFinite,
+    /// The caller asked the work to stop ([`crate::cancel`]); the point is where the solve stopped.
+    Cancelled,
 }
 
 impl std::fmt::Display for TerminationReason {
@@ -151,6 +153,7 @@ impl std::fmt::Display for TerminationReason {
             TerminationReason::MaxIterations => "iteration limit reached before convergence",
             TerminationReason::DampingLimit => "no decreasing step found",
             TerminationReason::NonFinite => "non-finite residuals",
+            TerminationReason::Cancelled => "cancelled",
         })
     }
 }
@@ -407,19 +410,19 @@ pub fn minimize<P: LeastSquaresProblem>(
         rank: 0,
         health: Health::new(),
     };
+    let nothing_solved = || Subspace {
+        scales: scales.to_vec(),
+        singular_values: vec![0.0; p],
+        v: DMatrix::identity(p, p),
+        rank: 0,
+        rtol: options.rank_rtol,
+        floor: options.min_singular_value,
+        n_residuals: m,
+    };
     if !cost_initial.is_finite() || ws.gram.iter().any(|v| !v.is_finite()) {
         report.termination = TerminationReason::NonFinite;
         locate_non_finite(problem, ws, 0, &mut report.health);
-        let sub = Subspace {
-            scales: scales.to_vec(),
-            singular_values: vec![0.0; p],
-            v: DMatrix::identity(p, p),
-            rank: 0,
-            rtol: options.rank_rtol,
-            floor: options.min_singular_value,
-            n_residuals: m,
-        };
-        return (report, sub);
+        return (report, nothing_solved());
     }
     // Starting subspace from the eigenvectors of the scaled normal matrix (cheap, and accurate enough
     // to step in); the decision that counts is the SVD at the solution. Should that find a different
@@ -450,6 +453,10 @@ pub fn minimize<P: LeastSquaresProblem>(
             );
         }
         fresh = false;
+        if report.termination == TerminationReason::Cancelled {
+            // No rank decision for a solve the caller stopped: its result is not used.
+            return (report, nothing_solved());
+        }
         problem.jacobian(&mut ws.jacobian);
         problem.residuals(&mut ws.residuals);
         sub = Subspace::analyze(
@@ -548,6 +555,11 @@ fn iterate<P: LeastSquaresProblem>(
     let Damping { mut mu, mut nu } = *damping;
     let start_iterations = report.iterations;
     loop {
+        // Asked to stop (crate::cancel): before the next normal equations, the costly part.
+        if crate::cancel::checkpoint().is_err() {
+            report.termination = TerminationReason::Cancelled;
+            return;
+        }
         let cost = if fresh {
             fresh = false;
             report.cost_final

@@ -1,5 +1,5 @@
 //! The calibrated model file (`MODEL.json`): everything `predict` needs, with the robot embedded; the
-//! predictor that evaluates it; and the export of a calibrated URDF.
+//! predictor that evaluates it. The calibrated URDF is written by [`crate::urdf_export`].
 //!
 //! # MODEL.json
 //! ```json
@@ -27,15 +27,15 @@ use crate::chain::{Chain, ChainScratch};
 use crate::error::{CalibError, Result};
 use crate::extensions::{Cause, ExtensionSettings, ModelSpec, Regressors};
 use crate::learned::LearnedResidual;
-use crate::lie3::{quaternion_from_rotation, rpy_from_rotation};
+use crate::lie3::quaternion_from_rotation;
 use crate::params::KinematicParams;
 use crate::predict::Prediction;
 use crate::robot::Robot;
 use crate::units::Unit;
 use nalgebra::{Matrix3, Vector3, Vector6};
-use sim::lie::{Pose, exp_twist, pose_from};
+use sim::lie::pose_from;
 use sim::measurement_table::MeasurementTable;
-use sim::{ChainSpec, JointKind, Model};
+use sim::{ChainSpec, Model};
 
 /// The `format` value of a calibrated model file.
 pub const FORMAT: &str = "robocal-calibrated-model";
@@ -588,177 +588,4 @@ impl Predictor {
         out.orientation = rotation.map(|r| r.iter().map(quaternion_from_rotation).collect());
         Ok(out)
     }
-}
-
-fn fmt3(v: &[f64; 3]) -> String {
-    format!("{:?} {:?} {:?}", v[0], v[1], v[2])
-}
-
-fn origin_xml(t: &Pose) -> String {
-    let rpy = rpy_from_rotation(t.rotation.matrix());
-    format!(
-        "<origin xyz=\"{}\" rpy=\"{}\"/>",
-        fmt3(&t.translation.vector.into()),
-        fmt3(&rpy)
-    )
-}
-
-fn xml_escape(s: &str) -> String {
-    s.replace('&', "&amp;")
-        .replace('<', "&lt;")
-        .replace('>', "&gt;")
-        .replace('"', "&quot;")
-}
-
-/// A URDF of the calibrated robot: its forward kinematics from the base link to the tip link equal the
-/// calibrated model's `T_base_flange(q)` (the tracker-to-base transform and the target are not part of
-/// the robot; they are given in a comment).
-///
-/// Joint `i` gets origin `Oᵢ exp([Aᵢ] δqᵢ)` with `Oᵢ = H'ᵢ₋₁⁻¹ H'ᵢ` (`H'ᵢ = Gᵢ Hᵢ`, the calibrated home
-/// pose of joint frame `i`): the calibrated axis in its parent frame, with the zero offset folded in (a
-/// rotation about, or a translation along, the joint's own axis, which commutes with the joint motion).
-/// The tip hangs off the last joint frame by `H'ₙ⁻¹ M`. Axes, limits and link inertials (in the joint
-/// frames, so they move with the calibrated frames by the same sub-millimetre amounts) are the nominal
-/// ones. Fixed joints of the original chain are folded into these origins.
-pub fn calibrated_urdf(model: &Model, params: &KinematicParams) -> String {
-    let n = model.nq();
-    let mut s = String::new();
-    s.push_str("<?xml version=\"1.0\"?>\n");
-    s.push_str(&format!(
-        "<!-- Calibrated by robocal-calib {}: kinematic error model (joint error twists and zero offsets)\n",
-        env!("CARGO_PKG_VERSION")
-    ));
-    let t = &params.t_tracker_base;
-    s.push_str(&format!(
-        "     T_tracker_base: translation (m) {}, rotation rpy (rad) {}\n",
-        fmt3(&t.translation.vector.into()),
-        fmt3(&rpy_from_rotation(t.rotation.matrix()))
-    ));
-    s.push_str(&format!(
-        "     target in the flange frame (m): {} -->\n",
-        fmt3(&params.p_flange_target.into())
-    ));
-    s.push_str(&format!(
-        "<robot name=\"{}\">\n",
-        xml_escape(&format!("{}_calibrated", model.name))
-    ));
-    s.push_str(&format!(
-        "  <link name=\"{}\"/>\n",
-        xml_escape(&model.base_link)
-    ));
-    let mut prev_inv = Pose::identity();
-    let mut parent = model.base_link.clone();
-    for (i, joint) in model.joints.iter().enumerate() {
-        let home = params.joint_error[i] * joint.home;
-        let mut origin = prev_inv * home;
-        prev_inv = home.inverse();
-        let d = params.zero_offset[i];
-        let kind = match joint.kind {
-            JointKind::Revolute => "revolute",
-            JointKind::Continuous => "continuous",
-            JointKind::Prismatic => "prismatic",
-        };
-        if joint.kind == JointKind::Prismatic {
-            origin *= pose_from(Matrix3::identity(), joint.axis * d);
-        } else {
-            origin *= exp_twist(&Vector6::new(
-                joint.axis.x * d,
-                joint.axis.y * d,
-                joint.axis.z * d,
-                0.0,
-                0.0,
-                0.0,
-            ));
-        }
-        let body = &model.bodies[i];
-        let mut child = body
-            .links
-            .first()
-            .cloned()
-            .unwrap_or_else(|| format!("link_{}", i + 1));
-        if i + 1 == n && child == model.tip_link {
-            child = format!("{child}_joint_frame");
-        }
-        s.push_str(&format!(
-            "  <joint name=\"{}\" type=\"{kind}\">\n    <parent link=\"{}\"/>\n    <child link=\"{}\"/>\n    {}\n    <axis xyz=\"{}\"/>\n",
-            xml_escape(&joint.name),
-            xml_escape(&parent),
-            xml_escape(&child),
-            origin_xml(&origin),
-            fmt3(&joint.axis.into())
-        ));
-        if joint.kind != JointKind::Continuous {
-            let l = joint.limits.unwrap_or(sim::JointLimits {
-                lower: 0.0,
-                upper: 0.0,
-                velocity: 0.0,
-                effort: 0.0,
-            });
-            s.push_str(&format!(
-                "    <limit lower=\"{:?}\" upper=\"{:?}\" effort=\"{:?}\" velocity=\"{:?}\"/>\n",
-                l.lower, l.upper, l.effort, l.velocity
-            ));
-        }
-        s.push_str("  </joint>\n");
-        if body.mass > 0.0 {
-            let c = body.com;
-            let it = body.inertia;
-            s.push_str(&format!(
-                "  <link name=\"{}\">\n    <inertial>\n      <origin xyz=\"{}\" rpy=\"0 0 0\"/>\n      <mass value=\"{:?}\"/>\n      <inertia ixx=\"{:?}\" ixy=\"{:?}\" ixz=\"{:?}\" iyy=\"{:?}\" iyz=\"{:?}\" izz=\"{:?}\"/>\n    </inertial>\n  </link>\n",
-                xml_escape(&child),
-                fmt3(&c.into()),
-                body.mass,
-                it[(0, 0)],
-                it[(0, 1)],
-                it[(0, 2)],
-                it[(1, 1)],
-                it[(1, 2)],
-                it[(2, 2)]
-            ));
-        } else {
-            s.push_str(&format!("  <link name=\"{}\"/>\n", xml_escape(&child)));
-        }
-        parent = child;
-    }
-    let flange = prev_inv * model.home_flange;
-    s.push_str(&format!(
-        "  <joint name=\"{}\" type=\"fixed\">\n    <parent link=\"{}\"/>\n    <child link=\"{}\"/>\n    {}\n  </joint>\n  <link name=\"{}\"/>\n</robot>\n",
-        xml_escape(&format!("{}_calibrated_flange", model.tip_link)),
-        xml_escape(&parent),
-        xml_escape(&model.tip_link),
-        origin_xml(&flange),
-        xml_escape(&model.tip_link)
-    ));
-    s
-}
-
-/// How far the flange pose of `urdf` (base link to tip link) is from the calibrated model's
-/// `T_base_flange(q)` over `configs`: the largest position difference (m) or rotation-matrix entry
-/// difference, whichever is larger. For tests and the CLI's self-check after writing a URDF.
-pub fn urdf_deviation(
-    model: &Model,
-    params: &KinematicParams,
-    urdf: &str,
-    configs: &[Vec<f64>],
-) -> Result<f64> {
-    let spec = ChainSpec {
-        base_link: Some(model.base_link.clone()),
-        tip_link: Some(model.tip_link.clone()),
-    };
-    let exported = sim::urdf::load_str(urdf, "calibrated URDF", &spec)?;
-    let mut base_params = params.clone();
-    base_params.t_tracker_base = Pose::identity();
-    base_params.p_flange_target = Vector3::zeros();
-    let chain = Chain::new(model, &base_params);
-    let mut s = ChainScratch::new(model.nq());
-    let mut data = sim::Data::new(&exported);
-    let mut worst = 0.0f64;
-    for q in configs {
-        chain.forward(&mut s, q);
-        let t = sim::flange_pose(&exported, &mut data, q);
-        let dp = (t.translation.vector - s.t_tracker_flange.translation.vector).norm();
-        let dr = (t.rotation.matrix() - s.t_tracker_flange.rotation.matrix()).amax();
-        worst = worst.max(dp).max(dr);
-    }
-    Ok(worst)
 }

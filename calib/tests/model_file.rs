@@ -3,9 +3,10 @@
 mod common;
 
 use calib::calibrate::{CalibrationOptions, Dataset, calibrate};
-use calib::model_file::{CalibratedModel, Predictor, calibrated_urdf};
+use calib::model_file::{CalibratedModel, Predictor};
 use calib::plan::{PlanOptions, plan_poses};
 use calib::robot::Robot;
+use calib::urdf_export::calibrated_urdf;
 use common::{Truth, random_configs, rng, table};
 use nalgebra::Point3;
 use sim::{ChainSpec, robots};
@@ -171,14 +172,15 @@ fn model_file_errors_name_the_key() {
 fn calibrated_urdf_reproduces_the_calibrated_robot() {
     for (name, seed) in [("iiwa7", 404), ("ur5", 405), ("wam", 406), ("ur10", 407)] {
         let (robot, truth, cal, mut g) = calibrated(name, false, seed);
-        let urdf = calibrated_urdf(&robot.model, &cal.params);
+        let out = calibrated_urdf(&CalibratedModel::new(&robot, &cal)).unwrap();
+        let urdf = out.text.as_str();
         let spec = ChainSpec {
             base_link: Some(robot.model.base_link.clone()),
             tip_link: Some(robot.model.tip_link.clone()),
         };
-        let exported = sim::urdf::load_str(&urdf, "exported", &spec).unwrap();
+        let exported = sim::urdf::load_str(urdf, "exported", &spec).unwrap();
         assert_eq!(exported.nq(), robot.model.nq());
-        let default_chain = sim::urdf::load_str(&urdf, "exported", &ChainSpec::default()).unwrap();
+        let default_chain = sim::urdf::load_str(urdf, "exported", &ChainSpec::default()).unwrap();
         assert_eq!(
             default_chain.tip_link, robot.model.tip_link,
             "the tip stays the default leaf"
@@ -194,10 +196,7 @@ fn calibrated_urdf_reproduces_the_calibrated_robot() {
         assert!(worst < 1e-9, "{name}: {worst:e}");
         // And against the calibrated model's own base-frame flange pose (the CLI's self-check).
         let qs = random_configs(&robot.model, 20, &mut g);
-        assert!(
-            calib::model_file::urdf_deviation(&robot.model, &cal.params, &urdf, &qs).unwrap()
-                < 1e-12
-        );
+        assert!(out.deviation(&robot.model, &cal.params, &qs).unwrap() < 1e-12);
     }
 }
 

@@ -1,10 +1,11 @@
 //! Speed of the analytic truth on the iiwa 7 with every effect on (thermal drift, kinematic offsets,
-//! transmission error, joint coupling, gravity-mode backlash, joint compliance with a payload, link
+//! transmission error, joint coupling, coupled transmission error, gravity-mode backlash, joint compliance with a payload, link
 //! deflection on every joint). Target (issue 3): ≥ 200,000 poses per second per core, i.e. ≤ 5 µs
 //! per pose, on the project's 2-core machine.
 
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use nalgebra::Vector3;
+use sim::effects::coupled_transmission::{CoupledTerm, CoupledTransmission};
 use sim::effects::gear_backlash::GearBacklash;
 use sim::effects::joint_compliance::JointCompliance;
 use sim::effects::joint_coupling::JointCoupling;
@@ -60,6 +61,16 @@ fn effects() -> Effects {
         ),
         coupling: Some(JointCoupling::single(6, 4, 2e-4).unwrap()),
         deflection: Some(LinkDeflection::uniform(7, 2e-6).unwrap()),
+        coupled_transmission: Some(
+            CoupledTransmission::new(vec![CoupledTerm {
+                joint: 6,
+                source: 5,
+                order: 1,
+                amplitude_rad: 5e-5,
+                phase_rad: 0.3,
+            }])
+            .unwrap(),
+        ),
     }
 }
 
@@ -86,6 +97,7 @@ fn bench(c: &mut Criterion) {
         deflection: None,
         transmission: None,
         coupling: None,
+        coupled_transmission: None,
         ..effects()
     };
     let no_deflection = Effects {

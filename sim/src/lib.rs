@@ -42,6 +42,7 @@ pub mod statics;
 pub mod tracker;
 pub mod trig;
 pub mod urdf;
+pub mod urdf_text;
 
 pub use error::{Result, SimError};
 pub use kinematics::{Data, Frame, flange_pose, forward_kinematics};

@@ -54,10 +54,12 @@
 //! ```
 
 mod check;
+mod columns;
 mod csv;
 mod parquet;
 
 pub use check::{LIMIT_TOLERANCE, check_against_model, reach_bound};
+pub use columns::{Column, ColumnValues, configurations_from_columns, from_columns};
 pub use csv::{read_csv_str, write_csv_string};
 pub use parquet::{PARQUET_MAX_ROW_GROUP_ROWS, write_parquet_bytes};
 

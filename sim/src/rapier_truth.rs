@@ -14,6 +14,10 @@
 //! * joint `i` is a multibody revolute (or prismatic) joint whose free axis is the model's joint axis
 //!   through the joint-frame origin: `T_parent_child(θ) = origin · Rot(axis, θ)`, exactly the model's
 //!   kinematics (see [`crate::kinematics`]);
+//! * with [`RapierArm::with_deflection`], link deflection (see [`crate::effects::link_deflection`]):
+//!   after joint `i`, up to two more revolute joints about its deflection axes `uᵢ`, `vᵢ` (through the
+//!   joint origin, in joint frame `i`), each with a spring of stiffness `1/c` toward 0; the joint's
+//!   body before them and the body between them are massless, the link's mass rides on the last;
 //! * joint compliance is rapier's passive joint spring (`MultibodyJoint::set_spring`): a generalised
 //!   force `−kᵢ (θᵢ − qᵢ)` toward the motor-side commanded angle `qᵢ`, integrated implicitly (rapier adds
 //!   `dt² kᵢ` to the mass-matrix diagonal and `−kᵢ dt θ̇ᵢ` to the force). It is a true stiffness in
@@ -73,7 +77,7 @@
 //! assert!(s.residual < 1e-6);
 //! ```
 
-use crate::effects::stiffness;
+use crate::effects::{deflection_compliance, stiffness};
 use crate::error::{Result, SimError};
 use crate::lie::{Pose, pose_from};
 use crate::model::{JointKind, Model};
@@ -160,12 +164,15 @@ impl SettleOptions {
 pub struct Settled {
     /// Link-side joint positions `θ` at rest (rad or m), in the model's joint coordinates.
     pub q_link: Vec<f64>,
+    /// Deflection angles `[α, β]` about each joint's `u` and `v` axes at rest (rad; 0 without a hinge,
+    /// see [`RapierArm::with_deflection`]).
+    pub deflection_rad: Vec<[f64; 2]>,
     /// `T_base_flange` at rest, from rapier's own forward kinematics (m).
     pub flange: Pose,
     /// Engine steps taken.
     pub steps: usize,
-    /// Static balance at rest, `max |kᵢ (qᵢ − θᵢ) + fᵢ|` over the compliant joints (N m or N), with `f`
-    /// the generalised gravity force from rapier's Jacobians.
+    /// Static balance at rest, `max |kᵢ (qᵢ − θᵢ) + fᵢ|` over the compliant joints and hinges (N m or
+    /// N; a hinge's `qᵢ` is 0), with `f` the generalised gravity force from rapier's Jacobians.
     pub residual: f64,
     /// Joint speed of the last step, `max |Δθ| / dt` (rad/s or m/s).
     pub speed: f64,
@@ -184,15 +191,24 @@ struct BodySpec {
 
 /// The model prepared for rapier: immutable and shared; each thread settles with its own
 /// [`RapierWorkspace`].
+///
+/// Its degrees of freedom are the model's joints and, with [`RapierArm::with_deflection`], the
+/// deflection hinges after them (see [`crate::effects::link_deflection`]): each a multibody joint
+/// with one free axis, in chain order, moving one body each (a hinge's parent body and the joint's own
+/// body before its hinges are massless).
 #[derive(Clone, Debug)]
 pub struct RapierArm {
     kinds: Vec<JointKind>,
-    /// Stiffness per joint (N m/rad or N/m; infinite = rigid).
+    /// Stiffness per degree of freedom (N m/rad or N/m; infinite = rigid).
     stiffness: Vec<f64>,
     bodies: Vec<BodySpec>,
-    /// `(local_frame1 in the parent body, local_frame2 in the child body)` per joint; the free axis is
-    /// the frames' x axis.
+    /// `(local_frame1 in the parent body, local_frame2 in the child body)` per degree of freedom; the
+    /// free axis is the frames' x axis.
     frames: Vec<(Pose, Pose)>,
+    /// Index of each model joint's degree of freedom.
+    joint_dof: Vec<usize>,
+    /// Indices of each model joint's `u` and `v` hinges (`None`: rigid about that axis).
+    hinge_dof: Vec<[Option<usize>; 2]>,
     flange_offset: Pose,
     gravity: Vector3<f64>,
     options: SettleOptions,
@@ -204,16 +220,19 @@ pub struct RapierArm {
 /// what the workspace settled before.
 pub struct RapierWorkspace {
     world: rp::PhysicsWorld,
-    /// Rigid body of each moving link, base to tip.
+    /// Rigid body of each degree of freedom's child, base to tip.
     links: Vec<rp::RigidBodyHandle>,
-    /// Handle of each joint (the child body's handle); all belong to one multibody.
+    /// Handle of each multibody joint (the child body's handle); all belong to one multibody.
     joints: Vec<rp::MultibodyJointHandle>,
     /// Multibody link id of each moving body.
     link_ids: Vec<usize>,
-    /// Generalised-coordinate index (rapier's assembly id) of each joint.
+    /// Generalised-coordinate index (rapier's assembly id) of each degree of freedom.
     dofs: Vec<usize>,
+    /// Position of each degree of freedom (rad or m).
     theta: Vec<f64>,
     prev: Vec<f64>,
+    /// Spring reference of each degree of freedom: the commanded joint angle, 0 for a hinge.
+    anchor: Vec<f64>,
     disp: Vec<f64>,
 }
 
@@ -319,9 +338,36 @@ impl RapierArm {
         gravity: &Vector3<f64>,
         options: SettleOptions,
     ) -> Result<RapierArm> {
+        let none = vec![[0.0; 2]; model.nq()];
+        RapierArm::with_deflection(
+            model,
+            stiffness_nm_per_rad,
+            &none,
+            payload,
+            gravity,
+            options,
+        )
+    }
+
+    /// Prepares `model` for rapier as [`RapierArm::new`], with link deflection: after joint `i`, a
+    /// hinge about `uᵢ` and one about `vᵢ` (the axes of [`crate::effects::link_deflection`], through
+    /// the joint origin, in joint frame `i`) with springs of stiffness `1/cᵢᵤ`, `1/cᵢᵥ` toward zero;
+    /// a compliance of 0 leaves that hinge out (rigid). `deflection_rad_per_nm` has one `[cᵤ, cᵥ]`
+    /// per joint (rad/(N m), finite, ≥ 0). The joint's body before its hinges and the body between the
+    /// hinges are massless; the link's mass rides on the last.
+    pub fn with_deflection(
+        model: &Model,
+        stiffness_nm_per_rad: &[f64],
+        deflection_rad_per_nm: &[[f64; 2]],
+        payload: Option<&Payload>,
+        gravity: &Vector3<f64>,
+        options: SettleOptions,
+    ) -> Result<RapierArm> {
         let n = model.nq();
         stiffness::check_values(stiffness_nm_per_rad)?;
         stiffness::check_len(stiffness_nm_per_rad, n)?;
+        deflection_compliance::check_values(deflection_rad_per_nm)?;
+        deflection_compliance::check_len(deflection_rad_per_nm, n)?;
         model.require_inertials()?;
         options.check()?;
         let cond = |field: String, value: String, problem: &str| SimError::BadCondition {
@@ -348,8 +394,24 @@ impl RapierArm {
                 ));
             }
         }
-        let mut bodies = Vec::with_capacity(n);
-        for (i, b) in model.bodies.iter().enumerate() {
+        let massless = BodySpec {
+            mass: 0.0,
+            com: Vector3::zeros(),
+            principal: Vector3::zeros(),
+            axes: Matrix3::identity(),
+        };
+        let mut arm = RapierArm {
+            kinds: Vec::new(),
+            stiffness: Vec::new(),
+            bodies: Vec::new(),
+            frames: Vec::new(),
+            joint_dof: Vec::with_capacity(n),
+            hinge_dof: Vec::with_capacity(n),
+            flange_offset: model.flange_offset,
+            gravity: *gravity,
+            options,
+        };
+        for (i, (b, j)) in model.bodies.iter().zip(&model.joints).enumerate() {
             let (mut mass, mut com, mut inertia) = (b.mass, b.com, b.inertia);
             if i + 1 == n
                 && let Some(pl) = payload
@@ -358,35 +420,46 @@ impl RapierArm {
                 (mass, com, inertia) = merge_point_mass(mass, &com, &inertia, pl.mass, &c_p.coords);
             }
             let (principal, axes) = principal_axes(&inertia);
-            bodies.push(BodySpec {
+            let f2 = pose_from(frame_with_x_along(&j.axis), Vector3::zeros());
+            arm.joint_dof.push(arm.kinds.len());
+            arm.kinds.push(j.kind);
+            arm.stiffness.push(stiffness_nm_per_rad[i]);
+            arm.frames.push((j.origin * f2, f2));
+            arm.bodies.push(massless.clone());
+            let (u, v) = deflection_compliance::deflection_axes(&j.axis);
+            let mut hinges = [None; 2];
+            for ((axis, &c), h) in [u, v]
+                .iter()
+                .zip(&deflection_rad_per_nm[i])
+                .zip(&mut hinges)
+            {
+                if c > 0.0 {
+                    let f = pose_from(frame_with_x_along(axis), Vector3::zeros());
+                    *h = Some(arm.kinds.len());
+                    arm.kinds.push(JointKind::Revolute);
+                    arm.stiffness.push(1.0 / c);
+                    arm.frames.push((f, f));
+                    arm.bodies.push(massless.clone());
+                }
+            }
+            arm.hinge_dof.push(hinges);
+            *arm.bodies.last_mut().expect("a body per degree of freedom") = BodySpec {
                 mass,
                 com,
                 principal,
                 axes,
-            });
+            };
         }
-        let frames = model
-            .joints
-            .iter()
-            .map(|j| {
-                let r_a = frame_with_x_along(&j.axis);
-                let f2 = pose_from(r_a, Vector3::zeros());
-                (j.origin * f2, f2)
-            })
-            .collect();
-        Ok(RapierArm {
-            kinds: model.joints.iter().map(|j| j.kind).collect(),
-            stiffness: stiffness_nm_per_rad.to_vec(),
-            bodies,
-            frames,
-            flange_offset: model.flange_offset,
-            gravity: *gravity,
-            options,
-        })
+        Ok(arm)
     }
 
     /// Number of joints.
     pub fn nq(&self) -> usize {
+        self.joint_dof.len()
+    }
+
+    /// Number of degrees of freedom: joints and deflection hinges.
+    fn ndof(&self) -> usize {
         self.kinds.len()
     }
 
@@ -411,8 +484,8 @@ impl RapierArm {
         world.integration_parameters.normalized_max_linear_velocity = f64::MAX;
         let base = world.insert_body(rp::RigidBodyBuilder::fixed().can_sleep(false));
         let mut parent = base;
-        let mut links = Vec::with_capacity(self.nq());
-        let mut joints = Vec::with_capacity(self.nq());
+        let mut links = Vec::with_capacity(self.ndof());
+        let mut joints = Vec::with_capacity(self.ndof());
         for (i, b) in self.bodies.iter().enumerate() {
             let mp = rp::MassProperties::with_principal_inertia_frame(
                 to_rp_vec(&b.com),
@@ -454,7 +527,7 @@ impl RapierArm {
         world.integration_parameters.dt = 0.0;
         world.step();
         world.integration_parameters.dt = dt;
-        let n = self.nq();
+        let n = self.ndof();
         let (mb, _) = world.multibody_joints.get(joints[0]).expect("joint");
         let link_ids: Vec<usize> = joints
             .iter()
@@ -472,11 +545,12 @@ impl RapierArm {
             dofs,
             theta: vec![0.0; n],
             prev: vec![0.0; n],
+            anchor: vec![0.0; n],
             disp: vec![0.0; n],
         }
     }
 
-    /// Reads the joint positions (model order) into `out`.
+    /// Reads the positions of every degree of freedom into `out`.
     fn read_theta(&self, ws: &RapierWorkspace, out: &mut [f64]) {
         let (mb, _) = ws.world.multibody_joints.get(ws.joints[0]).expect("joint");
         for (i, (&id, o)) in ws.link_ids.iter().zip(out).enumerate() {
@@ -501,24 +575,28 @@ impl RapierArm {
                 value: *v,
             });
         }
-        self.reset(ws, q_cmd);
+        ws.anchor.fill(0.0);
+        for (&d, &q) in self.joint_dof.iter().zip(q_cmd) {
+            ws.anchor[d] = q;
+        }
+        self.reset(ws);
         let dt = self.options.dt;
         let mut speed = f64::INFINITY;
-        ws.prev.copy_from_slice(q_cmd);
+        ws.prev.copy_from_slice(&ws.anchor);
         for step in 1..=self.options.max_steps {
             ws.world.step();
             let mut theta = std::mem::take(&mut ws.theta);
             self.read_theta(ws, &mut theta);
             ws.theta = theta;
             let mut dmax = 0.0f64;
-            for (i, ((th, prev), q)) in ws.theta.iter().zip(&ws.prev).zip(q_cmd).enumerate() {
+            for (d, ((th, prev), q)) in ws.theta.iter().zip(&ws.prev).zip(&ws.anchor).enumerate() {
                 dmax = dmax.max((th - prev).abs());
                 let sag = (th - q).abs();
                 if !sag.is_finite() || sag > MAX_DEFLECTION_RAD {
                     return Err(SimError::NotSettled {
                         reason: format!(
-                            "joint {} sags {sag:.3e} (> {MAX_DEFLECTION_RAD}) at step {step}: stiffness too low for the load",
-                            i + 1
+                            "{} sags {sag:.3e} (> {MAX_DEFLECTION_RAD}) at step {step}: stiffness too low for the load",
+                            self.dof_name(d)
                         ),
                     });
                 }
@@ -526,11 +604,17 @@ impl RapierArm {
             speed = dmax / dt;
             ws.prev.copy_from_slice(&ws.theta);
             if speed < self.options.speed_tol {
-                let residual = self.residual(ws, q_cmd);
+                let residual = self.residual(ws);
                 if residual < self.options.residual_tol {
                     let last = ws.world.bodies[*ws.links.last().expect("links")].position();
+                    let at = |d: Option<usize>| d.map_or(0.0, |d| ws.theta[d]);
                     return Ok(Settled {
-                        q_link: ws.theta.clone(),
+                        q_link: self.joint_dof.iter().map(|&d| ws.theta[d]).collect(),
+                        deflection_rad: self
+                            .hinge_dof
+                            .iter()
+                            .map(|[u, v]| [at(*u), at(*v)])
+                            .collect(),
                         flange: from_rp_pose(last) * self.flange_offset,
                         steps: step,
                         residual,
@@ -539,7 +623,7 @@ impl RapierArm {
                 }
             }
         }
-        let residual = self.residual(ws, q_cmd);
+        let residual = self.residual(ws);
         Err(SimError::NotSettled {
             reason: format!(
                 "{} steps of {} s: joint speed {speed:.3e} rad/s (tolerance {:e}), torque residual {residual:.3e} N m (tolerance {:e})",
@@ -548,8 +632,23 @@ impl RapierArm {
         })
     }
 
-    /// Puts the arm at rest at `θ = q`, springs toward `q`, dampers sized at `q`.
-    fn reset(&self, ws: &mut RapierWorkspace, q: &[f64]) {
+    /// `joint 3` or `joint 3's u hinge` for degree of freedom `d` (1-based joints), for errors.
+    fn dof_name(&self, d: usize) -> String {
+        if let Some(i) = self.joint_dof.iter().position(|&j| j == d) {
+            return format!("joint {}", i + 1);
+        }
+        for (i, h) in self.hinge_dof.iter().enumerate() {
+            if let Some(k) = h.iter().position(|&x| x == Some(d)) {
+                return format!("joint {}'s {} hinge", i + 1, ["u", "v"][k]);
+            }
+        }
+        format!("degree of freedom {d}")
+    }
+
+    /// Puts the arm at rest at its anchors (`ws.anchor`: the commanded joint angles, 0 for the
+    /// hinges), springs toward them, dampers sized there.
+    fn reset(&self, ws: &mut RapierWorkspace) {
+        let q = &ws.anchor;
         let rp::PhysicsWorld {
             bodies,
             multibody_joints,
@@ -587,9 +686,10 @@ impl RapierArm {
         }
     }
 
-    /// `max |kᵢ (qᵢ − θᵢ) + fᵢ|` over the compliant joints, with `f = Σₖ Jₖᵀ (mₖ g)` from rapier's
-    /// centre-of-mass Jacobians at the current pose (N m or N).
-    fn residual(&self, ws: &RapierWorkspace, q: &[f64]) -> f64 {
+    /// `max |kᵢ (qᵢ − θᵢ) + fᵢ|` over the compliant degrees of freedom (`qᵢ` their anchors), with
+    /// `f = Σₖ Jₖᵀ (mₖ g)` from rapier's centre-of-mass Jacobians at the current pose (N m or N).
+    fn residual(&self, ws: &RapierWorkspace) -> f64 {
+        let q = &ws.anchor;
         let (mb, _) = ws.world.multibody_joints.get(ws.joints[0]).expect("joint");
         let g = self.gravity;
         let mut worst = 0.0f64;

@@ -4,6 +4,25 @@
 //! folded into the neighbouring joint origins and their links' inertials merged into the moving body
 //! they are attached to. Meshes, `package://` paths, `<gazebo>`, `<transmission>` and `<ros2_control>`
 //! blocks are never read.
+//!
+//! # Which chain
+//! Without `--base-link`, the base is the one root link (several roots: an error listing them). Without
+//! `--tip-link`, the chain must be clear from the tree, and nothing is chosen between alternatives:
+//! every movable joint below the base must lie on one path, and one leaf link must hang off its last
+//! movable joint (through fixed joints only: `flange`, `tool0`); that leaf is the tip. Leaves hanging
+//! off earlier links through fixed joints only (a ROS-Industrial `base` frame off the root, a camera on
+//! link 3) are frames on the chain, not branches of it: their masses are welded to the body they hang
+//! from. Two cases are errors that list the leaf links to choose from:
+//! * movable joints on two branches (gripper fingers, a second arm): the chain's joints are ambiguous,
+//!   whatever the joint counts (an earlier rule took the branch with the most movable joints);
+//! * several leaves below the last movable joint (`tool0` and `ft_frame` off the last link): the joints
+//!   are clear, but the tip frame is not, and the flange pose (`fk`), the target offset of a scenario
+//!   and the calibrated URDF's flange joint depend on it. Their deepest common link is named, as is
+//!   the last joint's own frame.
+//!
+//! The shipped robots and the two third-party iiwa 7 exports have one leaf each (their fixed `world`,
+//! floating and flange frames lie on the chain), so none depends on a rule. Loops of joints, a link
+//! with two parent joints, a joint from a link to itself and duplicated names are refused first.
 
 use crate::error::{Result, SimError};
 use crate::lie::{Pose, pose_from, rotation_from_rpy};
@@ -17,8 +36,12 @@ use std::path::Path;
 pub struct ChainSpec {
     /// Root of the chain; default: the tree's root link.
     pub base_link: Option<String>,
-    /// Tip of the chain; default: the single leaf link (or the leaf reached through the most movable
-    /// joints when exactly one such leaf exists).
+    /// Tip of the chain; default: the one leaf link below the last movable joint, when every movable
+    /// joint below the base lies on one path and one leaf hangs off its end (leaves hanging off
+    /// earlier links through fixed joints only, such as a `base` or camera frame, are frames, not
+    /// tips). Anything else is an error listing the leaves: movable joints on two branches, or
+    /// several fixed frames off the last joint (`tool0` and `ft_frame`: the joints are clear, the
+    /// tip frame, which `fk` and the target offset depend on, is not).
     pub tip_link: Option<String>,
 }
 
@@ -38,6 +61,47 @@ pub fn load_file(path: &Path, spec: &ChainSpec) -> Result<Model> {
 
 /// Builds a model from URDF text; `source_name` names the text in error messages.
 pub fn load_str(text: &str, source_name: &str, spec: &ChainSpec) -> Result<Model> {
+    let robot = parse(text, source_name)?;
+    Builder::new(&robot, source_name)?.build(spec)
+}
+
+/// One URDF joint of the chain from the base link to the tip link, as the file writes it.
+#[derive(Clone, Debug, PartialEq)]
+pub struct UrdfJoint {
+    /// URDF joint name.
+    pub name: String,
+    /// Revolute, continuous or prismatic (fixed joints are `false`).
+    pub movable: bool,
+    /// Its `<origin>`: the child link frame in the parent link frame at q = 0 (m).
+    pub origin: Pose,
+    /// The origin's `rpy` as written (rad): of the two roll-pitch-yaw triples of a rotation, an editor
+    /// keeps the one nearer to it.
+    pub rpy: [f64; 3],
+}
+
+/// The URDF joints (movable and fixed, base to tip) of the chain that [`load_str`] builds with the
+/// same `spec`, each with its own origin: what a tool that edits the file needs ([`load_str`] folds
+/// the fixed ones into the movable joints' origins).
+pub fn chain_joints(text: &str, source_name: &str, spec: &ChainSpec) -> Result<Vec<UrdfJoint>> {
+    let robot = parse(text, source_name)?;
+    let b = Builder::new(&robot, source_name)?;
+    let base = b.choose_base(spec)?;
+    let tip = b.choose_tip(base, spec)?;
+    b.path(base, tip)?
+        .into_iter()
+        .map(|j| {
+            Ok(UrdfJoint {
+                name: j.name.clone(),
+                movable: is_movable(j),
+                origin: b.joint_origin(j)?,
+                rpy: [j.origin.rpy[0], j.origin.rpy[1], j.origin.rpy[2]],
+            })
+        })
+        .collect()
+}
+
+/// Checks what the XML parser cannot be trusted with, then parses.
+fn parse(text: &str, source_name: &str) -> Result<urdf_rs::Robot> {
     let src = || source_name.to_string();
     if text.contains("xmlns:xacro") || text.contains("<xacro:") {
         return Err(SimError::Xacro { source_name: src() });
@@ -57,11 +121,10 @@ pub fn load_str(text: &str, source_name: &str, spec: &ChainSpec) -> Result<Model
             ),
         });
     }
-    let robot = urdf_rs::read_from_string(text).map_err(|e| SimError::Parse {
+    urdf_rs::read_from_string(text).map_err(|e| SimError::Parse {
         source_name: src(),
         message: one_line(&e.to_string()),
-    })?;
-    Builder::new(&robot, source_name)?.build(spec)
+    })
 }
 
 /// Deepest element nesting accepted in a URDF. A robot description nests about six deep
@@ -187,7 +250,45 @@ impl<'a> Builder<'a> {
                 .or_default()
                 .push(j);
         }
+        b.refuse_loops()?;
         Ok(b)
+    }
+
+    /// Every link has at most one parent joint (checked before), so a link that does not lead up to a
+    /// root lies on (or below) a loop: refused, naming the loop's links in joint order.
+    fn refuse_loops(&self) -> Result<()> {
+        // 1: on the current walk up; 2: known to lead up to a root.
+        let mut state: HashMap<&str, u8> = HashMap::with_capacity(self.links.len());
+        for l in &self.robot.links {
+            let mut walk: Vec<&str> = Vec::new();
+            let mut cur = l.name.as_str();
+            loop {
+                match state.get(cur) {
+                    Some(2) => break,
+                    Some(_) => {
+                        let start = walk.iter().position(|w| *w == cur).unwrap_or(0);
+                        let mut cycle: Vec<&str> = walk[start..].to_vec();
+                        cycle.reverse(); // parent before child
+                        cycle.push(cycle[0]);
+                        return Err(self.structure(format!(
+                            "the joints form a loop: links {}; a URDF must be a tree",
+                            path_list(&cycle)
+                        )));
+                    }
+                    None => {}
+                }
+                state.insert(cur, 1);
+                walk.push(cur);
+                match self.parent_joint.get(cur) {
+                    Some(j) => cur = j.parent.link.as_str(),
+                    None => break,
+                }
+            }
+            for w in walk {
+                state.insert(w, 2);
+            }
+        }
+        Ok(())
     }
 
     fn structure(&self, message: String) -> SimError {
@@ -264,26 +365,6 @@ impl<'a> Builder<'a> {
         Ok(joints)
     }
 
-    fn leaves_below(&self, base: &'a str) -> Vec<&'a str> {
-        let mut out = Vec::new();
-        let mut stack = vec![base];
-        let mut guard = 0;
-        while let Some(l) = stack.pop() {
-            guard += 1;
-            if guard > self.robot.links.len() + 1 {
-                break;
-            }
-            match self.child_joints.get(l) {
-                Some(js) if !js.is_empty() => {
-                    stack.extend(js.iter().map(|j| j.child.link.as_str()))
-                }
-                _ => out.push(l),
-            }
-        }
-        out.sort_unstable();
-        out
-    }
-
     fn choose_base(&self, spec: &ChainSpec) -> Result<&'a str> {
         if let Some(b) = &spec.base_link {
             return self
@@ -297,9 +378,10 @@ impl<'a> Builder<'a> {
             [one] => Ok(one),
             [] => Err(self.structure("no root link: the joints form a cycle".into())),
             many => Err(self.structure(format!(
-                "the links form {} separate trees (roots: {}); join them or give --base-link",
+                "the links form {} separate trees (root links {}); join them or choose one with \
+                 --base-link",
                 many.len(),
-                many.join(", ")
+                name_list(many)
             ))),
         }
     }
@@ -312,29 +394,110 @@ impl<'a> Builder<'a> {
                 .map(|(k, _)| *k)
                 .ok_or_else(|| self.structure(format!("tip link '{t}' does not exist")));
         }
-        let leaves = self.leaves_below(base);
-        if leaves.len() == 1 {
-            return Ok(leaves[0]);
+        let ends = self.chain_ends(base);
+        match ends.as_slice() {
+            [] => Err(self.structure(format!(
+                "no movable joint below base link '{base}': not a robot arm"
+            ))),
+            [end] => match end.leaves.as_slice() {
+                [leaf] => Ok(leaf),
+                leaves => Err(self.structure(format!(
+                    "the tip frame is ambiguous: leaf links {} hang off '{}' (after the last movable \
+                     joint '{}') by fixed joints only; choose one with --tip-link ('{}' for the last \
+                     joint's own frame)",
+                    name_list(leaves),
+                    end.common_link,
+                    end.joint,
+                    end.link
+                ))),
+            },
+            many => {
+                let mut leaves: Vec<&str> = many.iter().flat_map(|e| e.leaves.clone()).collect();
+                leaves.sort_unstable();
+                Err(self.structure(format!(
+                    "the tree branches into {} chains of movable joints (leaf links {}); choose one \
+                     with --tip-link",
+                    many.len(),
+                    name_list(&leaves)
+                )))
+            }
         }
-        let movable = |leaf: &str| -> usize {
-            self.path(base, leaf)
-                .map(|p| p.iter().filter(|j| is_movable(j)).count())
-                .unwrap_or(0)
+    }
+
+    /// Where the chains of movable joints below `base` end: one entry per movable joint with no
+    /// movable joint below it, with the leaf links that hang off it through fixed joints only. A
+    /// serial arm has exactly one entry; its leaves are the candidate tip frames. One pass over the
+    /// subtree (no recursion: trees of any depth).
+    fn chain_ends(&self, base: &'a str) -> Vec<ChainEnd<'a>> {
+        // Pre-order walk, remembering for every link the last movable joint above it (below base).
+        let mut order: Vec<(&'a str, Option<&'a urdf_rs::Joint>)> = Vec::new();
+        let mut stack = vec![(base, None)];
+        while let Some((link, last)) = stack.pop() {
+            order.push((link, last));
+            for j in self.child_joints.get(link).into_iter().flatten() {
+                let last = if is_movable(j) { Some(*j) } else { last };
+                stack.push((j.child.link.as_str(), last));
+            }
+        }
+        // Movable joints strictly below each link (post-order sums over the pre-order list).
+        let mut movable_below: HashMap<&str, usize> = HashMap::new();
+        for (link, _) in order.iter().rev() {
+            let n: usize = self
+                .child_joints
+                .get(link)
+                .into_iter()
+                .flatten()
+                .map(|j| usize::from(is_movable(j)) + movable_below[j.child.link.as_str()])
+                .sum();
+            movable_below.insert(link, n);
+        }
+        let mut ends: Vec<ChainEnd<'a>> = Vec::new();
+        for (link, last) in &order {
+            let Some(j) = last else { continue };
+            let is_leaf = self.child_joints.get(link).is_none_or(|c| c.is_empty());
+            if !is_leaf || movable_below[j.child.link.as_str()] > 0 {
+                continue;
+            }
+            match ends.iter_mut().find(|e| e.joint == j.name) {
+                Some(e) => e.leaves.push(link),
+                None => ends.push(ChainEnd {
+                    joint: j.name.as_str(),
+                    link: j.child.link.as_str(),
+                    common_link: j.child.link.as_str(),
+                    leaves: vec![link],
+                }),
+            }
+        }
+        for e in &mut ends {
+            e.leaves.sort_unstable();
+            e.common_link = self.common_ancestor(&e.leaves, e.link);
+        }
+        ends.sort_by(|a, b| a.leaves.cmp(&b.leaves));
+        ends
+    }
+
+    /// The deepest link above all of `leaves` (which all lie below `top`).
+    fn common_ancestor(&self, leaves: &[&'a str], top: &'a str) -> &'a str {
+        let up = |leaf: &'a str| -> Vec<&'a str> {
+            let mut path = vec![leaf];
+            let mut l = leaf;
+            while l != top {
+                match self.parent_joint.get(l) {
+                    Some(j) => l = j.parent.link.as_str(),
+                    None => break,
+                }
+                path.push(l);
+            }
+            path.reverse();
+            path
         };
-        let best = leaves.iter().map(|l| movable(l)).max().unwrap_or(0);
-        let top: Vec<&str> = leaves
-            .iter()
-            .copied()
-            .filter(|l| movable(l) == best)
-            .collect();
-        if top.len() == 1 && best > 0 {
-            Ok(top[0])
-        } else {
-            Err(self.structure(format!(
-                "the tree branches: leaf links {}; choose one with --tip-link",
-                top.join(", ")
-            )))
+        let first = up(leaves[0]);
+        let mut depth = first.len();
+        for leaf in &leaves[1..] {
+            let other = up(leaf);
+            depth = depth.min(first.iter().zip(&other).take_while(|(a, b)| a == b).count());
         }
+        first[depth.max(1) - 1]
     }
 
     fn build(&self, spec: &ChainSpec) -> Result<Model> {
@@ -556,6 +719,50 @@ impl<'a> Builder<'a> {
             Ok(None)
         }
     }
+}
+
+/// Where one chain of movable joints ends ([`Builder::chain_ends`]).
+struct ChainEnd<'a> {
+    /// The last movable joint of the chain.
+    joint: &'a str,
+    /// Its child link (the last joint's own frame).
+    link: &'a str,
+    /// The deepest link above every leaf in `leaves`.
+    common_link: &'a str,
+    /// Leaf links below `joint` through fixed joints only (sorted).
+    leaves: Vec<&'a str>,
+}
+
+/// At most this many names are listed in an error message; the rest are counted.
+const MAX_LISTED: usize = 12;
+
+/// `'a', 'b', 'c'` (the first [`MAX_LISTED`], then "and N more").
+fn name_list(names: &[&str]) -> String {
+    let mut s: Vec<String> = names
+        .iter()
+        .take(MAX_LISTED)
+        .map(|n| format!("'{n}'"))
+        .collect();
+    if names.len() > MAX_LISTED {
+        s.push(format!("and {} more", names.len() - MAX_LISTED));
+    }
+    s.join(", ")
+}
+
+/// `'a' -> 'b' -> 'a'` (shortened in the middle beyond [`MAX_LISTED`] names).
+fn path_list(names: &[&str]) -> String {
+    let quoted = |n: &&str| format!("'{n}'");
+    if names.len() <= MAX_LISTED {
+        return names.iter().map(quoted).collect::<Vec<_>>().join(" -> ");
+    }
+    let head: Vec<String> = names[..MAX_LISTED / 2].iter().map(quoted).collect();
+    let tail: Vec<String> = names[names.len() - 2..].iter().map(quoted).collect();
+    format!(
+        "{} -> ({} more) -> {}",
+        head.join(" -> "),
+        names.len() - MAX_LISTED / 2 - 2,
+        tail.join(" -> ")
+    )
 }
 
 fn is_movable(j: &urdf_rs::Joint) -> bool {

@@ -5,6 +5,7 @@
 use nalgebra::{Point3, Vector3, Vector6};
 use rand::rngs::StdRng;
 use rand::{RngExt, SeedableRng};
+use sim::effects::coupled_transmission::{CoupledTerm, CoupledTransmission};
 use sim::effects::gear_backlash::GearBacklash;
 use sim::effects::joint_compliance::JointCompliance;
 use sim::effects::joint_coupling::{CouplingTerm, JointCoupling};
@@ -896,6 +897,16 @@ fn all_effects(m: &Model, rng: &mut StdRng) -> Effects {
             )
             .unwrap(),
         ),
+        coupled_transmission: Some(
+            CoupledTransmission::new(vec![CoupledTerm {
+                joint: 6,
+                source: 5,
+                order: 2,
+                amplitude_rad: 2e-4,
+                phase_rad: rng.random::<f64>() * 6.0,
+            }])
+            .unwrap(),
+        ),
     }
 }
 
@@ -931,6 +942,7 @@ fn no_effects_give_exactly_the_nominal_forward_kinematics() {
         ),
         coupling: Some(JointCoupling::single(3, 1, 0.0).unwrap()),
         deflection: Some(LinkDeflection::uniform(7, 0.0).unwrap()),
+        coupled_transmission: Some(CoupledTransmission::new(vec![]).unwrap()),
     };
     let truth = Truth::new(&m, &zero).unwrap();
     let mut s = truth.scratch();
@@ -968,6 +980,7 @@ fn contributions_sum_to_the_total_and_the_prepared_path_equals_the_one_shot() {
             ("kinematic", t.contribution.kinematic),
             ("transmission", t.contribution.transmission),
             ("coupling", t.contribution.coupling),
+            ("coupled_transmission", t.contribution.coupled_transmission),
             ("backlash", t.contribution.backlash),
             ("compliance", t.contribution.compliance),
             ("deflection", t.contribution.deflection),
@@ -1226,6 +1239,29 @@ fn planar_transmission_error_and_coupling_match_closed_form() {
         let nominal = planar(q[0], q[1], 0.2, 1.0, 0.5, p);
         assert!(arr_close(t.contribution.transmission, &(expect - nominal)) < 1e-15);
         assert_eq!(t.contribution.coupling, [0.0; 3]);
+    }
+    // Coupled transmission error: joint 2 gains 4e-5 sin(2 q₁ + 0.7), joint 1 nothing.
+    let effects = Effects {
+        coupled_transmission: Some(
+            CoupledTransmission::new(vec![CoupledTerm {
+                joint: 2,
+                source: 1,
+                order: 2,
+                amplitude_rad: 4e-5,
+                phase_rad: 0.7,
+            }])
+            .unwrap(),
+        ),
+        ..Effects::default()
+    };
+    for q in [[0.0, 0.5], [0.4, -1.1], [-2.7, 2.0]] {
+        let t = true_target(&m, &effects, &cond(&q, None, 20.0, None), &p, &gravity()).unwrap();
+        let th2 = q[1] + 4e-5 * (2.0 * q[0] + 0.7).sin();
+        assert!(t.q_link[0] == q[0] && (t.q_link[1] - th2).abs() < 1e-16);
+        let expect = planar(q[0], th2, 0.2, 1.0, 0.5, p);
+        let nominal = planar(q[0], q[1], 0.2, 1.0, 0.5, p);
+        assert!(arr_close(t.contribution.coupled_transmission, &(expect - nominal)) < 1e-15);
+        assert!(close3(&t.p_base, &expect) < 1e-15);
     }
     // Coupling: joint 2 gains 3e-4 q₁, joint 1 a scale error of −2e-4.
     let effects = Effects {
@@ -1561,12 +1597,14 @@ fn each_absent_new_effect_contributes_exactly_zero_and_the_rest_still_sum() {
     for id in [
         EffectId::TransmissionError,
         EffectId::JointCoupling,
+        EffectId::CoupledTransmission,
         EffectId::LinkDeflection,
     ] {
         let mut e = all.clone();
         match id {
             EffectId::TransmissionError => e.transmission = None,
             EffectId::JointCoupling => e.coupling = None,
+            EffectId::CoupledTransmission => e.coupled_transmission = None,
             _ => e.deflection = None,
         }
         let truth = Truth::new(&m, &e).unwrap();

@@ -31,7 +31,8 @@ fn temp_dir(name: &str) -> PathBuf {
 
 /// Every effect the analytic truth has, each at a size that shows at the target: geometric errors
 /// with base and tool errors, compliance with three payloads, gravity-mode backlash, link growth and
-/// zero drift at a different temperature for every pose (25 → 35 °C, reference 20 °C).
+/// zero drift at a different temperature for every pose (25 → 35 °C, reference 20 °C), transmission
+/// error, joint coupling, coupled transmission error and link deflection on every joint.
 const ALL_EFFECTS: &str = r#"
 seed = 5
 [robot]
@@ -61,6 +62,18 @@ threshold_nm = 1.0
 t_ref_c = 20.0
 alpha_per_k = 23e-6
 beta_rad_per_k = 2e-6
+[effects.transmission]
+amplitude_rad = { normal = [0.0, 1e-4] }
+phase_rad = { uniform = [-3.0, 3.0] }
+[effects.coupling]
+pairs = [[6, 4], [2, 2]]
+ratio_rad_per_rad = [3e-4, -2e-4]
+[effects.coupled_transmission]
+pairs = [[2, 1], [4, 1]]
+amplitude_rad = 1e-4
+phase_rad = [0.4, 1.97]
+[effects.deflection]
+compliance_rad_per_nm = { uniform = [2e-6, 6e-6] }
 "#;
 
 /// [`ALL_EFFECTS`] with `extra` appended, written to `dir/name` and parsed.
@@ -96,7 +109,7 @@ fn rapier_truth_with_every_effect_agrees_with_the_analytic_truth() {
     assert_eq!(rapier.truth_model, TruthModel::Rapier);
     let (a, r) = (simulate(&analytic), simulate(&rapier));
     assert_eq!(a.rows.len(), 10);
-    let mut worst = (0.0f64, 0.0f64);
+    let mut worst = (0.0f64, 0.0f64, 0.0f64);
     for (k, (ra, rr)) in a.rows.iter().zip(&r.rows).enumerate() {
         // Noise-free: the measured position is the true one.
         assert_eq!(rr.reading.p_measured, rr.reading.p_true, "pose {k}");
@@ -111,12 +124,25 @@ fn rapier_truth_with_every_effect_agrees_with_the_analytic_truth() {
             (cr.thermal, cr.kinematic, cr.backlash),
             "pose {k}"
         );
+        assert_eq!(
+            (ca.transmission, ca.coupling, ca.coupled_transmission),
+            (cr.transmission, cr.coupling, cr.coupled_transmission),
+            "pose {k}"
+        );
+        // Joints and deflection hinges settled together by the engine, as by Newton.
+        let dd = norm(ca.deflection, cr.deflection);
+        assert!(dd < POSITION_TOL_M, "pose {k}: deflection {dd:e} m");
+        worst.2 = worst.2.max(dd);
         // The effects are really there (so agreement is not two nominal robots agreeing).
         for (name, c) in [
             ("thermal", ca.thermal),
             ("kinematic", ca.kinematic),
+            ("transmission", ca.transmission),
+            ("coupling", ca.coupling),
+            ("coupled_transmission", ca.coupled_transmission),
             ("backlash", ca.backlash),
             ("compliance", ca.compliance),
+            ("deflection", ca.deflection),
         ] {
             assert!(norm(c, [0.0; 3]) > 1e-5, "pose {k}: no {name} effect");
         }
@@ -133,8 +159,8 @@ fn rapier_truth_with_every_effect_agrees_with_the_analytic_truth() {
         }
     }
     eprintln!(
-        "rapier vs analytic, every effect, 10 poses: worst {:.2e} m, {:.2e} rad",
-        worst.0, worst.1
+        "rapier vs analytic, every effect, 10 poses: worst {:.2e} m, {:.2e} rad, deflection contribution {:.2e} m",
+        worst.0, worst.1, worst.2
     );
     let _ = std::fs::remove_dir_all(dir);
 }

@@ -441,6 +441,25 @@ fn bad_input_and_failure_to_settle_are_one_line_errors() {
     assert!(
         err(RapierArm::new(&model, &[1e4; 6], None, &g, opts)).contains("stiffness_nm_per_rad")
     );
+    let mut c = [[2e-6; 2]; 7];
+    c[2][1] = -1e-6;
+    assert!(
+        err(RapierArm::with_deflection(
+            &model, &[1e4; 7], &c, None, &g, opts
+        ))
+        .contains("compliance_rad_per_nm[2][1]")
+    );
+    assert!(
+        err(RapierArm::with_deflection(
+            &model,
+            &[1e4; 7],
+            &[[2e-6; 2]; 3],
+            None,
+            &g,
+            opts
+        ))
+        .contains("the robot has 7 joints")
+    );
     let mut k = [1e4; 7];
     k[3] = -1.0;
     assert!(

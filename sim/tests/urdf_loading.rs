@@ -327,3 +327,250 @@ fn deeply_nested_xml_is_refused_in_bounded_time() {
     );
     assert_eq!(load(&text).unwrap().nq(), 1);
 }
+
+fn fixed(name: &str, parent: &str, child: &str, xyz: &str) -> String {
+    format!(
+        r#"<joint name="{name}" type="fixed"><parent link="{parent}"/><child link="{child}"/><origin xyz="{xyz}"/></joint>"#
+    )
+}
+
+fn robot(parts: &[String]) -> String {
+    format!(r#"<robot name="r">{}</robot>"#, parts.concat())
+}
+
+fn with_tip(text: &str, tip: &str) -> Result<sim::Model, SimError> {
+    let spec = ChainSpec {
+        base_link: None,
+        tip_link: Some(tip.into()),
+    };
+    urdf::load_str(text, "test.urdf", &spec)
+}
+
+/// Frames hanging off the chain through fixed joints only (a ROS-Industrial `base` frame off the root,
+/// a camera off link 1) are not branches of the chain: every movable joint lies on the path to the one
+/// leaf below the last movable joint (`flange` -> `tool0`), which is the tip. Nothing is chosen between
+/// alternatives, so the default needs no flag.
+#[test]
+fn fixed_frames_off_the_chain_do_not_make_it_ambiguous() {
+    let text = robot(&[
+        link("base_link"),
+        link("base"),
+        link("l1"),
+        link("camera"),
+        link("l2"),
+        link("flange"),
+        link("tool0"),
+        fixed("base_frame", "base_link", "base", "0 0 0"),
+        revolute("j1", "base_link", "l1", "0 0 1"),
+        fixed("camera_mount", "l1", "camera", "0.1 0 0"),
+        revolute("j2", "l1", "l2", "0 0 1"),
+        fixed("flange_joint", "l2", "flange", "0 0 0.1"),
+        fixed("tool0_joint", "flange", "tool0", "0 0 0.05"),
+    ]);
+    let model = load(&text).unwrap();
+    assert_eq!(
+        (model.base_link.as_str(), model.tip_link.as_str()),
+        ("base_link", "tool0")
+    );
+    assert_eq!(model.nq(), 2);
+    // The camera's 1 kg is welded to body 1 (l1 + camera), the flange and tool0 to body 2.
+    assert_eq!((model.bodies[0].mass, model.bodies[1].mass), (2.0, 3.0));
+    assert!((model.flange_offset.translation.vector - Vector3::new(0.0, 0.0, 0.15)).norm() < 1e-15);
+}
+
+/// Two tool frames off the last link (ROS 2 ur_description: `tool0` and `ft_frame`): the chain's
+/// joints are clear, but the tip frame is not, and `fk`, the target offset and `--urdf-out` depend on
+/// it. An error listing both leaves and the last joint's frame, until --tip-link says which.
+#[test]
+fn several_tool_frames_off_the_last_link_need_a_tip_link() {
+    let text = robot(&[
+        link("base"),
+        link("l1"),
+        link("flange"),
+        link("tool0"),
+        link("ft_frame"),
+        revolute("j1", "base", "l1", "0 0 1"),
+        fixed("flange_joint", "l1", "flange", "0 0 0.1"),
+        fixed("tool0_joint", "flange", "tool0", "0 0 0.05"),
+        fixed("ft_joint", "l1", "ft_frame", "0 0 0.02"),
+    ]);
+    let m = msg(load(&text));
+    assert_eq!(
+        m,
+        "test.urdf: the tip frame is ambiguous: leaf links 'ft_frame', 'tool0' hang off 'l1' \
+         (after the last movable joint 'j1') by fixed joints only; choose one with --tip-link \
+         ('l1' for the last joint's own frame)"
+    );
+    for (tip, z) in [
+        ("tool0", 0.15),
+        ("ft_frame", 0.02),
+        ("l1", 0.0),
+        ("flange", 0.1),
+    ] {
+        let model = with_tip(&text, tip).unwrap();
+        assert_eq!(model.tip_link, tip);
+        assert!(
+            (model.flange_offset.translation.z - z).abs() < 1e-15,
+            "{tip}"
+        );
+    }
+    // Both tool frames off 'flange': their common link is named.
+    let text = robot(&[
+        link("base"),
+        link("l1"),
+        link("flange"),
+        link("tool0"),
+        link("tcp"),
+        revolute("j1", "base", "l1", "0 0 1"),
+        fixed("flange_joint", "l1", "flange", "0 0 0.1"),
+        fixed("tool0_joint", "flange", "tool0", "0 0 0.05"),
+        fixed("tcp_joint", "flange", "tcp", "0 0 0.2"),
+    ]);
+    let m = msg(load(&text));
+    assert!(
+        m.contains("leaf links 'tcp', 'tool0' hang off 'flange'"),
+        "{m}"
+    );
+}
+
+/// Movable joints on two branches are a real ambiguity of the chain. The old default took the
+/// branch with the most movable joints when there was one; it now lists every leaf instead, whatever
+/// the counts.
+#[test]
+fn movable_branches_are_an_error_listing_every_leaf_even_of_unequal_length() {
+    let text = robot(&[
+        link("base"),
+        link("a1"),
+        link("a2"),
+        link("b1"),
+        link("b1_tool"),
+        revolute("ja1", "base", "a1", "0 0 1"),
+        revolute("ja2", "a1", "a2", "0 0 1"),
+        revolute("jb1", "base", "b1", "0 0 1"),
+        fixed("jb_tool", "b1", "b1_tool", "0 0 1"),
+    ]);
+    let m = msg(load(&text));
+    assert_eq!(
+        m,
+        "test.urdf: the tree branches into 2 chains of movable joints (leaf links 'a2', \
+         'b1_tool'); choose one with --tip-link"
+    );
+    assert_eq!(with_tip(&text, "a2").unwrap().nq(), 2);
+    assert_eq!(with_tip(&text, "b1_tool").unwrap().nq(), 1);
+    // Gripper fingers (Franka-like): two prismatic joints below the hand are two chains too.
+    let mut parts = vec![link("base"), link("hand"), link("left"), link("right")];
+    parts.push(revolute("j1", "base", "hand", "0 0 1"));
+    for side in ["left", "right"] {
+        parts.push(format!(
+            r#"<joint name="{side}_finger" type="prismatic"><parent link="hand"/><child link="{side}"/>
+            <axis xyz="0 1 0"/><limit lower="0" upper="0.04" effort="1" velocity="1"/></joint>"#
+        ));
+    }
+    let m = msg(load(&robot(&parts)));
+    assert!(
+        m.contains("2 chains") && m.contains("'left', 'right'"),
+        "{m}"
+    );
+    assert_eq!(with_tip(&robot(&parts), "hand").unwrap().nq(), 1);
+}
+
+/// A chain below a chosen --base-link follows the same rule; several roots need --base-link.
+#[test]
+fn several_roots_need_a_base_link_and_the_rule_applies_below_it() {
+    let text = robot(&[
+        link("r1"),
+        link("r2"),
+        link("a"),
+        link("b"),
+        revolute("j1", "r1", "a", "0 0 1"),
+        revolute("j2", "r2", "b", "0 0 1"),
+    ]);
+    let m = msg(load(&text));
+    assert_eq!(
+        m,
+        "test.urdf: the links form 2 separate trees (root links 'r1', 'r2'); join them or choose one \
+         with --base-link"
+    );
+    let spec = ChainSpec {
+        base_link: Some("r2".into()),
+        tip_link: None,
+    };
+    let model = urdf::load_str(&text, "test.urdf", &spec).unwrap();
+    assert_eq!(
+        (model.tip_link.as_str(), model.joints[0].name.as_str()),
+        ("b", "j2")
+    );
+}
+
+/// Loops are refused before any chain is chosen, naming their links in joint order: a loop beside a
+/// good tree (which used to load silently, the loop ignored) and a file that is one loop.
+#[test]
+fn loops_are_refused_naming_their_links() {
+    let text = robot(&[
+        link("base"),
+        link("tip"),
+        link("x"),
+        link("y"),
+        link("z"),
+        revolute("j", "base", "tip", "0 0 1"),
+        revolute("xy", "x", "y", "0 0 1"),
+        revolute("yz", "y", "z", "0 0 1"),
+        revolute("zx", "z", "x", "0 0 1"),
+    ]);
+    let m = msg(load(&text));
+    assert!(
+        m.contains("the joints form a loop: links ")
+            && [
+                "'x' -> 'y' -> 'z' -> 'x'",
+                "'y' -> 'z' -> 'x' -> 'y'",
+                "'z' -> 'x' -> 'y' -> 'z'"
+            ]
+            .iter()
+            .any(|c| m.contains(c)),
+        "{m}"
+    );
+    assert!(msg(with_tip(&text, "tip")).contains("loop"));
+    let text = robot(&[
+        link("a"),
+        link("b"),
+        revolute("ab", "a", "b", "0 0 1"),
+        revolute("ba", "b", "a", "0 0 1"),
+    ]);
+    let m = msg(load(&text));
+    assert!(
+        m.contains("loop: links 'a' -> 'b' -> 'a'") || m.contains("'b' -> 'a' -> 'b'"),
+        "{m}"
+    );
+    // A duplicated link name is refused too (duplicated joints and self-loops: the test above).
+    let text = robot(&[
+        link("a"),
+        link("a"),
+        link("b"),
+        revolute("j", "a", "b", "0 0 1"),
+    ]);
+    assert!(msg(load(&text)).contains("link 'a' is defined twice"));
+}
+
+/// Long lists are cut: at most 12 leaf names, then a count.
+#[test]
+fn a_tree_with_many_leaves_gives_a_one_line_error_of_bounded_length() {
+    let mut parts = vec![link("base")];
+    for i in 0..5000 {
+        parts.push(link(&format!("leaf{i:04}")));
+        parts.push(revolute(
+            &format!("j{i}"),
+            "base",
+            &format!("leaf{i:04}"),
+            "0 0 1",
+        ));
+    }
+    let start = std::time::Instant::now();
+    let m = msg(load(&robot(&parts)));
+    assert!(
+        m.contains("5000 chains") && m.contains("'leaf0011', and 4988 more") && !m.contains('\n'),
+        "{m}"
+    );
+    assert!(m.len() < 400, "{}", m.len());
+    // A hang guard (the analysis is one pass), not a speed target.
+    assert!(start.elapsed().as_secs_f64() < 10.0);
+}

@@ -4,14 +4,15 @@ use super::paths::{Inputs, check_distinct};
 use super::robot_arg::RobotArgs;
 use super::shared::{CliError, CliResult, print_json, read_table};
 use calib::CalibError;
-use calib::calibrate::{CalibrationOptions, Dataset, RobustLoss, calibrate_model};
-use calib::extensions::ModelChoice;
-use calib::model_file::{CalibratedModel, calibrated_urdf, urdf_deviation};
+use calib::calibrate::{Calibration, CalibrationOptions, Dataset, RobustLoss, calibrate_model};
+use calib::extensions::{ModelChoice, ModelSpec};
+use calib::model_file::CalibratedModel;
 use calib::robot::Robot;
 use calib::stats::split_by_pose;
 use serde_json::json;
 use sim::ChainSpec;
-use std::path::PathBuf;
+use sim::measurement_table::MeasurementTable;
+use std::path::{Path, PathBuf};
 
 /// Arguments of `robocal calibrate`.
 #[derive(clap::Args, Debug)]
@@ -21,33 +22,43 @@ pub struct Args {
     /// Measurement table (.csv or .parquet, see the measurement contract).
     #[arg(long, value_name = "FILE")]
     data: PathBuf,
-    /// Error model: `kinematic` (joint error twists, zero offsets, base and target), a `+`-joined
-    /// extension such as `kinematic+joint_compliance+thermal_drift` (also `gear_backlash`,
-    /// `learned:poly|poly1|poly2|poly3|kernel`), or `auto` (what diagnose chooses).
-    #[arg(long, value_name = "MODEL", default_value = "kinematic")]
-    model: String,
+    #[command(flatten)]
+    options: Options,
     /// Where to write the calibrated model (JSON, with the robot embedded).
     #[arg(long, value_name = "MODEL.json")]
     out: PathBuf,
     /// Held-out measurements for validation (instead of splitting --data).
     #[arg(long, value_name = "FILE")]
     test_data: Option<PathBuf>,
-    /// Fraction of the poses of --data held out for validation (0 = calibrate on everything).
-    /// Repeated measurements of a pose stay together.
-    #[arg(long, value_name = "F", default_value_t = 0.3)]
-    test_fraction: f64,
-    /// Seed of the train/test split.
-    #[arg(long, value_name = "N", default_value_t = 0)]
-    seed: u64,
-    /// Robust loss against outliers (iteratively reweighted).
-    #[arg(long, value_name = "LOSS", value_enum)]
-    robust: Option<Robust>,
-    /// Also write a URDF of the calibrated robot (joint origins adjusted).
+    /// Also write the calibrated URDF: the --robot URDF with the chain's joint origins moved to the
+    /// calibrated robot, everything else kept, base and target transforms in a comment.
     #[arg(long, value_name = "FILE.urdf")]
     urdf_out: Option<PathBuf>,
     /// Print one JSON document on stdout instead of text on stderr.
     #[arg(long)]
     json: bool,
+}
+
+/// The flags of `robocal calibrate` that are values rather than files: one definition for the command
+/// line (flattened into its arguments) and the Python package (`robocal.calibrate(data, **options)`,
+/// keyword arguments parsed by [`super::flags::parse`]). A flag added here is a keyword argument there.
+#[derive(clap::Args, Debug, Clone)]
+pub struct Options {
+    /// Error model: `kinematic` (joint error twists, zero offsets, base and target), a `+`-joined
+    /// extension such as `kinematic+joint_compliance+thermal_drift` (also `gear_backlash`,
+    /// `learned:poly|poly1|poly2|poly3|kernel`), or `auto` (what diagnose chooses).
+    #[arg(long, value_name = "MODEL", default_value = "kinematic")]
+    pub model: String,
+    /// Fraction of the poses of --data held out for validation (0 = calibrate on everything).
+    /// Repeated measurements of a pose stay together.
+    #[arg(long, value_name = "F", default_value_t = 0.3)]
+    pub test_fraction: f64,
+    /// Seed of the train/test split.
+    #[arg(long, value_name = "N", default_value_t = 0)]
+    pub seed: u64,
+    /// Robust loss against outliers (iteratively reweighted).
+    #[arg(long, value_name = "LOSS", value_enum)]
+    robust: Option<Robust>,
 }
 
 /// `--robust`: the robust loss against outliers.
@@ -69,13 +80,167 @@ impl Robust {
     }
 }
 
+impl Options {
+    /// The model `--model` names, `None` for `auto`.
+    fn model_spec(&self) -> Result<Option<ModelSpec>, CliError> {
+        Ok(match self.model.parse::<ModelChoice>()? {
+            ModelChoice::Auto => None,
+            ModelChoice::Model(m) => Some(m),
+        })
+    }
+
+    /// The model to fit (`None` for `auto`) and calib's calibration options; bad values are input
+    /// errors naming the flag.
+    fn resolve(&self) -> Result<(Option<ModelSpec>, CalibrationOptions), CliError> {
+        let model_spec = self.model_spec()?;
+        if !(0.0..1.0).contains(&self.test_fraction) {
+            return Err(CliError::Input(format!(
+                "--test-fraction {}: must be in [0, 1)",
+                self.test_fraction
+            )));
+        }
+        let options = CalibrationOptions {
+            robust: self.robust.map(Robust::loss),
+            ..CalibrationOptions::default()
+        };
+        Ok((model_spec, options))
+    }
+}
+
+/// A measurement table and the name that stands for it in messages and reports (its file name).
+#[derive(Clone, Copy, Debug)]
+pub struct Named<'a> {
+    /// The table, checked against the robot.
+    pub table: &'a MeasurementTable,
+    /// Its name (a file as given, or a description of a table in memory).
+    pub name: &'a str,
+}
+
+/// What `robocal calibrate` computes between reading its inputs and writing its outputs.
+pub struct Outcome {
+    /// The fitted model (`auto` resolved).
+    pub model_spec: ModelSpec,
+    /// The calibration.
+    pub cal: Calibration,
+    /// How the poses were split: the report's `split` object.
+    pub split: serde_json::Value,
+    /// The rows of the data the model was fitted on.
+    pub train_rows: Vec<usize>,
+}
+
+impl Outcome {
+    /// The message of a calibration that did not converge (a runtime failure), if it did not.
+    pub fn failure(&self) -> Option<String> {
+        let report = &self.cal.report;
+        (!report.was_successful()).then(|| {
+            format!(
+                "calibration did not converge: {} after {} iterations",
+                report.after.solver.termination, report.after.solver.iterations
+            )
+        })
+    }
+
+    /// The `calibrate --json` document: `out` and `urdf_out` name the files written (null when none).
+    pub fn json(
+        &self,
+        robot: &Robot,
+        data: &str,
+        out: Option<&Path>,
+        urdf_out: Option<&Path>,
+    ) -> serde_json::Value {
+        json!({
+            "robot": robot.model.name,
+            "model": self.model_spec.name(),
+            "data": data,
+            "out": out.map(|p| p.display().to_string()),
+            "urdf_out": urdf_out.map(|p| p.display().to_string()),
+            "split": self.split,
+            "report": self.cal.report,
+        })
+    }
+}
+
+/// Calibrates `robot` on `data` (held out: `test`, or the `--test-fraction` of `data`'s poses) as
+/// `robocal calibrate` does with `options`; `progress` hears which model `--model auto`'s diagnosis
+/// fits, `note` what it chose. A calibration that does not converge is an [`Outcome`] too (see
+/// [`Outcome::failure`]).
+pub fn calibrate(
+    robot: &Robot,
+    data: Named<'_>,
+    test: Option<Named<'_>>,
+    options: &Options,
+    progress: &mut dyn FnMut(&str),
+    note: &mut dyn FnMut(&str),
+) -> Result<Outcome, CliError> {
+    let (model_spec, calibration) = options.resolve()?;
+    let model = &robot.model;
+    let table = data.table;
+    let (train, test_set, split) = match test {
+        Some(t) => (
+            Dataset::all(table, data.name),
+            Some(Dataset::all(t.table, t.name)),
+            json!({"kind": "test_file", "test_data": t.name}),
+        ),
+        None => {
+            let (tr, te) = split_by_pose(table, options.test_fraction, options.seed);
+            let split = json!({"kind": "by_pose", "test_fraction": options.test_fraction, "seed": options.seed});
+            let train = Dataset {
+                table,
+                rows: tr,
+                name: if te.is_empty() {
+                    data.name.to_string()
+                } else {
+                    format!("{} (training set)", data.name)
+                },
+            };
+            let test = (!te.is_empty()).then(|| Dataset {
+                table,
+                rows: te,
+                name: format!("{} (test set)", data.name),
+            });
+            (train, test, split)
+        }
+    };
+    let model_spec = match model_spec {
+        Some(s) => s,
+        None => {
+            let d = super::diagnose::run_diagnosis_with(
+                model,
+                table,
+                data.name,
+                &super::diagnose::options(1.0 / 3.0, options.seed, 1e-3)?,
+                progress,
+            )?;
+            note(&format!("--model auto: diagnose chose {}", d.model));
+            d.model
+        }
+    };
+    let cal = calibrate_model(model, &train, test_set.as_ref(), &model_spec, &calibration)
+        .map_err(|e| {
+            let split_hint = matches!(e, CalibError::TooFewPoses { .. })
+                && test.is_none()
+                && options.test_fraction > 0.0;
+            let e = CliError::from(e);
+            if split_hint {
+                e.with_hint(&format!(
+                    " (--test-fraction {} held out part of the poses; --test-fraction 0 uses all)",
+                    options.test_fraction
+                ))
+            } else {
+                e
+            }
+        })?;
+    Ok(Outcome {
+        model_spec,
+        cal,
+        split,
+        train_rows: train.rows,
+    })
+}
+
 /// Runs `robocal calibrate`.
 pub fn run(args: Args) -> CliResult {
-    let model_spec = match args.model.parse::<ModelChoice>()? {
-        ModelChoice::Auto => None,
-        ModelChoice::Model(m) => Some(m),
-    };
-    let robust = args.robust.map(Robust::loss);
+    args.options.model_spec()?;
     let mut inputs = Inputs::new();
     inputs
         .add("--data", &args.data)
@@ -88,12 +253,7 @@ pub fn run(args: Args) -> CliResult {
         inputs.check("--urdf-out", u)?;
         check_distinct(("--out", &args.out), ("--urdf-out", u))?;
     }
-    if !(0.0..1.0).contains(&args.test_fraction) {
-        return Err(CliError::Input(format!(
-            "--test-fraction {}: must be in [0, 1)",
-            args.test_fraction
-        )));
-    }
+    args.options.resolve()?;
     let spec = ChainSpec {
         base_link: args.robot.base_link.clone(),
         tip_link: args.robot.tip_link.clone(),
@@ -103,76 +263,35 @@ pub fn run(args: Args) -> CliResult {
     let table = read_table(&args.data, model)?;
     let data_name = args.data.display().to_string();
     let test_table = match &args.test_data {
-        Some(p) => Some(read_table(p, model)?),
+        Some(p) => Some((read_table(p, model)?, p.display().to_string())),
         None => None,
     };
-    let (train, test, split) = match (&test_table, &args.test_data) {
-        (Some(t), Some(p)) => (
-            Dataset::all(&table, &data_name),
-            Some(Dataset::all(t, &p.display().to_string())),
-            json!({"kind": "test_file", "test_data": p.display().to_string()}),
-        ),
-        _ => {
-            let (tr, te) = split_by_pose(&table, args.test_fraction, args.seed);
-            let split =
-                json!({"kind": "by_pose", "test_fraction": args.test_fraction, "seed": args.seed});
-            let train = Dataset {
-                table: &table,
-                rows: tr,
-                name: if te.is_empty() {
-                    data_name.clone()
-                } else {
-                    format!("{data_name} (training set)")
-                },
-            };
-            let test = (!te.is_empty()).then(|| Dataset {
-                table: &table,
-                rows: te,
-                name: format!("{data_name} (test set)"),
-            });
-            (train, test, split)
-        }
+    let test = test_table
+        .as_ref()
+        .map(|(t, name)| Named { table: t, name });
+    let data = Named {
+        table: &table,
+        name: &data_name,
     };
-    let options = CalibrationOptions {
-        robust,
-        ..CalibrationOptions::default()
-    };
-    let model_spec = match model_spec {
-        Some(s) => s,
-        None => {
-            let d = super::diagnose::run_diagnosis(
-                model,
-                &table,
-                &data_name,
-                &super::diagnose::options(1.0 / 3.0, args.seed, 1e-3)?,
-            )?;
-            if !args.json {
-                eprintln!("--model auto: diagnose chose {}", d.model);
+    let mut spinner = super::diagnose::Spinner::default();
+    let quiet = args.json;
+    let outcome = calibrate(
+        &robot,
+        data,
+        test,
+        &args.options,
+        &mut |m| spinner.show(m),
+        &mut |m| {
+            if !quiet {
+                eprintln!("{m}");
             }
-            d.model
-        }
-    };
-    let cal =
-        calibrate_model(model, &train, test.as_ref(), &model_spec, &options).map_err(|e| {
-            let split_hint = matches!(e, CalibError::TooFewPoses { .. })
-                && args.test_data.is_none()
-                && args.test_fraction > 0.0;
-            let e = CliError::from(e);
-            if split_hint {
-                e.with_hint(&format!(
-                    " (--test-fraction {} held out part of the poses; --test-fraction 0 uses all)",
-                    args.test_fraction
-                ))
-            } else {
-                e
-            }
-        })?;
+        },
+    );
+    drop(spinner);
+    let outcome = outcome?;
+    let cal = &outcome.cal;
     let report = &cal.report;
-    if !report.was_successful() {
-        let msg = format!(
-            "calibration did not converge: {} after {} iterations",
-            report.after.solver.termination, report.after.solver.iterations
-        );
+    if let Some(msg) = outcome.failure() {
         if args.json {
             print_json(&json!({"error": msg, "report": report}))?;
         } else {
@@ -180,35 +299,18 @@ pub fn run(args: Args) -> CliResult {
         }
         return Err(CliError::Runtime(msg));
     }
-    let file = CalibratedModel::new(&robot, &cal);
+    let file = CalibratedModel::new(&robot, cal);
     sim::io::write_atomic(&args.out, file.to_json().as_bytes())?;
     if let Some(path) = &args.urdf_out {
-        let urdf = calibrated_urdf(model, &cal.params);
-        let configs: Vec<Vec<f64>> = train
-            .rows
-            .iter()
-            .take(200)
-            .map(|&r| table.q_row(r).to_vec())
-            .collect();
-        let dev = urdf_deviation(model, &cal.params, &urdf, &configs)?;
-        if dev > 1e-9 {
-            return Err(CliError::Runtime(format!(
-                "{}: the calibrated URDF deviates from the model by {dev:.1e} (m or rotation entry); not written",
-                path.display()
-            )));
-        }
-        sim::io::write_atomic(path, urdf.as_bytes())?;
+        super::urdf_out::write(path, &file, &table, &data_name)?;
     }
     if args.json {
-        print_json(&json!({
-            "robot": model.name,
-            "model": model_spec.name(),
-            "data": data_name,
-            "out": args.out.display().to_string(),
-            "urdf_out": args.urdf_out.as_ref().map(|p| p.display().to_string()),
-            "split": split,
-            "report": report,
-        }))
+        print_json(&outcome.json(
+            &robot,
+            &data_name,
+            Some(&args.out),
+            args.urdf_out.as_deref(),
+        ))
     } else {
         eprint!("{}", report.text());
         eprintln!("wrote {}", args.out.display());

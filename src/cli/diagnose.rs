@@ -24,21 +24,46 @@ pub struct Args {
     /// Write plots (SVG) and a one-page summary (index.html, summary.md) into this folder.
     #[arg(long, value_name = "DIR")]
     report: Option<PathBuf>,
+    #[command(flatten)]
+    options: Options,
+}
+
+/// The flags of `robocal diagnose` that are values rather than files: one definition for the command
+/// line (flattened into its arguments) and the Python package (`robocal.diagnose(data, **options)`,
+/// keyword arguments parsed by [`super::flags::parse`]). A flag added here is a keyword argument there.
+#[derive(clap::Args, Debug, Clone)]
+pub struct Options {
     /// Fraction of the poses held out to judge every decision (repeats of a pose stay together).
     /// A decimal or a ratio such as `1/3`.
     #[arg(long, value_name = "F", default_value = "1/3", value_parser = parse_fraction)]
-    test_fraction: f64,
+    pub test_fraction: f64,
     /// Seed of the train/test split and of the learned models' folds.
     #[arg(long, value_name = "N", default_value_t = 0)]
-    seed: u64,
+    pub seed: u64,
     /// False-alarm level of each round's training test (family-wise over its candidates); the
     /// held-out test that must also pass is at 0.05.
     #[arg(long, value_name = "P", default_value_t = 1e-3)]
-    alpha: f64,
+    pub alpha: f64,
     /// The noise floor (m, RMS of the position error norm) when known better than the data tell, e.g.
     /// a robot's repeatability; by default estimated from repeated poses, `sigma` or the tracker model.
     #[arg(long, value_name = "M")]
-    noise_floor: Option<f64>,
+    pub noise_floor: Option<f64>,
+}
+
+impl Options {
+    /// calib's diagnose options; bad values are input errors naming the flag.
+    pub fn resolve(&self) -> Result<DiagnoseOptions, CliError> {
+        let mut o = options(self.test_fraction, self.seed, self.alpha)?;
+        if let Some(v) = self.noise_floor {
+            if !(v > 0.0 && v.is_finite() && v < 0.1) {
+                return Err(CliError::Input(format!(
+                    "--noise-floor {v}: must be a position error in m, > 0 and < 0.1"
+                )));
+            }
+            o.noise_floor_m = Some(v);
+        }
+        Ok(o)
+    }
 }
 
 /// A fraction given as a decimal (`0.25`) or a ratio (`1/3`).
@@ -146,6 +171,32 @@ pub(crate) fn options(
     })
 }
 
+/// A spinner on stderr, shown from its first message when stderr is a terminal, cleared when dropped.
+#[derive(Default)]
+pub(crate) struct Spinner(Option<indicatif::ProgressBar>);
+
+impl Spinner {
+    /// Shows `fitting {model}`.
+    pub(crate) fn show(&mut self, model: &str) {
+        if self.0.is_none() && std::io::stderr().is_terminal() {
+            let b = indicatif::ProgressBar::new_spinner();
+            b.enable_steady_tick(std::time::Duration::from_millis(120));
+            self.0 = Some(b);
+        }
+        if let Some(b) = &self.0 {
+            b.set_message(format!("fitting {model}"));
+        }
+    }
+}
+
+impl Drop for Spinner {
+    fn drop(&mut self) {
+        if let Some(b) = &self.0 {
+            b.finish_and_clear();
+        }
+    }
+}
+
 /// Runs a diagnosis with a spinner on a terminal.
 pub(crate) fn run_diagnosis(
     model: &sim::Model,
@@ -153,35 +204,31 @@ pub(crate) fn run_diagnosis(
     name: &str,
     options: &DiagnoseOptions,
 ) -> Result<Diagnosis, CliError> {
-    let bar = std::io::stderr().is_terminal().then(|| {
-        let b = indicatif::ProgressBar::new_spinner();
-        b.enable_steady_tick(std::time::Duration::from_millis(120));
-        b
-    });
-    let mut progress = |m: &str| {
-        if let Some(b) = &bar {
-            b.set_message(format!("fitting {m}"));
-        }
-    };
-    let d =
-        diagnose_with_progress(model, table, name, options, &mut progress).map_err(CliError::from);
-    if let Some(b) = &bar {
-        b.finish_and_clear();
-    }
-    d
+    let mut spinner = Spinner::default();
+    run_diagnosis_with(model, table, name, options, &mut |m| spinner.show(m))
+}
+
+/// Runs a diagnosis of `table` (`name` in messages) on `model`, calling `progress` with the model
+/// before each fit: what `robocal diagnose` computes between reading its inputs and writing its
+/// outputs (the JSON document is [`json`]).
+pub fn run_diagnosis_with(
+    model: &sim::Model,
+    table: &sim::measurement_table::MeasurementTable,
+    name: &str,
+    options: &DiagnoseOptions,
+    progress: &mut dyn FnMut(&str),
+) -> Result<Diagnosis, CliError> {
+    diagnose_with_progress(model, table, name, options, progress).map_err(CliError::from)
+}
+
+/// The `diagnose --json` document (the diagnose contract).
+pub fn json(d: &Diagnosis) -> Result<serde_json::Value, CliError> {
+    serde_json::to_value(d).map_err(|e| CliError::Runtime(format!("cannot write JSON: {e}")))
 }
 
 /// Runs `robocal diagnose`.
 pub fn run(args: Args) -> CliResult {
-    let mut options = options(args.test_fraction, args.seed, args.alpha)?;
-    if let Some(v) = args.noise_floor {
-        if !(v > 0.0 && v.is_finite() && v < 0.1) {
-            return Err(CliError::Input(format!(
-                "--noise-floor {v}: must be a position error in m, > 0 and < 0.1"
-            )));
-        }
-        options.noise_floor_m = Some(v);
-    }
+    let options = args.options.resolve()?;
     if let Some(dir) = &args.report {
         let mut inputs = Inputs::new();
         inputs
@@ -219,9 +266,7 @@ pub fn run(args: Args) -> CliResult {
         }
     }
     if args.json {
-        let v = serde_json::to_value(&d)
-            .map_err(|e| CliError::Runtime(format!("cannot write JSON: {e}")))?;
-        return print_json(&v);
+        return print_json(&json(&d)?);
     }
     eprint!("{}", text(&d, &name));
     Ok(())

@@ -5,9 +5,10 @@
 
 use super::paths::Inputs;
 use super::shared::{CliError, CliResult, print_json};
+use sim::generate::Summary;
 use sim::scenario::{Overrides, Scenario};
 use std::io::IsTerminal;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 /// Arguments of `robocal generate`.
 #[derive(clap::Args, Debug)]
@@ -19,73 +20,129 @@ pub struct Args {
     /// other files in it are kept. It must not hold the scenario or its inputs.
     #[arg(long, value_name = "DIR")]
     out: PathBuf,
-    /// Seed of every random draw (replaces the scenario's `seed`).
-    #[arg(long, value_name = "N")]
-    seed: Option<u64>,
-    /// Number of poses (replaces `[campaign] poses`).
-    #[arg(long, value_name = "N")]
-    poses: Option<usize>,
-    /// Multiplier on the tracker noise and outlier size (replaces `[tracker] noise_scale`); 0 gives
-    /// noise-free measurements.
-    #[arg(long, value_name = "M", allow_negative_numbers = true)]
-    noise: Option<f64>,
+    #[command(flatten)]
+    options: Options,
     /// Print the summary as one JSON document on stdout.
     #[arg(long)]
     json: bool,
 }
 
+/// The flags of `robocal generate` that are values rather than files: one definition for the command
+/// line (flattened into its arguments) and the Python package (`robocal.generate(scenario,
+/// **options)`, keyword arguments parsed by [`super::flags::parse`]).
+#[derive(clap::Args, Debug, Clone)]
+pub struct Options {
+    /// Seed of every random draw (replaces the scenario's `seed`).
+    #[arg(long, value_name = "N")]
+    pub seed: Option<u64>,
+    /// Number of poses (replaces `[campaign] poses`).
+    #[arg(long, value_name = "N")]
+    pub poses: Option<usize>,
+    /// Multiplier on the tracker noise and outlier size (replaces `[tracker] noise_scale`); 0 gives
+    /// noise-free measurements.
+    #[arg(long, value_name = "M", allow_negative_numbers = true)]
+    pub noise: Option<f64>,
+}
+
+impl Options {
+    /// The scenario overrides; bad values are input errors naming the flag.
+    fn overrides(&self) -> Result<Overrides, CliError> {
+        if self.poses == Some(0) {
+            return Err(CliError::Input("--poses: 0: must be ≥ 1".into()));
+        }
+        if let Some(p) = self.poses {
+            sim::campaign::check_row_count(Some(p), &format!("--poses {p}"))
+                .map_err(CliError::Input)?;
+        }
+        if let Some(m) = self.noise
+            && !(m.is_finite() && m >= 0.0)
+        {
+            return Err(CliError::Input(format!(
+                "--noise: {m}: must be a finite multiplier ≥ 0"
+            )));
+        }
+        Ok(Overrides {
+            seed: self.seed,
+            poses: self.poses,
+            noise: self.noise,
+        })
+    }
+}
+
+/// Generates the dataset of the scenario file `scenario` into the folder `out` as `robocal generate`
+/// does with `options` (the folder must not hold the scenario's inputs); `progress` is called with the
+/// total number of rows once, then with rows finished, from worker threads.
+pub fn generate(
+    scenario: &Path,
+    out: &Path,
+    options: &Options,
+    progress: &(dyn Fn(Rows) + Sync),
+) -> Result<Summary, CliError> {
+    let overrides = options.overrides()?;
+    let loaded = Scenario::load(scenario)?;
+    Inputs::new()
+        .add_scenario("--scenario", scenario, &loaded)
+        .check_dir("--out", out, &sim::generate::OUTPUT_FILES)?;
+    let resolved = loaded.resolve(&overrides)?;
+    let plan = sim::generate::plan_of(&resolved)?;
+    progress(Rows::Total(plan.len() as u64));
+    let tick = |k: u64| progress(Rows::Done(k));
+    Ok(sim::generate::write_dataset(
+        &resolved,
+        out,
+        &plan,
+        Some(&tick),
+    )?)
+}
+
+/// What [`generate`] reports to its progress callback.
+#[derive(Clone, Copy, Debug)]
+pub enum Rows {
+    /// The number of rows the campaign has.
+    Total(u64),
+    /// Rows just finished.
+    Done(u64),
+}
+
 /// Runs `robocal generate`.
 pub fn run(args: Args) -> CliResult {
-    if args.poses == Some(0) {
-        return Err(CliError::Input("--poses: 0: must be ≥ 1".into()));
-    }
-    if let Some(p) = args.poses {
-        sim::campaign::check_row_count(Some(p), &format!("--poses {p}"))
-            .map_err(CliError::Input)?;
-    }
-    if let Some(m) = args.noise
-        && !(m.is_finite() && m >= 0.0)
-    {
-        return Err(CliError::Input(format!(
-            "--noise: {m}: must be a finite multiplier ≥ 0"
-        )));
-    }
-    let scenario = Scenario::load(&args.scenario)?;
-    Inputs::new()
-        .add_scenario("--scenario", &args.scenario, &scenario)
-        .check_dir("--out", &args.out, &sim::generate::OUTPUT_FILES)?;
-    let overrides = Overrides {
-        seed: args.seed,
-        poses: args.poses,
-        noise: args.noise,
-    };
-    let resolved = scenario.resolve(&overrides)?;
-    let plan = sim::generate::plan_of(&resolved)?;
-    let bar = std::io::stderr().is_terminal().then(|| {
-        let b = indicatif::ProgressBar::new(plan.len() as u64);
-        if let Ok(style) = indicatif::ProgressStyle::with_template(
-            "{spinner} simulating {pos}/{len} measurements [{bar:40}] {eta}",
-        ) {
-            b.set_style(style.progress_chars("=> "));
+    // Made once the campaign's size is known, on a terminal only.
+    let bar = std::sync::OnceLock::new();
+    let progress = |r: Rows| match r {
+        Rows::Total(n) if std::io::stderr().is_terminal() => {
+            bar.get_or_init(|| {
+                let b = indicatif::ProgressBar::new(n);
+                if let Ok(style) = indicatif::ProgressStyle::with_template(
+                    "{spinner} simulating {pos}/{len} measurements [{bar:40}] {eta}",
+                ) {
+                    b.set_style(style.progress_chars("=> "));
+                }
+                b
+            });
         }
-        b
-    });
-    let tick = |k: u64| {
-        if let Some(b) = &bar {
-            b.inc(k);
+        Rows::Total(_) => {}
+        Rows::Done(k) => {
+            if let Some(b) = bar.get() {
+                b.inc(k);
+            }
         }
     };
-    let summary = sim::generate::write_dataset(&resolved, &args.out, &plan, Some(&tick));
-    if let Some(b) = &bar {
+    let summary = generate(&args.scenario, &args.out, &args.options, &progress);
+    if let Some(b) = bar.get() {
         b.finish_and_clear();
     }
     let summary = summary?;
     eprintln!("{}", summary.paragraph());
     if args.json {
-        let mut v = serde_json::to_value(&summary)
-            .map_err(|e| CliError::Runtime(format!("cannot write JSON: {e}")))?;
-        v["files"] = serde_json::json!(summary.files);
-        return print_json(&v);
+        return print_json(&summary_json(&summary)?);
     }
     Ok(())
+}
+
+/// The `generate --json` document.
+pub fn summary_json(summary: &Summary) -> Result<serde_json::Value, CliError> {
+    let mut v = serde_json::to_value(summary)
+        .map_err(|e| CliError::Runtime(format!("cannot write JSON: {e}")))?;
+    v["files"] = serde_json::json!(summary.files);
+    Ok(v)
 }

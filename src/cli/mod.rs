@@ -1,19 +1,23 @@
 //! Subcommands, one module each; [`shared`] holds what several of them use. The error type that
-//! decides the exit code is [`crate::error::CliError`].
+//! decides the exit code is [`crate::error::CliError`]. The modules the Python package calls into
+//! (`calibrate`, `diagnose`, `generate`, `predict`, `flags`, `shared`) are public: each keeps the
+//! glue between reading its inputs and writing its outputs in functions of its own.
 
-mod calibrate;
+pub mod calibrate;
 mod dataset;
 mod demo;
-mod diagnose;
+pub mod diagnose;
 mod fk;
-mod generate;
+pub mod flags;
+pub mod generate;
 mod info;
 mod paths;
 mod plan_poses;
-mod predict;
+pub mod predict;
 mod robot_arg;
-mod shared;
+pub mod shared;
 mod sweep;
+mod urdf_out;
 
 use crate::error::CliResult;
 use clap::{Parser, Subcommand};

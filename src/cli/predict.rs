@@ -2,7 +2,7 @@
 
 use super::paths::{Inputs, check_distinct};
 use super::shared::{CliError, CliResult, print_json};
-use calib::model_file::{CalibratedModel, Predictor, calibrated_urdf, urdf_deviation};
+use calib::model_file::{CalibratedModel, Predictor};
 use serde_json::json;
 use sim::measurement_table::{self, MeasurementTable};
 use std::path::{Path, PathBuf};
@@ -20,7 +20,8 @@ pub struct Args {
     /// Where to write `pose,x,y,z` (and `qw,qx,qy,qz` with orientation), tracker frame, m.
     #[arg(long, value_name = "PRED.csv")]
     out: PathBuf,
-    /// Also write a URDF of the calibrated robot (joint origins adjusted).
+    /// Also write the calibrated URDF: the model's URDF with the chain's joint origins moved to the
+    /// calibrated robot, everything else kept, base and target transforms in a comment.
     #[arg(long, value_name = "FILE.urdf")]
     urdf_out: Option<PathBuf>,
     /// Print one JSON summary on stdout instead of text on stderr.
@@ -32,19 +33,32 @@ pub struct Args {
 fn read_configs(path: &Path, robot: &sim::Model) -> Result<MeasurementTable, CliError> {
     // x, y, z are not needed (and ignored when present).
     let table = measurement_table::read_configurations(path)?;
+    for w in check_configurations(&table, robot, &path.display().to_string())? {
+        eprintln!("warning: {w}");
+    }
+    Ok(table)
+}
+
+/// Checks a table of joint configurations against the model's robot (joint count, limits, units);
+/// `name` names it in messages. Returns the warnings, one line each.
+pub fn check_configurations(
+    table: &MeasurementTable,
+    robot: &sim::Model,
+    name: &str,
+) -> Result<Vec<String>, CliError> {
     if table.n_joints != robot.nq() {
         return Err(CliError::Input(format!(
-            "{}: {} joint columns, but the model's robot '{}' has {} joints",
-            path.display(),
+            "{name}: {} joint columns, but the model's robot '{}' has {} joints",
             table.n_joints,
             robot.name,
             robot.nq()
         )));
     }
-    for w in measurement_table::check_against_model(&table, robot, path)? {
-        eprintln!("warning: {w}");
-    }
-    Ok(table)
+    Ok(measurement_table::check_against_model(
+        table,
+        robot,
+        Path::new(name),
+    )?)
 }
 
 /// Runs `robocal predict`.
@@ -62,18 +76,7 @@ pub fn run(args: Args) -> CliResult {
     let preds = predictor.predict_table(&table, &args.data.display().to_string())?;
     sim::io::write_atomic(&args.out, preds.to_csv().as_bytes())?;
     if let Some(path) = &args.urdf_out {
-        let urdf = calibrated_urdf(&predictor.model, &predictor.params);
-        let configs: Vec<Vec<f64>> = (0..table.len().min(200))
-            .map(|r| table.q_row(r).to_vec())
-            .collect();
-        let dev = urdf_deviation(&predictor.model, &predictor.params, &urdf, &configs)?;
-        if dev > 1e-9 {
-            return Err(CliError::Runtime(format!(
-                "{}: the calibrated URDF deviates from the model by {dev:.1e}; not written",
-                path.display()
-            )));
-        }
-        sim::io::write_atomic(path, urdf.as_bytes())?;
+        super::urdf_out::write(path, &file, &table, &args.data.display().to_string())?;
     }
     if args.json {
         print_json(&json!({

@@ -6,13 +6,27 @@ pub(crate) use crate::error::{CliError, CliResult};
 use sim::measurement_table::{self, MeasurementTable};
 use std::path::Path;
 
-/// Reads a measurement table and checks it against the robot; warnings go to stderr.
+/// Reads a measurement table and checks it against the robot ([`check_table`]); warnings go to stderr.
 pub(crate) fn read_table(path: &Path, robot: &sim::Model) -> Result<MeasurementTable, CliError> {
     let table = measurement_table::read(path)?;
-    for w in measurement_table::check_against_model(&table, robot, path)? {
+    for w in check_table(&table, robot, &path.display().to_string())? {
         eprintln!("warning: {w}");
     }
     Ok(table)
+}
+
+/// Checks a measurement table against the robot (joint count, limits, units); `name` names it in
+/// messages (a file name, or a description of a table in memory). Returns the warnings, one line each.
+pub fn check_table(
+    table: &MeasurementTable,
+    robot: &sim::Model,
+    name: &str,
+) -> Result<Vec<String>, CliError> {
+    Ok(measurement_table::check_against_model(
+        table,
+        robot,
+        Path::new(name),
+    )?)
 }
 
 /// Prints one JSON document to stdout.

@@ -185,6 +185,7 @@ pub fn calibrate_model(
     };
     cal.report.model = spec.name();
     if let Some(kind) = spec.learned {
+        crate::cancel::checkpoint()?;
         learned_stage::add_learned(model, &mut cal, kind, train, test, options)?;
     }
     Ok(cal)
@@ -232,6 +233,7 @@ fn calibrate_with(
             problem: "no rows to calibrate on".into(),
         });
     }
+    crate::cancel::checkpoint()?;
     let mut obs = observations(model, train, options, extensions, at)?;
     let test_obs = match test {
         Some(t) if !t.rows.is_empty() => Some(observations(model, t, options, extensions, at)?),
@@ -283,6 +285,7 @@ fn calibrate_with(
     let mut prob = KinematicProblem::new(model, &obs, start, bt);
     let (before_report, _) = minimize(&mut prob, &bt_scales, &options.lm, &mut ws);
     let before_params = prob.into_params();
+    crate::cancel::checkpoint()?;
     if !before_report.was_successful() {
         warnings.push(format!(
             "the base-and-target fit did not converge ({})",
@@ -373,6 +376,8 @@ fn calibrate_with(
             (fit.report, fit.subspace)
         }
     };
+    // A solve stopped by the caller (Ctrl-C in Python) ends the calibration here.
+    crate::cancel::checkpoint()?;
     if !report.was_successful() {
         warnings.push(format!(
             "the kinematic fit did not converge: {}",
@@ -393,6 +398,7 @@ fn calibrate_with(
         (1.0, "noise model (no degrees of freedom left)")
     };
     let covariance = sub.covariance(variance_factor);
+    crate::cancel::checkpoint()?;
     let observability = Observability::from_subspace(&sub);
     let null = describe_null_space(model, &params, ws.gram(), &sub, &obs);
     for line in &null.data_specific {
@@ -414,6 +420,7 @@ fn calibrate_with(
         ));
     }
 
+    crate::cancel::checkpoint()?;
     let outliers = outliers::find(model, &obs, &params, &all, options.outlier_threshold);
 
     let sigma_rms = (obs.sigma.iter().map(|s| s * s).sum::<f64>() / obs.len() as f64).sqrt();

@@ -891,6 +891,7 @@ fn select(
         let rivals = unexplained::probes(model, split, &current, &[], options.seed);
         let mut tried: Vec<(Cause, Evaluated, f64, f64, f64)> = Vec::new();
         for cause in remaining {
+            crate::cancel::checkpoint()?;
             let spec = current.spec.with(cause);
             (book.progress)(&spec.name());
             let cand = match evaluate(model, split, &spec, options) {
@@ -1154,6 +1155,7 @@ pub fn diagnose_with_progress(
         Some(v) => (v, "given (--noise-floor)".to_string()),
         None => noise_floor::estimate(table, &split.test.rows, &options.calibration.noise),
     };
+    crate::cancel::checkpoint()?;
     progress("unexplained structure");
     let unexplained =
         unexplained::analyse(model, &split, &current, noise_floor_m, options, rejected)?;

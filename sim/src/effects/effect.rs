@@ -166,6 +166,9 @@ pub struct Prepare<'a> {
     /// gives one ([`Effect::link_growth_per_k`]).
     pub(crate) growth: Option<&'a [f64]>,
     pub(crate) solver: ComplianceSolver,
+    /// Joint stiffness (N m/rad or N/m; infinite = rigid) of the compliance effect, if present: what
+    /// a stage that settles in the same equilibrium with the physics engine needs up front.
+    pub(crate) joint_stiffness: Option<&'a [f64]>,
 }
 
 impl Prepare<'_> {

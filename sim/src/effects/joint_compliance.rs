@@ -206,7 +206,30 @@ fn lu_solve(a: &[f64], piv: &[usize], b: &mut [f64], n: usize) {
 
 /// Steps larger than this (rad or m) refresh the Newton matrix; below it the last factorization is
 /// reused (its change over such a step is ~10⁻⁸ of itself, so convergence stays immediate).
-const REFRESH_STEP_RAD: f64 = 1e-6;
+pub(crate) const REFRESH_STEP_RAD: f64 = 1e-6;
+
+/// When [`Equilibrium::newton`] refreshes its matrix, and how it finishes.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct NewtonSchedule {
+    /// Steps larger than this (rad or m) refresh the Newton matrix; smaller ones reuse the last
+    /// factorization (chord steps).
+    pub refresh_step: f64,
+    /// After the last step (below [`TOLERANCE_RAD`]), move the flange pose by that step to first
+    /// order instead of evaluating the chain again: the flange turns by `δω = Σ wⱼ Δⱼ` and its origin
+    /// moves by `Σ wⱼ × (p_flange − pⱼ) Δⱼ` (`wⱼ × …` replaced by `wⱼ` for a prismatic joint), with the
+    /// axes `wⱼ` and origins `pⱼ` of the last evaluation. What is left is of order `|Δ|² < 10⁻²⁶`; the
+    /// joint frames in `poses` stay those of the last evaluation (within the step of the root).
+    pub first_order_finish: bool,
+}
+
+impl NewtonSchedule {
+    /// The compliance solve's schedule: refresh after steps above [`REFRESH_STEP_RAD`], evaluate the
+    /// chain at the root.
+    pub const COMPLIANCE: NewtonSchedule = NewtonSchedule {
+        refresh_step: REFRESH_STEP_RAD,
+        first_order_finish: false,
+    };
+}
 
 /// Everything the equilibrium solve reads.
 pub(crate) struct Equilibrium<'a> {
@@ -249,6 +272,24 @@ impl Equilibrium<'_> {
         }
     }
 
+    /// `flange` moved by the last step `ws.step` to first order (see
+    /// [`NewtonSchedule::first_order_finish`]); `ws.w` and `poses` are those of the last evaluation.
+    fn moved_by_step(&self, flange: &Pose, poses: &[Pose], ws: &GravityWork) -> Pose {
+        let pf = flange.translation.vector;
+        let (mut dw, mut dp) = (Vector3::zeros(), Vector3::zeros());
+        for (j, (joint, pose)) in self.chain.joints.iter().zip(poses).enumerate() {
+            let (w, d) = (ws.w[j], ws.step[j]);
+            if joint.rotational {
+                dw += w * d;
+                dp += w.cross(&(pf - pose.translation.vector)) * d;
+            } else {
+                dp += w * d;
+            }
+        }
+        let r = flange.rotation.matrix();
+        crate::lie::pose_from(r + crate::lie::skew(&dw) * r, pf + dp)
+    }
+
     /// Solves `θ = q_motor − K⁻¹ τ_g(θ)` (chain angles, rad or m) into `theta`, and the first-order
     /// solution into `first`. On entry `poses` and `flange` must hold the chain evaluated at `q_motor`
     /// (the caller has them already; this saves one evaluation). Returns the Newton steps taken and the
@@ -263,14 +304,26 @@ impl Equilibrium<'_> {
         ws: &mut GravityWork,
     ) -> Result<(usize, Pose)> {
         theta.copy_from_slice(q_motor);
-        self.newton(q_motor, theta, Some(first), poses, flange, ws)
+        self.newton(
+            q_motor,
+            theta,
+            Some(first),
+            poses,
+            flange,
+            ws,
+            NewtonSchedule::COMPLIANCE,
+        )
     }
 
     /// Newton's method on `F(θ) = θ − q_motor + K⁻¹ τ_g(θ)` from the initial guess in `theta` (chain
     /// angles, rad or m; the root on return). On entry `poses` and `flange` must hold the chain
     /// evaluated at that guess. When `first` is given it receives `q_motor − K⁻¹ τ_g(guess)` (the
-    /// first-order solution when the guess is `q_motor`). Returns the Newton steps taken and the
-    /// flange pose at the root; `poses` holds the joint frames at the root afterwards.
+    /// first-order solution when the guess is `q_motor`). The Newton matrix is computed at the first
+    /// step and again after every step larger than `schedule.refresh_step` (rad or m); in between the
+    /// last factorization is reused (a chord step: it changes the convergence rate, never the root).
+    /// Stops when a step is below [`TOLERANCE_RAD`]. Returns the Newton steps taken and the flange pose at the root; `poses`
+    /// holds the joint frames at the root afterwards.
+    #[allow(clippy::too_many_arguments)]
     pub fn newton(
         &self,
         q_motor: &[f64],
@@ -279,6 +332,7 @@ impl Equilibrium<'_> {
         poses: &mut [Pose],
         mut flange: Pose,
         ws: &mut GravityWork,
+        schedule: NewtonSchedule,
     ) -> Result<(usize, Pose)> {
         let n = self.chain.nq();
         let mut last_step = f64::NAN;
@@ -302,7 +356,7 @@ impl Equilibrium<'_> {
                     first[i] = q_motor[i] - self.compliance[i] * ws.tau[i];
                 }
             }
-            if it == 1 || last_step > REFRESH_STEP_RAD {
+            if it == 1 || last_step > schedule.refresh_step {
                 chain_gravity_hessian(self.chain, self.gravity, ws);
                 for i in 0..n {
                     let c = self.compliance[i];
@@ -339,6 +393,9 @@ impl Equilibrium<'_> {
             }
             last_step = step;
             if step < TOLERANCE_RAD {
+                if schedule.first_order_finish {
+                    return Ok((it, self.moved_by_step(&flange, poses, ws)));
+                }
                 let flange = self.chain.eval(theta, self.dt, poses);
                 return Ok((it, flange));
             }

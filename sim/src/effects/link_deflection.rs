@@ -50,8 +50,12 @@
 //! last stage: the geometry it settles is not a chain of the model's joints, and a stage after it
 //! would re-evaluate the chain without it.
 //!
-//! With `[truth] model = "rapier"` the deflection is refused (the rapier multibody has no deflection
-//! hinges).
+//! With `[truth] model = "rapier"` the engine settles it instead: the multibody gets the two hinges
+//! after each deflecting joint, with springs `1/cᵤ`, `1/cᵥ` toward zero
+//! ([`crate::rapier_truth::RapierArm::with_deflection`]), and settles joints and hinges together
+//! from rest at the joint springs' anchors, on the real geometry of the measurement (as the compliance
+//! stage does, [`super::rapier_compliance`]). The joint frames in the state then stay those of the
+//! stage before (no stage follows).
 //!
 //! # Magnitudes
 //!
@@ -64,41 +68,23 @@
 use super::chain::{Chain, ChainJoint};
 use super::effect::{ComplianceSolver, Effect, Moved, Needs, Prepare, ResolveCx, State};
 use super::gravity::GravityWork;
-use super::joint_compliance::Equilibrium;
+use super::joint_compliance::{Equilibrium, NewtonSchedule};
+use super::rapier_compliance::{RapierCache, RapierCompliance};
 use crate::error::{Result, SimError};
 use crate::lie::Pose;
 use crate::model::Joint;
 use crate::scenario::magnitude::Magnitude;
 use nalgebra::{Matrix3, Vector3};
 
-/// Largest accepted compliance (rad/(N m)): 10⁻³ is already a bearing a few N m bend by a
-/// milliradian; more is almost surely a stiffness (N m/rad) given where a compliance is expected.
-pub const MAX_COMPLIANCE_RAD_PER_NM: f64 = 1e-3;
+/// Steps larger than this (rad) refresh the Newton matrix of the joint + deflection solve. It starts
+/// from the joint sag alone, so its first step is the deflection itself (≈ 10⁻⁴ rad) and the matrix
+/// changes by `C ∂H/∂x Δx` (≈ 10⁻⁴ · 10² · 10⁻⁴ = 10⁻⁶ of itself): the first factorization serves
+/// every later (chord) step, which converge at that rate. Only a soft arm, whose steps exceed this,
+/// pays for more factorizations.
+pub const REFRESH_STEP_RAD: f64 = 1e-2;
 
-const EFFECT: &str = "link_deflection";
-
-fn bad(field: impl Into<String>, value: impl ToString, problem: impl Into<String>) -> SimError {
-    SimError::BadEffect {
-        effect: EFFECT,
-        field: field.into(),
-        value: value.to_string(),
-        problem: problem.into(),
-    }
-}
-
-/// The deflection axes `(u, v)` of a joint with unit axis `a` (joint frame): see the module docs.
-pub fn deflection_axes(a: &Vector3<f64>) -> (Vector3<f64>, Vector3<f64>) {
-    let a = a.normalize();
-    let mut k = 0;
-    for j in 1..3 {
-        if a[j].abs() < a[k].abs() {
-            k = j;
-        }
-    }
-    let e = Vector3::ith(k, 1.0);
-    let u = (e - a * a.dot(&e)).normalize();
-    (u, a.cross(&u))
-}
+pub use super::deflection_compliance::{MAX_COMPLIANCE_RAD_PER_NM, deflection_axes};
+use super::deflection_compliance::{EFFECT, bad, check_len, check_values};
 
 /// Per-joint compliance across the joint axis (see the module docs for the model).
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -125,26 +111,7 @@ impl LinkDeflection {
     /// Deflection with compliances `[cᵤ, cᵥ]` per joint (rad/(N m)). Refuses negative, non-finite
     /// and values above [`MAX_COMPLIANCE_RAD_PER_NM`].
     pub fn new(compliance_rad_per_nm: Vec<[f64; 2]>) -> Result<Self> {
-        for (i, c) in compliance_rad_per_nm.iter().enumerate() {
-            for (k, &v) in c.iter().enumerate() {
-                if !(v.is_finite() && v >= 0.0) {
-                    return Err(bad(
-                        format!("compliance_rad_per_nm[{i}][{k}]"),
-                        v,
-                        "must be finite and ≥ 0 rad/(N m) (0 = rigid)",
-                    ));
-                }
-                if v > MAX_COMPLIANCE_RAD_PER_NM {
-                    return Err(bad(
-                        format!("compliance_rad_per_nm[{i}][{k}]"),
-                        v,
-                        format!(
-                            "compliance above {MAX_COMPLIANCE_RAD_PER_NM} rad/(N m); give a compliance, not a stiffness"
-                        ),
-                    ));
-                }
-            }
-        }
+        check_values(&compliance_rad_per_nm)?;
         Ok(LinkDeflection {
             compliance_rad_per_nm,
         })
@@ -162,14 +129,7 @@ impl LinkDeflection {
 
     /// Checks that the length fits a robot with `nq` joints.
     pub fn check_fits(&self, nq: usize) -> Result<()> {
-        if self.compliance_rad_per_nm.len() != nq {
-            return Err(bad(
-                "compliance_rad_per_nm",
-                format!("{} entries", self.compliance_rad_per_nm.len()),
-                format!("the robot has {nq} joints"),
-            ));
-        }
-        Ok(())
+        check_len(&self.compliance_rad_per_nm, nq)
     }
 }
 
@@ -197,11 +157,15 @@ pub struct DeflectionStage {
     compliance: Vec<f64>,
     /// Mass (kg) and centre of mass (m, in the frame it hangs on) per joint of the long chain.
     bodies: Vec<(f64, Vector3<f64>)>,
+    /// With [`ComplianceSolver::Rapier`]: the rapier arms with deflection hinges.
+    rapier: Option<RapierCompliance>,
 }
 
 /// Per-thread workspace of the deflection stage.
 #[derive(Clone, Debug)]
 pub struct DeflectionScratch {
+    /// Prepared rapier arms (rapier truth only).
+    rapier: RapierCache,
     chain: Chain,
     compliance: Vec<f64>,
     anchor: Vec<f64>,
@@ -212,6 +176,16 @@ pub struct DeflectionScratch {
 
 /// A hinge about `axis` (unit, in the frame before it) at the origin of that frame.
 fn hinge(axis: Vector3<f64>) -> ChainJoint {
+    let coordinate_hinge = (0..3).find_map(|k| {
+        let e = Vector3::ith(k, 1.0);
+        if axis == e {
+            Some((k, 1.0))
+        } else if axis == -e {
+            Some((k, -1.0))
+        } else {
+            None
+        }
+    });
     ChainJoint {
         rotational: true,
         axis,
@@ -219,6 +193,7 @@ fn hinge(axis: Vector3<f64>) -> ChainJoint {
         origin_rot: Matrix3::identity(),
         p0: Vector3::zeros(),
         dp: Vector3::zeros(),
+        coordinate_hinge,
     }
 }
 
@@ -255,13 +230,24 @@ impl Effect for LinkDeflection {
     }
 
     fn prepare(&self, cx: &Prepare<'_>) -> Result<DeflectionStage> {
-        if matches!(cx.solver, ComplianceSolver::Rapier(_)) {
-            return Err(bad(
-                "compliance_rad_per_nm",
-                "given",
-                "not modelled by the rapier truth (its multibody has no deflection hinges); use [truth] model = \"analytic\"",
-            ));
-        }
+        let rapier = match (cx.solver, cx.joint_stiffness) {
+            (ComplianceSolver::Analytic, _) => None,
+            (ComplianceSolver::Rapier(options), Some(k)) => {
+                Some(RapierCompliance::with_deflection(
+                    cx.model,
+                    k,
+                    &self.compliance_rad_per_nm,
+                    options,
+                )?)
+            }
+            (ComplianceSolver::Rapier(_), None) => {
+                return Err(bad(
+                    "compliance_rad_per_nm",
+                    "given",
+                    "the rapier truth settles joints and deflection together: give [effects.compliance] too",
+                ));
+            }
+        };
         let model = cx.model;
         let mut joints = Vec::new();
         let mut compliance = Vec::new();
@@ -305,12 +291,14 @@ impl Effect for LinkDeflection {
             template,
             compliance,
             bodies,
+            rapier,
         })
     }
 
     fn scratch(stage: &DeflectionStage, _nq: usize) -> DeflectionScratch {
         let m = stage.template.nq();
         DeflectionScratch {
+            rapier: RapierCache::default(),
             chain: stage.template.clone(),
             compliance: stage.compliance.clone(),
             anchor: vec![0.0; m],
@@ -330,6 +318,27 @@ impl Effect for LinkDeflection {
         if stage.template.nq() == stage.joint_index.len() {
             // No hinge (every compliance 0): the joints are settled already.
             return Ok(Moved::Unchanged);
+        }
+        if let Some(r) = &stage.rapier {
+            // The engine settles joints and hinges from rest at the joint springs' anchors (set by
+            // the compliance stage, which a rapier truth always has).
+            let theta = &mut sc.x[..st.angles.len()];
+            let (steps, flange) = r.settle(
+                st.geom,
+                st.dt,
+                st.cond.payload.as_ref(),
+                st.gravity,
+                st.anchor,
+                theta,
+                &mut sc.rapier,
+            )?;
+            for (i, &th) in theta.iter().enumerate() {
+                st.q_link[i] -= st.angles[i] - th;
+                st.angles[i] = th;
+            }
+            st.flange = flange;
+            st.iterations += steps;
+            return Ok(Moved::Evaluated);
         }
         let g = st.geom;
         sc.chain.base = g.base;
@@ -352,7 +361,23 @@ impl Effect for LinkDeflection {
                 }
             }
         }
-        let flange = sc.chain.eval(&sc.x, st.dt, &mut sc.poses);
+        // The long chain at zero deflection is the chain the state was last evaluated on (at these
+        // angles, by the stage before): its frames are the state's, each hinge frame that of its
+        // joint. Copying them saves an evaluation.
+        debug_assert_eq!(
+            st.geom
+                .eval(st.angles, st.dt, &mut sc.poses[..st.angles.len()]),
+            st.flange,
+            "stage bookkeeping: the state must hold the chain evaluated at its angles"
+        );
+        let mut joint = 0;
+        for (e, pose) in sc.poses.iter_mut().enumerate() {
+            if joint + 1 < stage.joint_index.len() && stage.joint_index[joint + 1] == e {
+                joint += 1;
+            }
+            *pose = st.poses[joint];
+        }
+        let flange = st.flange;
         let eq = Equilibrium {
             chain: &sc.chain,
             dt: st.dt,
@@ -369,6 +394,10 @@ impl Effect for LinkDeflection {
                 &mut sc.poses,
                 flange,
                 &mut sc.work,
+                NewtonSchedule {
+                    refresh_step: REFRESH_STEP_RAD,
+                    first_order_finish: true,
+                },
             )
             .map_err(|e| match e {
                 SimError::ComplianceDiverged { reason } => SimError::ComplianceDiverged {
@@ -418,6 +447,33 @@ mod tests {
     }
 
     #[test]
+    fn coordinate_hinges_evaluate_as_the_general_rotation() {
+        let m = crate::robots::load_builtin("iiwa7").unwrap();
+        let real = Chain::grown(&m, None);
+        let mut fast = real.clone();
+        for (k, j) in fast.joints.iter_mut().enumerate() {
+            *j = hinge(j.axis);
+            assert_eq!(
+                j.coordinate_hinge.map(|h| h.0),
+                Some([2, 1, 2, 1, 2, 1, 2][k])
+            );
+        }
+        fast.joints
+            .extend([hinge(Vector3::x()), hinge(-Vector3::z())]);
+        let mut slow = fast.clone();
+        for j in &mut slow.joints {
+            j.coordinate_hinge = None;
+        }
+        let x = [0.3, -1.2, 2.0, 0.7, -0.4, 1.1, -2.5, 3e-4, -2e-4];
+        let (mut pf, mut ps) = (vec![Pose::identity(); 9], vec![Pose::identity(); 9]);
+        let (ff, fs) = (fast.eval(&x, 0.0, &mut pf), slow.eval(&x, 0.0, &mut ps));
+        for (a, b) in pf.iter().zip(&ps).chain([(&ff, &fs)]) {
+            assert!((a.rotation.matrix() - b.rotation.matrix()).amax() < 1e-15);
+            assert!((a.translation.vector - b.translation.vector).amax() < 1e-15);
+        }
+    }
+
+    #[test]
     fn constructor_refuses_bad_values_naming_the_field() {
         let e = LinkDeflection::new(vec![[1e-6, 0.0], [0.0, -1e-6]]).unwrap_err();
         assert!(e.to_string().contains("compliance_rad_per_nm[1][1]"), "{e}");
@@ -457,6 +513,7 @@ mod tests {
             model: &m,
             growth: None,
             solver: ComplianceSolver::Analytic,
+            joint_stiffness: None,
         };
         let stage = d.prepare(&cx).unwrap();
         let mut sc = LinkDeflection::scratch(&stage, 7);

@@ -6,16 +6,19 @@
 //! 2. kinematic offsets (adjoint error twists, joint zero offsets, base and tool errors),
 //! 3. transmission error (link angle periodic in the joint's own reported angle),
 //! 4. joint coupling (link angle error proportional to a reported joint angle),
-//! 5. gear backlash (link-side angle shifted by half the dead band),
-//! 6. joint compliance (link-side angle settles where the joint springs balance gravity and payload),
+//! 5. coupled transmission error (link angle error periodic in another joint's reported angle),
+//! 6. gear backlash (link-side angle shifted by half the dead band),
+//! 7. joint compliance (link-side angle settles where the joint springs balance gravity and payload),
 //!    solved analytically or, with [`ComplianceSolver::Rapier`], by the rapier physics engine on the
 //!    same real geometry ([`rapier_compliance`]),
-//! 7. link deflection (the child side of each joint tilts about two axes across the joint axis under
-//!    the moment it carries), settled in one equilibrium with the joint springs ([`link_deflection`]).
+//! 8. link deflection (the child side of each joint tilts about two axes across the joint axis under
+//!    the moment it carries), settled in one equilibrium with the joint springs ([`link_deflection`]),
+//!    by Newton or, with [`ComplianceSolver::Rapier`], by the engine with two spring hinges per
+//!    deflecting joint.
 //!
 //! The contributions are successive increments, so they add up to the total deviation from nominal:
 //! with `p₀` the nominal target position and `pₖ` the position with effects 1 … k applied,
-//! contribution `k` is `pₖ − pₖ₋₁` and `Σ contributions = p₇ − p₀`. An absent effect contributes
+//! contribution `k` is `pₖ − pₖ₋₁` and `Σ contributions = p₈ − p₀`. An absent effect contributes
 //! exactly zero.
 //!
 //! # The real robot
@@ -28,8 +31,9 @@
 //! φᵢ = θᵢ + δqᵢ + βᵢ ΔT,      θᵢ = qᵢ + eᵢ(q) − sᵢ − cᵢ
 //! ```
 //!
-//! where `q` is the motor-side position the controller reports, `eᵢ(q)` the transmission error and
-//! joint coupling ([`transmission_error`], [`joint_coupling`]), `sᵢ` the backlash shift
+//! where `q` is the motor-side position the controller reports, `eᵢ(q)` the transmission error,
+//! joint coupling and coupled transmission error ([`transmission_error`], [`joint_coupling`],
+//! [`coupled_transmission`]), `sᵢ` the backlash shift
 //! ([`gear_backlash`]), `cᵢ` the compliance sag ([`joint_compliance`]), `δqᵢ` the zero offset
 //! ([`kinematic_offsets`]), `βᵢ ΔT` the zero drift ([`thermal_drift`]) and `Dᵢ` the link deflection
 //! (identity without it; a rotation about axes through joint `i`'s origin, [`link_deflection`]). `θ`
@@ -81,6 +85,8 @@ use gravity::GravityWork;
 use nalgebra::{Point3, Vector3};
 
 pub mod chain;
+pub mod coupled_transmission;
+pub(crate) mod deflection_compliance;
 pub mod effect;
 pub mod gear_backlash;
 pub(crate) mod gravity;
@@ -478,6 +484,10 @@ impl Truth {
             model,
             growth,
             solver,
+            joint_stiffness: effects
+                .compliance
+                .as_ref()
+                .map(joint_compliance::JointCompliance::stiffness_nm_per_rad),
         };
         let stages = Stages::prepare(effects, &cx)?;
         Ok(Truth {
@@ -661,6 +671,8 @@ registry! {
     transmission: transmission_error::TransmissionError => TransmissionError,
     /// Joint coupling (link angle error proportional to a joint angle).
     coupling: joint_coupling::JointCoupling => JointCoupling,
+    /// Coupled transmission error (link angle error periodic in another joint's angle).
+    coupled_transmission: coupled_transmission::CoupledTransmission => CoupledTransmission,
     /// Gear backlash.
     backlash: gear_backlash::GearBacklash => GearBacklash,
     /// Joint compliance.

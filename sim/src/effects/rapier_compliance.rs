@@ -41,6 +41,8 @@ pub(crate) struct RapierCompliance {
     nominal: Model,
     /// Stiffness per joint (N m/rad or N/m; infinite = rigid).
     stiffness: Vec<f64>,
+    /// Deflection compliance `[c_u, c_v]` per joint (rad/(N m); all 0 without link deflection).
+    deflection: Vec<[f64; 2]>,
     options: SettleOptions,
 }
 
@@ -89,9 +91,23 @@ impl RapierCompliance {
         stiffness_nm_per_rad: &[f64],
         options: SettleOptions,
     ) -> Result<RapierCompliance> {
-        RapierArm::new(
+        let none = vec![[0.0; 2]; nominal.nq()];
+        RapierCompliance::with_deflection(nominal, stiffness_nm_per_rad, &none, options)
+    }
+
+    /// As [`RapierCompliance::new`], the arms with link-deflection hinges of compliance
+    /// `deflection_rad_per_nm` (`[c_u, c_v]` per joint, rad/(N m); see
+    /// [`RapierArm::with_deflection`]).
+    pub fn with_deflection(
+        nominal: &Model,
+        stiffness_nm_per_rad: &[f64],
+        deflection_rad_per_nm: &[[f64; 2]],
+        options: SettleOptions,
+    ) -> Result<RapierCompliance> {
+        RapierArm::with_deflection(
             nominal,
             stiffness_nm_per_rad,
+            deflection_rad_per_nm,
             None,
             &Vector3::from(crate::statics::DEFAULT_GRAVITY),
             options,
@@ -100,6 +116,7 @@ impl RapierCompliance {
             id: next_id(),
             nominal: nominal.clone(),
             stiffness: stiffness_nm_per_rad.to_vec(),
+            deflection: deflection_rad_per_nm.to_vec(),
             options,
         })
     }
@@ -144,7 +161,14 @@ impl RapierCompliance {
             Some(k) => k,
             None => {
                 let real = chain.model_at(&self.nominal, dt);
-                let arm = RapierArm::new(&real, &self.stiffness, payload, gravity, self.options)?;
+                let arm = RapierArm::with_deflection(
+                    &real,
+                    &self.stiffness,
+                    &self.deflection,
+                    payload,
+                    gravity,
+                    self.options,
+                )?;
                 let ws = arm.workspace();
                 if cache.entries.len() >= CACHE_ENTRIES {
                     cache.entries.remove(0);

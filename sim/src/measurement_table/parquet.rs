@@ -1,5 +1,6 @@
 //! Parquet reading and writing of the measurement table (see the parent module for the format).
 
+use super::columns::{ColumnValues, ColumnsBuilder};
 use super::{IN_MEMORY, MeasurementTable, Positions, Role, resolve_columns, table_err};
 use crate::error::{Result, SimError};
 use arrow_array::cast::AsArray;
@@ -20,9 +21,6 @@ use std::sync::Arc;
 
 /// Most rows in one Parquet row group (about 16 MB of a 16-column table); smaller tables are one group.
 pub const PARQUET_MAX_ROW_GROUP_ROWS: usize = 131_072;
-
-/// Largest integer magnitude up to which every integer is exactly an `f64` (2⁵³).
-const EXACT_INT: i128 = 1 << 53;
 
 /// The Parquet bytes of `table` (deterministic: the same table always gives the same bytes). Fails if
 /// the table is invalid ([`MeasurementTable::validate`]), naming it [`IN_MEMORY`].
@@ -118,122 +116,30 @@ pub(super) fn write_parquet_unchecked(table: &MeasurementTable, file: &str) -> R
 /// A problem in one column: the 0-based index within the array (if one value is at fault) and what.
 type ColumnProblem = (Option<usize>, String);
 
-fn first_null(arr: &dyn Array) -> std::result::Result<(), ColumnProblem> {
-    if arr.null_count() == 0 {
-        return Ok(());
-    }
-    let i = (0..arr.len()).find(|&i| arr.is_null(i));
-    Err((i, "missing value (null): a number is required".into()))
-}
-
-fn unsupported(dt: &DataType) -> ColumnProblem {
-    (
-        None,
-        format!("has Arrow type {dt}; an integer or floating-point type is required"),
-    )
-}
-
-/// A numeric column as `f64`, accepting any integer or float type whose values convert exactly.
-fn floats(arr: &dyn Array) -> std::result::Result<Vec<f64>, ColumnProblem> {
-    first_null(arr)?;
-    fn exact<I: Copy + Into<i128> + std::fmt::Display>(
-        v: &[I],
-    ) -> std::result::Result<Vec<f64>, ColumnProblem> {
-        v.iter()
-            .enumerate()
-            .map(|(i, &x)| {
-                let w: i128 = x.into();
-                if w.abs() <= EXACT_INT {
-                    Ok(w as f64)
-                } else {
-                    Err((
-                        Some(i),
-                        format!("{x} cannot be represented exactly as a 64-bit float"),
-                    ))
-                }
-            })
-            .collect()
+/// The values of an Arrow array as borrowed typed values ([`ColumnValues`]); nulls are a problem.
+fn values(arr: &dyn Array) -> std::result::Result<ColumnValues<'_>, ColumnProblem> {
+    if arr.null_count() > 0 {
+        let i = (0..arr.len()).find(|&i| arr.is_null(i));
+        return Err((i, "missing value (null): a number is required".into()));
     }
     Ok(match arr.data_type() {
-        DataType::Float64 => arr.as_primitive::<Float64Type>().values().to_vec(),
-        DataType::Float32 => arr
-            .as_primitive::<Float32Type>()
-            .values()
-            .iter()
-            .map(|&v| v as f64)
-            .collect(),
-        DataType::Int8 => exact(arr.as_primitive::<Int8Type>().values())?,
-        DataType::Int16 => exact(arr.as_primitive::<Int16Type>().values())?,
-        DataType::Int32 => exact(arr.as_primitive::<Int32Type>().values())?,
-        DataType::Int64 => exact(arr.as_primitive::<Int64Type>().values())?,
-        DataType::UInt8 => exact(arr.as_primitive::<UInt8Type>().values())?,
-        DataType::UInt16 => exact(arr.as_primitive::<UInt16Type>().values())?,
-        DataType::UInt32 => exact(arr.as_primitive::<UInt32Type>().values())?,
-        DataType::UInt64 => exact(arr.as_primitive::<UInt64Type>().values())?,
-        dt => return Err(unsupported(dt)),
-    })
-}
-
-/// An integer column as `i64`, accepting any integer type in range and floats that are exact integers.
-fn integers(arr: &dyn Array) -> std::result::Result<Vec<i64>, ColumnProblem> {
-    first_null(arr)?;
-    fn small<I: Copy + Into<i64>>(v: &[I]) -> Vec<i64> {
-        v.iter().map(|&x| x.into()).collect()
-    }
-    fn from_float(v: impl Iterator<Item = f64>) -> std::result::Result<Vec<i64>, ColumnProblem> {
-        v.enumerate()
-            .map(|(i, x)| {
-                if x.fract() == 0.0 && x.abs() < (1u64 << 63) as f64 {
-                    Ok(x as i64)
-                } else {
-                    Err((Some(i), format!("{x:?} is not an integer")))
-                }
-            })
-            .collect()
-    }
-    Ok(match arr.data_type() {
-        DataType::Int8 => small(arr.as_primitive::<Int8Type>().values()),
-        DataType::Int16 => small(arr.as_primitive::<Int16Type>().values()),
-        DataType::Int32 => small(arr.as_primitive::<Int32Type>().values()),
-        DataType::Int64 => arr.as_primitive::<Int64Type>().values().to_vec(),
-        DataType::UInt8 => small(arr.as_primitive::<UInt8Type>().values()),
-        DataType::UInt16 => small(arr.as_primitive::<UInt16Type>().values()),
-        DataType::UInt32 => small(arr.as_primitive::<UInt32Type>().values()),
-        DataType::UInt64 => arr
-            .as_primitive::<UInt64Type>()
-            .values()
-            .iter()
-            .enumerate()
-            .map(|(i, &x)| {
-                i64::try_from(x)
-                    .map_err(|_| (Some(i), format!("{x} is too large for a 64-bit integer")))
-            })
-            .collect::<std::result::Result<_, _>>()?,
-        DataType::Float64 => {
-            from_float(arr.as_primitive::<Float64Type>().values().iter().copied())?
+        DataType::Float64 => ColumnValues::F64(arr.as_primitive::<Float64Type>().values()),
+        DataType::Float32 => ColumnValues::F32(arr.as_primitive::<Float32Type>().values()),
+        DataType::Int8 => ColumnValues::I8(arr.as_primitive::<Int8Type>().values()),
+        DataType::Int16 => ColumnValues::I16(arr.as_primitive::<Int16Type>().values()),
+        DataType::Int32 => ColumnValues::I32(arr.as_primitive::<Int32Type>().values()),
+        DataType::Int64 => ColumnValues::I64(arr.as_primitive::<Int64Type>().values()),
+        DataType::UInt8 => ColumnValues::U8(arr.as_primitive::<UInt8Type>().values()),
+        DataType::UInt16 => ColumnValues::U16(arr.as_primitive::<UInt16Type>().values()),
+        DataType::UInt32 => ColumnValues::U32(arr.as_primitive::<UInt32Type>().values()),
+        DataType::UInt64 => ColumnValues::U64(arr.as_primitive::<UInt64Type>().values()),
+        dt => {
+            return Err((
+                None,
+                format!("has Arrow type {dt}; an integer or floating-point type is required"),
+            ));
         }
-        DataType::Float32 => from_float(
-            arr.as_primitive::<Float32Type>()
-                .values()
-                .iter()
-                .map(|&v| v as f64),
-        )?,
-        dt => return Err(unsupported(dt)),
     })
-}
-
-fn directions(arr: &dyn Array) -> std::result::Result<Vec<i8>, ColumnProblem> {
-    integers(arr)?
-        .into_iter()
-        .enumerate()
-        .map(|(i, v)| {
-            if (-1..=1).contains(&v) {
-                Ok(v as i8)
-            } else {
-                Err((Some(i), format!("{v} is not a direction (-1, 0 or +1)")))
-            }
-        })
-        .collect()
 }
 
 /// Rows reserved up front from the file's own row count; beyond, the columns grow as rows arrive (a
@@ -299,18 +205,11 @@ fn read_parquet(f: std::fs::File, file: &str, positions: Positions) -> Result<Me
         .build()
         .map_err(|e| bad_file(&e))?;
 
-    let nq = layout.n_joints;
-    let mut pose: Vec<i64> = Vec::with_capacity(n_rows);
-    let mut q_cols: Vec<Vec<f64>> = vec![Vec::with_capacity(n_rows); nq];
-    let mut dir_cols: Vec<Vec<i8>> = vec![Vec::new(); if layout.columns.dir { nq } else { 0 }];
-    let mut pos_cols: [Vec<f64>; 3] = Default::default();
-    let mut quat_cols: [Vec<f64>; 4] = Default::default();
-    let (mut t, mut temp, mut payload, mut sigma) =
-        (Vec::new(), Vec::new(), Vec::new(), Vec::new());
-    let mut row0 = 0usize;
+    let mut columns = ColumnsBuilder::new(&layout, n_rows);
     for batch in reader {
         let batch = batch.map_err(|e| bad_file(&e))?;
         let schema = batch.schema();
+        let row0 = columns.rows();
         for (k, arr) in batch.columns().iter().enumerate() {
             let name = schema.field(k).name().trim();
             let Some(&role) = role_of.get(name) else {
@@ -328,21 +227,7 @@ fn read_parquet(f: std::fs::File, file: &str, positions: Positions) -> Result<Me
                 }
                 None => arr.as_ref(),
             };
-            let res = match role {
-                Role::Ignore => Ok(()),
-                Role::Pose => integers(arr).map(|v| pose.extend(v)),
-                Role::Dir(j) => directions(arr).map(|v| dir_cols[j].extend(v)),
-                _ => floats(arr).map(|v| match role {
-                    Role::Q(j) => q_cols[j].extend(v),
-                    Role::Position(i) => pos_cols[i].extend(v),
-                    Role::Quaternion(i) => quat_cols[i].extend(v),
-                    Role::T => t.extend(v),
-                    Role::Temp => temp.extend(v),
-                    Role::Payload => payload.extend(v),
-                    Role::Sigma => sigma.extend(v),
-                    Role::Ignore | Role::Pose | Role::Dir(_) => {}
-                }),
-            };
+            let res = values(arr).and_then(|v| columns.add(role, v));
             if let Err((i, message)) = res {
                 return Err(table_err(
                     file,
@@ -352,40 +237,8 @@ fn read_parquet(f: std::fs::File, file: &str, positions: Positions) -> Result<Me
                 ));
             }
         }
-        row0 += batch.num_rows();
     }
-
-    let n = pose.len();
-    let mut table = MeasurementTable::with_capacity(nq, layout.columns, n);
-    table.pose = pose;
-    for r in 0..n {
-        for col in &q_cols {
-            table.q.push(col[r]);
-        }
-        // Without x, y, z (joint configurations only, `Positions::Optional`): zero.
-        let p = |k: usize| pos_cols[k].get(r).copied().unwrap_or(0.0);
-        table.position.push([p(0), p(1), p(2)]);
-    }
-    if let Some(o) = table.orientation.as_mut() {
-        o.extend((0..n).map(|r| {
-            [
-                quat_cols[0][r],
-                quat_cols[1][r],
-                quat_cols[2][r],
-                quat_cols[3][r],
-            ]
-        }));
-    }
-    if let Some(d) = table.dir.as_mut() {
-        for r in 0..n {
-            d.extend(dir_cols.iter().map(|c| c[r]));
-        }
-    }
-    let c = layout.columns;
-    table.t = c.t.then_some(t);
-    table.temp = c.temp.then_some(temp);
-    table.payload = c.payload.then_some(payload);
-    table.sigma = c.sigma.then_some(sigma);
+    let table = columns.finish();
     table.validate_named(file)?;
     Ok(table)
 }

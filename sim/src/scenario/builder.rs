@@ -28,6 +28,7 @@
 
 use crate::campaign::DirectionRule;
 use crate::effects::Registered;
+use crate::effects::coupled_transmission::CoupledTransmissionSection;
 use crate::effects::gear_backlash::{BacklashMode, BacklashSection};
 use crate::effects::joint_compliance::ComplianceSection;
 use crate::effects::joint_coupling::CouplingSection;
@@ -378,6 +379,27 @@ impl ScenarioBuilder {
         })
     }
 
+    /// `[effects.coupled_transmission]` with one cycle per revolution of each source joint: each
+    /// `[joint, source]` pair (numbered from 1, `source ≠ joint`) gives joint `joint` a link angle error
+    /// `A sin(q_source + φ)`; `amplitude_rad` and `phase_rad` (rad) have shape `[pairs.len()]`. Other
+    /// orders: [`ScenarioBuilder::effect`] with a full [`CoupledTransmissionSection`].
+    pub fn coupled_transmission(
+        self,
+        pairs: Vec<[usize; 2]>,
+        amplitude_rad: Magnitude,
+        phase_rad: Magnitude,
+    ) -> ScenarioBuilder {
+        self.effect::<crate::effects::coupled_transmission::CoupledTransmission>(
+            CoupledTransmissionSection {
+                enabled: None,
+                pairs,
+                order: None,
+                amplitude_rad,
+                phase_rad: Some(phase_rad),
+            },
+        )
+    }
+
     /// `[effects.deflection] compliance_rad_per_nm` (rad/(N m), shape `[n][2]`: about the `u` and `v`
     /// axes of each joint; 0 = rigid).
     pub fn link_deflection(self, compliance_rad_per_nm: Magnitude) -> ScenarioBuilder {
@@ -482,7 +504,9 @@ mod tests {
                     phase_rad = { uniform = [-3.0, 3.0] }\n\
                     [effects.coupling]\npairs = [[6, 4], [2, 2]]\nratio_rad_per_rad = [2e-4, -1e-4]\n\
                     [effects.deflection]\ncompliance_rad_per_nm = [[0, 0], [3e-6, 3e-6], [0, 0], \
-                    [4e-6, { uniform = [3e-6, 5e-6] }], [0, 0], [0, 0], [0, 0]]\n";
+                    [4e-6, { uniform = [3e-6, 5e-6] }], [0, 0], [0, 0], [0, 0]]\n\
+                    [effects.coupled_transmission]\npairs = [[6, 5]]\n\
+                    amplitude_rad = { normal = [0.0, 5e-5] }\nphase_rad = 0.3\n";
         let written = Scenario::parse(text, "t.toml", Path::new("."))
             .unwrap()
             .resolve(&Overrides::default())
@@ -511,6 +535,11 @@ mod tests {
                 zero(),
                 zero(),
             ]))
+            .coupled_transmission(
+                vec![[6, 5]],
+                Magnitude::Draw(Draw::Normal([0.0, 5e-5])),
+                Magnitude::Number(0.3),
+            )
             .label("t.toml")
             .resolve(&Overrides::default())
             .unwrap();
@@ -536,7 +565,22 @@ mod tests {
             .compliance_rad_per_nm();
         assert_eq!(d[1], [3e-6, 3e-6]);
         assert!(d[3][1] >= 3e-6 && d[3][1] <= 5e-6);
+        let ct = built.effects.coupled_transmission.as_ref().unwrap().terms();
+        assert_eq!(
+            (ct[0].joint, ct[0].source, ct[0].order, ct[0].phase_rad),
+            (6, 5, 1, 0.3)
+        );
         // Refusals name the scenario key.
+        let e = ScenarioBuilder::builtin("iiwa7")
+            .coupled_transmission(
+                vec![[4, 4]],
+                Magnitude::Number(1e-5),
+                Magnitude::Number(0.0),
+            )
+            .build()
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("effects.coupled_transmission.pairs[0]"), "{e}");
         let e = ScenarioBuilder::builtin("iiwa7")
             .joint_coupling(vec![[8, 1]], Magnitude::Number(1e-4))
             .build()
@@ -578,7 +622,7 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.contains("effects.transmission.harmonics[1]"), "{e}");
-        // Deflection settles with the joint springs: refused with the rapier truth, naming it.
+        // The rapier truth settles deflection with the joint springs; without them it is refused.
         let s = ScenarioBuilder::builtin("iiwa7")
             .compliance(Magnitude::Number(1e4))
             .link_deflection(Magnitude::Number(2e-6))
@@ -586,11 +630,14 @@ mod tests {
             .build()
             .unwrap();
         let res = s.resolve(&Overrides::default()).unwrap();
-        let e = crate::generate::truth_of(&res).unwrap_err().to_string();
-        assert!(
-            e.contains("truth.model") && e.contains("link_deflection") && !e.contains('\n'),
-            "{e}"
-        );
+        assert!(crate::generate::truth_of(&res).is_ok());
+        let e = ScenarioBuilder::builtin("iiwa7")
+            .link_deflection(Magnitude::Number(2e-6))
+            .truth_model(TruthModel::Rapier)
+            .build()
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("truth.model") && !e.contains('\n'), "{e}");
     }
 
     #[test]

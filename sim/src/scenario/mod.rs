@@ -74,6 +74,11 @@
 //! [effects.coupling]          # link angle of `joint` gains ratio · q_source
 //! pairs = [[6, 4]]            # [joint, source], numbered from 1 (joint = source: scale error)
 //! ratio_rad_per_rad = 2e-4    # [len(pairs)]
+//! [effects.coupled_transmission]  # link angle of `joint` gains A sin(h q_source + φ), source ≠ joint
+//! pairs = [[6, 5]]            # [joint, source], numbered from 1
+//! order = [1]                 # h per pair (cycles per revolution of the source), default 1
+//! amplitude_rad = 5e-5        # [len(pairs)]
+//! phase_rad = 0.0             # [len(pairs)], default 0
 //! [effects.deflection]        # compliance across each joint axis, about u and v
 //! compliance_rad_per_nm = [[0, 0], [2e-6, 2e-6], [0, 0], [3e-6, 3e-6], [0, 0], [0, 0], [0, 0]]  # [n][2]
 //!
@@ -99,6 +104,7 @@ pub mod magnitude;
 pub mod schema;
 
 pub use crate::effects::EffectsSection;
+pub use crate::effects::coupled_transmission::CoupledTransmissionSection;
 pub use crate::effects::gear_backlash::BacklashSection;
 pub use crate::effects::joint_compliance::ComplianceSection;
 pub use crate::effects::joint_coupling::CouplingSection;

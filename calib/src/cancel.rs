@@ -1,0 +1,117 @@
+//! Cooperative cancellation of long work (a calibration, a diagnosis): a caller that can be
+//! interrupted (the Python package on Ctrl-C) runs the work inside [`with_check`], and the long loops
+//! poll [`checkpoint`] between steps: the Levenberg–Marquardt iterations ([`crate::lm::minimize`]),
+//! the stages of [`crate::calibrate::calibrate_model`] and each candidate fit of
+//! [`crate::diagnose::diagnose`]. Once the check says stop, every later checkpoint on that thread
+//! says so too (the answer is kept), and the work returns [`CalibError::Cancelled`].
+//!
+//! The check belongs to the calling thread: the loops that poll it run there (the rows of one
+//! evaluation may run on rayon's threads, but the loop around them does not). Work run without a
+//! check (the command line, the tests) is never cancelled, and a checkpoint then costs one
+//! thread-local read.
+//!
+//! ```
+//! use calib::cancel::{checkpoint, with_check};
+//! use std::{cell::Cell, rc::Rc};
+//! let calls = Rc::new(Cell::new(0));
+//! let counter = calls.clone();
+//! let stop_at_third = move || { counter.set(counter.get() + 1); counter.get() >= 3 };
+//! let steps = with_check(stop_at_third, || (0..10).take_while(|_| checkpoint().is_ok()).count());
+//! assert_eq!((steps, calls.get()), (2, 3));
+//! assert!(checkpoint().is_ok()); // outside `with_check`: never cancelled
+//! ```
+
+use crate::error::{CalibError, Result};
+use std::cell::{Cell, RefCell};
+use std::rc::Rc;
+
+thread_local! {
+    /// The checks installed by [`with_check`] on this thread, innermost last.
+    static CHECKS: RefCell<Vec<Rc<dyn Fn() -> bool>>> = const { RefCell::new(Vec::new()) };
+    /// Set once a check said stop inside the current outermost [`with_check`].
+    static STOPPED: Cell<bool> = const { Cell::new(false) };
+}
+
+/// Runs `work` with `check` (whether to stop; it may be called often, every LM iteration) polled at
+/// every [`checkpoint`] on this thread. Nested calls poll the innermost check; the stop answer of any
+/// check is kept until the outermost call returns.
+pub fn with_check<R>(check: impl Fn() -> bool + 'static, work: impl FnOnce() -> R) -> R {
+    /// Pops the check when `work` returns or unwinds.
+    struct Pop;
+    impl Drop for Pop {
+        fn drop(&mut self) {
+            CHECKS.with(|c| {
+                let mut c = c.borrow_mut();
+                c.pop();
+                if c.is_empty() {
+                    STOPPED.with(|s| s.set(false));
+                }
+            });
+        }
+    }
+    CHECKS.with(|c| c.borrow_mut().push(Rc::new(check)));
+    let _pop = Pop;
+    work()
+}
+
+/// `Err(CalibError::Cancelled)` when the current thread's check (see [`with_check`]) says stop,
+/// now or before; `Ok(())` otherwise, and always outside `with_check`.
+pub fn checkpoint() -> Result<()> {
+    if STOPPED.with(Cell::get) {
+        return Err(CalibError::Cancelled);
+    }
+    // The check is called after the borrow of CHECKS ended, so a check may itself run work.
+    let Some(check) = CHECKS.with(|c| c.borrow().last().cloned()) else {
+        return Ok(());
+    };
+    if check() {
+        STOPPED.with(|s| s.set(true));
+        return Err(CalibError::Cancelled);
+    }
+    Ok(())
+}
+
+/// True when [`checkpoint`] would say stop without asking the check again.
+pub fn stopped() -> bool {
+    STOPPED.with(Cell::get)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_stop_is_kept_until_the_outermost_call_returns() {
+        with_check(
+            || false,
+            || {
+                assert!(checkpoint().is_ok());
+                with_check(|| true, || assert!(checkpoint().is_err()));
+                // The inner check said stop: the outer work stops too.
+                assert!(stopped());
+                assert!(matches!(checkpoint(), Err(CalibError::Cancelled)));
+            },
+        );
+        assert!(!stopped());
+        assert!(checkpoint().is_ok());
+    }
+
+    #[test]
+    fn a_panic_inside_pops_the_check() {
+        let r = std::panic::catch_unwind(|| with_check(|| true, || panic!("boom")));
+        assert!(r.is_err());
+        assert!(checkpoint().is_ok());
+    }
+
+    #[test]
+    fn other_threads_are_not_cancelled() {
+        with_check(
+            || true,
+            || {
+                assert!(checkpoint().is_err());
+                let other = std::thread::spawn(|| checkpoint().is_ok()).join().unwrap();
+                assert!(other);
+            },
+        );
+    }
+}

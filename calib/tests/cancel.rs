@@ -1,0 +1,86 @@
+//! Cooperative cancellation (`calib::cancel`): a check that says stop ends a calibration and a
+//! diagnosis with `CalibError::Cancelled` at the next checkpoint; a check that never does changes
+//! nothing (the same report, bit for bit).
+
+use calib::CalibError;
+use calib::calibrate::{CalibrationOptions, Dataset, calibrate};
+use calib::cancel::with_check;
+use calib::diagnose::{DiagnoseOptions, diagnose};
+use sim::measurement_table::{MeasurementTable, OptionalColumns, Row};
+use sim::{Data, flange_pose, robots};
+use std::cell::Cell;
+use std::rc::Rc;
+
+/// 60 poses of a UR5 whose joint 2 sits 0.5 mm off its nominal axis, with a little noise.
+fn table() -> (sim::Model, MeasurementTable) {
+    let model = robots::load_builtin("ur5").unwrap();
+    let mut real = model.clone();
+    let mut origin = real.joints[1].origin;
+    origin.translation.vector.x += 5e-4;
+    real.joints[1].origin = origin;
+    real.joints[1].rotation_terms = sim::Joint::rotation_terms_for(&origin, &real.joints[1].axis);
+    let mut data = Data::new(&real);
+    let mut t = MeasurementTable::new(6, OptionalColumns::NONE);
+    for k in 0..60 {
+        let q: Vec<f64> = (0..6)
+            .map(|j| ((k * 7 + j * 3) as f64 * 0.618).sin() * 2.0)
+            .collect();
+        let p = flange_pose(&real, &mut data, &q) * nalgebra::Point3::new(0.0, 0.03, 0.05);
+        let wiggle = 1e-5 * ((k as f64) * 1.7).sin();
+        t.push_row(&Row {
+            pose: k,
+            q: &q,
+            position: [p.x + 1.0 + wiggle, p.y - wiggle, p.z],
+            ..Row::default()
+        })
+        .unwrap();
+    }
+    (model, t)
+}
+
+/// A check that says stop at its `n`-th call, and the count of its calls.
+fn stop_at(n: usize) -> (impl Fn() -> bool + 'static, Rc<Cell<usize>>) {
+    let calls = Rc::new(Cell::new(0));
+    let c = calls.clone();
+    (
+        move || {
+            c.set(c.get() + 1);
+            c.get() >= n
+        },
+        calls,
+    )
+}
+
+#[test]
+fn a_stop_ends_the_calibration_at_the_next_checkpoint() {
+    let (model, t) = table();
+    let data = Dataset::all(&t, "ur5");
+    let options = CalibrationOptions::default();
+    let plain = calibrate(&model, &data, None, &options).unwrap();
+    // Never stopping: the same calibration, and the loops did poll.
+    let (never, calls) = stop_at(usize::MAX);
+    let polled = with_check(never, || calibrate(&model, &data, None, &options)).unwrap();
+    assert_eq!(
+        serde_json::to_string(&polled.report).unwrap(),
+        serde_json::to_string(&plain.report).unwrap()
+    );
+    let total = calls.get();
+    assert!(total >= 4, "{total} checks");
+    // Stopping at each of those checks in turn: Cancelled, with no further call to the check.
+    for n in 1..=total {
+        let (check, calls) = stop_at(n);
+        let r = with_check(check, || calibrate(&model, &data, None, &options));
+        assert!(matches!(r, Err(CalibError::Cancelled)), "stop at check {n}");
+        assert_eq!(calls.get(), n);
+    }
+}
+
+#[test]
+fn a_stop_ends_the_diagnosis() {
+    let (model, t) = table();
+    let options = DiagnoseOptions::default();
+    let (check, calls) = stop_at(3);
+    let r = with_check(check, || diagnose(&model, &t, "ur5", &options));
+    assert!(matches!(r, Err(CalibError::Cancelled)));
+    assert_eq!(calls.get(), 3);
+}

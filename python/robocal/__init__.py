@@ -1,0 +1,266 @@
+"""robocal from Python: the same engine as the ``robocal`` command line, on numpy and pandas.
+
+Simulate laser-tracker campaigns with known injected errors, calibrate a robot's kinematic error model
+from measurements, predict, and diagnose what the model still gets wrong::
+
+    import robocal
+    robot = robocal.Robot.load("iiwa7")                 # built-in name or URDF path
+    T = robot.fk([0, 0.5, 0, -1.2, 0, 0.8, 0])          # T_base_flange, 4x4 numpy (m)
+    ds = robocal.generate("scenarios/iiwa7_all.toml", seed=7)
+    model = robocal.calibrate(ds.measurements, robot="iiwa7", model="kinematic")
+    model.report["report"]["after"]["test"]["rms_m"]    # held-out RMS error (m)
+    robocal.diagnose(ds.measurements, robot="iiwa7")["findings"]
+
+Units are SI (m, rad, s, kg, °C); positions are in the tracker frame, ``T_base_flange`` in the robot's
+base frame. Measurement tables follow the contract of the command line (columns ``pose, q1..qN, x, y,
+z`` and optionally ``qw..qz, t, temp, dir1..dirN, payload, sigma``). Options have the names of the
+command line's flags (``test_fraction=`` for ``--test-fraction``). Errors raise :class:`BadInput`
+(the command line's exit 2) or :class:`RuntimeFailure` (exit 1) with the command line's message.
+Long work releases the GIL, and Ctrl-C interrupts it (``KeyboardInterrupt``). See docs/python.md.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+from typing import Any
+
+from . import _robocal
+from ._data import DataLike, flags, to_frame, to_table
+from ._errors import BadInput, DataWarning, Error, RuntimeFailure
+from ._robocal import Robot, Table
+
+__all__ = [
+    "BadInput",
+    "DataLike",
+    "DataWarning",
+    "Dataset",
+    "Error",
+    "Model",
+    "Robot",
+    "RuntimeFailure",
+    "Table",
+    "__version__",
+    "calibrate",
+    "diagnose",
+    "generate",
+    "load_model",
+    "options",
+    "read_table",
+]
+
+__version__: str = _robocal.VERSION
+
+
+def _robot(robot: str | os.PathLike[str] | Robot) -> Robot:
+    if isinstance(robot, Robot):
+        return robot
+    return Robot.load(os.fspath(robot))
+
+
+def _check_options(command: str, given: dict[str, Any]) -> None:
+    """A keyword that is not an option of ``command`` is a TypeError, as for any Python function."""
+    known = _robocal.options(command)
+    for key in given:
+        if key not in known:
+            raise TypeError(
+                f"{command}() got an unexpected keyword argument '{key}' (options: {', '.join(known)})"
+            )
+
+
+def options(command: str) -> list[str]:
+    """The keyword options of ``command`` (``"calibrate"``, ``"diagnose"``, ``"generate"``): the
+    command line's value flags, ``--test-fraction`` as ``test_fraction``."""
+    return list(_robocal.options(command))
+
+
+def read_table(path: str | os.PathLike[str], *, configurations: bool = False) -> "pd.DataFrame":
+    """A measurement table file (``.csv`` or ``.parquet``) as a pandas DataFrame, read and checked as
+    the command line reads it (``pose`` int64, ``dir*`` int8, every other column float64). With
+    ``configurations``, ``x, y, z`` may be absent (joint configurations for :meth:`Model.predict`)."""
+    return to_frame(_robocal.Table.read(os.fspath(path), configurations).columns())
+
+
+class Dataset:
+    """A generated campaign: what ``robocal generate`` writes.
+
+    Attributes:
+        measurements: the measurement table (pandas DataFrame, the contract's columns: ``pose``,
+            ``q1..qN`` in rad, ``x, y, z`` in m in the tracker frame, ``t`` in s, ``temp`` in °C,
+            ``dir1..dirN``, ``payload`` in kg, ``sigma`` in m, ``qw..qz`` with a 6-DoF probe).
+        truth: the ground truth, the ``truth.json`` document (every injected parameter, the scenario,
+            seeds, software version, tracker placement).
+        summary: the ``generate --json`` summary (effect sizes, noise, outliers).
+        path: the folder holding ``measurements.parquet``, ``truth.json`` and ``truth.parquet`` when
+            ``generate`` was given ``out=``, else None.
+    """
+
+    def __init__(
+        self,
+        measurements: "pd.DataFrame",
+        truth: dict[str, Any],
+        summary: dict[str, Any],
+        path: str | None,
+    ) -> None:
+        self.measurements = measurements
+        self.truth = truth
+        self.summary = summary
+        self.path = path
+
+    def __repr__(self) -> str:
+        return (
+            f"Dataset({self.summary.get('robot')!r}, {self.summary.get('poses')} poses, "
+            f"{len(self.measurements)} rows, seed {self.summary.get('seed')})"
+        )
+
+
+def generate(
+    scenario: str | os.PathLike[str],
+    *,
+    seed: int | None = None,
+    poses: int | None = None,
+    out: str | os.PathLike[str] | None = None,
+    **options: Any,
+) -> Dataset:
+    """Simulates the campaign of a scenario file (TOML, see ``scenarios/``) as ``robocal generate``.
+
+    Args:
+        scenario: the scenario file.
+        seed: replaces the scenario's seed (every random draw follows from it: same seed, same data).
+        poses: replaces the scenario's number of poses.
+        out: a folder to keep the three files in (created if missing; as ``generate --out``); by default
+            they are written to a temporary folder and removed after reading.
+        **options: further ``generate`` flags, e.g. ``noise=0`` (multiplier on the tracker noise).
+
+    Returns:
+        The :class:`Dataset`: ``measurements`` (DataFrame), ``truth`` (dict, as ``truth.json``).
+    """
+    options = {"seed": seed, "poses": poses, **options}
+    _check_options("generate", options)
+    args = flags(options)
+
+    def run(folder: str) -> Dataset:
+        summary = json.loads(_robocal.generate(os.fspath(scenario), folder, args))
+        table = _robocal.Table.read(os.path.join(folder, "measurements.parquet"))
+        with open(os.path.join(folder, "truth.json"), encoding="utf-8") as f:
+            truth = json.load(f)
+        return Dataset(to_frame(table.columns()), truth, summary, None)
+
+    if out is not None:
+        ds = run(os.fspath(out))
+        ds.path = os.fspath(out)
+        return ds
+    with tempfile.TemporaryDirectory(prefix="robocal_") as folder:
+        return run(os.path.join(folder, "dataset"))
+
+
+class Model:
+    """A calibrated model: what ``robocal calibrate --out MODEL.json`` writes (the robot is embedded).
+
+    Attributes:
+        report: the ``calibrate --json`` document of the calibration that made it (``out`` and
+            ``urdf_out`` are None: nothing was written); None for a model read by :func:`load_model`.
+    """
+
+    def __init__(self, native: _robocal.CalibratedModel, report: dict[str, Any] | None) -> None:
+        self._native = native
+        self.report = report
+
+    @property
+    def robot(self) -> str:
+        """The calibrated robot's name."""
+        return self._native.robot
+
+    @property
+    def model(self) -> str:
+        """The fitted model: ``kinematic``, ``kinematic+joint_compliance``, …"""
+        return self._native.model
+
+    def predict(self, data: DataLike) -> "pd.DataFrame":
+        """Where the calibrated robot puts the target for each row of ``data``, as ``robocal
+        predict``: a DataFrame ``pose, x, y, z`` (tracker frame, m) and ``qw, qx, qy, qz`` when the
+        model has orientation. ``data`` needs ``pose, q1..qN`` (rad) and what the model's causes read
+        (``temp`` or ``t``, ``dir1..dirN``, ``payload``); ``x, y, z`` are ignored when present."""
+        return to_frame(self._native.predict(to_table(data, configurations=True)))
+
+    def save(self, path: str | os.PathLike[str]) -> None:
+        """Writes the model file: the same bytes as ``robocal calibrate --out`` for the same
+        calibration (written atomically)."""
+        self._native.save(os.fspath(path))
+
+    def to_json(self) -> str:
+        """The model file's text."""
+        return self._native.to_json()
+
+    def __repr__(self) -> str:
+        return f"Model({self.model!r} of robot {self.robot!r})"
+
+
+def load_model(path: str | os.PathLike[str]) -> Model:
+    """Reads a model file written by ``robocal calibrate --out`` or :meth:`Model.save`."""
+    return Model(_robocal.CalibratedModel.load(os.fspath(path)), None)
+
+
+def calibrate(
+    data: DataLike,
+    *,
+    robot: str | os.PathLike[str] | Robot = "iiwa7",
+    model: str = "kinematic",
+    test_data: DataLike | None = None,
+    **options: Any,
+) -> Model:
+    """Identifies the robot's error model from measurements, as ``robocal calibrate``.
+
+    Args:
+        data: the measurements (DataFrame, dict of arrays, ``.csv``/``.parquet`` path, Dataset).
+        robot: a built-in robot name, a URDF path or a :class:`Robot` (for ``base_link``/``tip_link``).
+        model: ``kinematic`` (default), a ``+``-joined extension such as
+            ``kinematic+joint_compliance+thermal_drift``, ``kinematic+learned:kernel``, or ``auto``
+            (what diagnose chooses).
+        test_data: held-out measurements for validation instead of splitting ``data``.
+        **options: the other ``calibrate`` flags: ``test_fraction=0.3`` (poses of ``data`` held out),
+            ``seed=0`` (of that split), ``robust="huber"|"cauchy"``; :func:`options` lists them.
+
+    Returns:
+        The :class:`Model`, with ``report`` (dict, as ``calibrate --json``).
+
+    Raises:
+        BadInput: unusable data or options (the message names the column, row and field).
+        RuntimeFailure: the calibration did not converge (``report`` attribute) or failed.
+    """
+    options = {"model": model, **options}
+    _check_options("calibrate", options)
+    rob = _robot(robot)
+    table = to_table(data)
+    test = None if test_data is None else to_table(test_data)
+    native, report_text, failure = _robocal.calibrate(rob, table, test, flags(options))
+    report = json.loads(report_text)
+    if failure is not None:
+        raise RuntimeFailure(failure, report)
+    return Model(native, report)
+
+
+def diagnose(
+    data: DataLike,
+    *,
+    robot: str | os.PathLike[str] | Robot = "iiwa7",
+    **options: Any,
+) -> dict[str, Any]:
+    """What the kinematic model misses, its cause and the gain on held-out poses, as ``robocal
+    diagnose --json`` (the diagnose contract: ``steps``, ``findings``, ``unexplained``, in m).
+
+    Args:
+        data: the measurements (DataFrame, dict of arrays, ``.csv``/``.parquet`` path, Dataset).
+        robot: a built-in robot name, a URDF path or a :class:`Robot`.
+        **options: the ``diagnose`` flags: ``test_fraction=1/3``, ``seed=0``, ``alpha=1e-3``,
+            ``noise_floor=None`` (m); :func:`options` lists them.
+    """
+    _check_options("diagnose", options)
+    return json.loads(_robocal.diagnose(_robot(robot), to_table(data), flags(options)))
+
+
+try:  # for the type annotations only
+    import pandas as pd  # noqa: F401
+except ImportError:  # pragma: no cover
+    pass
