@@ -575,7 +575,10 @@ fn diagnose_names_the_hidden_cause_and_its_joints() {
     let n = env_or("ROBOCAL_BLIND_CASES", DEFAULT_CASES);
     let mut cases = cases(seed, n);
     // `ROBOCAL_BLIND_ONLY=K` reruns case K alone (with ROBOCAL_BLIND_KEEP to look at it).
-    if let Some(k) = std::env::var("ROBOCAL_BLIND_ONLY").ok().and_then(|s| s.parse().ok()) {
+    if let Some(k) = std::env::var("ROBOCAL_BLIND_ONLY")
+        .ok()
+        .and_then(|s| s.parse().ok())
+    {
         cases = vec![cases.swap_remove(k)];
     }
     let start = std::time::Instant::now();

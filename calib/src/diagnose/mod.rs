@@ -426,7 +426,8 @@ fn finding_plots(
 ) -> Vec<report::RegressorPlot> {
     let layout = &after.cal.layout;
     let n_test = split.test.rows.len();
-    let regressor = |e: usize| -> Vec<f64> { (0..n_test).map(|r| after.test_regs.row(r)[e]).collect() };
+    let regressor =
+        |e: usize| -> Vec<f64> { (0..n_test).map(|r| after.test_regs.row(r)[e]).collect() };
     let mut out = Vec::new();
     for &j in joints {
         let angle_params: Vec<usize> = (0..layout.extensions.len())
@@ -448,7 +449,11 @@ fn finding_plots(
                     .sum()
             })
             .collect();
-        let before: Vec<f64> = resid.iter().zip(&contribution).map(|(r, c)| r + c).collect();
+        let before: Vec<f64> = resid
+            .iter()
+            .zip(&contribution)
+            .map(|(r, c)| r + c)
+            .collect();
         let base = report::RegressorPlot {
             file: format!("{}_joint{j}", cause.name()),
             title: format!("{}: joint {j}", cause.name()),
@@ -475,7 +480,10 @@ fn finding_plots(
             let mut curve: Vec<(f64, f64)> = q.iter().copied().zip(contribution).collect();
             curve.sort_by(|a, b| a.0.total_cmp(&b.0));
             out.push(report::RegressorPlot {
-                x_label: cause.model().plot_axis(Term::JointAngle { joint: j - 1 }).label,
+                x_label: cause
+                    .model()
+                    .plot_axis(Term::JointAngle { joint: j - 1 })
+                    .label,
                 x: q,
                 curve,
                 ..base
@@ -845,6 +853,19 @@ struct Selection {
     steps: Vec<Step>,
     /// The causes adopted, in order (joints and evidence filled later, from the final model).
     findings: Vec<Finding>,
+    /// Pairs `(cause, its companion)` adopted together ([`companion`]): of the two, one that names no
+    /// joint is not named.
+    companions: Vec<(Cause, Cause)>,
+}
+
+/// The cause fitted alongside `cause` when it is tried and the other is not in the model yet:
+/// joint compliance with link deflection. Bending of a joint about an axis that is the next joint's
+/// axis line is that joint's compliance, so link deflection leaves those axes to the compliance
+/// ([`crate::extensions::link_deflection::modelled_axes`]); fitted without it, a real bending about
+/// such an axis makes the other bending parameters take it up with impossible signs, and the
+/// compliance alone then takes the wrong joints' names.
+fn companion(cause: Cause) -> Option<Cause> {
+    (cause == Cause::LinkDeflection).then_some(Cause::JointCompliance)
 }
 
 /// What a selection adds to across passes.
@@ -871,6 +892,7 @@ fn select(
     let mut current = start;
     let mut steps = vec![current.step.clone()];
     let mut findings = Vec::new();
+    let mut companions = Vec::new();
     loop {
         *book.round += 1;
         let round = *book.round;
@@ -892,7 +914,10 @@ fn select(
         let mut tried: Vec<(Cause, Evaluated, f64, f64, f64)> = Vec::new();
         for cause in remaining {
             crate::cancel::checkpoint()?;
-            let spec = current.spec.with(cause);
+            let mut spec = current.spec.with(cause);
+            if let Some(c) = companion(cause).filter(|c| candidates.contains(c)) {
+                spec = spec.with(c);
+            }
             (book.progress)(&spec.name());
             let cand = match evaluate(model, split, &spec, options) {
                 Ok(c) => c,
@@ -936,9 +961,8 @@ fn select(
         // apart, and the larger model can mimic the smaller: bending of joint 1 about the horizontal
         // axis under joint 2 is joint 2's compliance moved 0.19 m down).
         let added = |i: usize| tried[i].1.cal.layout.len() - current.cal.layout.len();
-        let better_than = |i: usize, j: usize| {
-            significance::paired(&tried[i].1.pose_sq, &tried[j].1.pose_sq).z
-        };
+        let better_than =
+            |i: usize, j: usize| significance::paired(&tried[i].1.pose_sq, &tried[j].1.pose_sq).z;
         if let Some(i) = (0..tried.len())
             .filter(|&i| this_round[i].significant && added(i) < added(k))
             .filter(|&i| better_than(i, k) < TIE_Z)
@@ -953,7 +977,7 @@ fn select(
         let rival = nearest_rival(this_round, k, &rivals, &|i| better_than(k, i));
         let (cause, next, tz, trz, gain) = tried.swap_remove(k);
         let r = explained_correlation(&current.test_err, &next.test_err);
-        findings.push(Finding {
+        let finding = Finding {
             cause,
             evidence: String::new(),
             joints: Vec::new(),
@@ -965,7 +989,23 @@ fn select(
             train_z: trz,
             parameters: Vec::new(),
             rival,
-        });
+        };
+        let added: Vec<Cause> = next
+            .spec
+            .causes
+            .iter()
+            .copied()
+            .filter(|c| *c != cause && !current.spec.causes.contains(c))
+            .collect();
+        findings.push(finding.clone());
+        for c in added {
+            companions.push((cause, c));
+            findings.push(Finding {
+                cause: c,
+                rival: None,
+                ..finding.clone()
+            });
+        }
         steps.push(next.step.clone());
         current = next;
     }
@@ -973,6 +1013,7 @@ fn select(
         current,
         steps,
         findings,
+        companions,
     })
 }
 
@@ -1088,6 +1129,7 @@ pub fn diagnose_with_progress(
         current,
         steps,
         mut findings,
+        companions,
     } = loop {
         let candidates: Vec<Cause> = usable
             .iter()
@@ -1150,6 +1192,60 @@ pub fn diagnose_with_progress(
         plots.regressors.extend(finding_plots(
             model, &split, &current, cause, &f.joints, growth,
         ));
+    }
+    // Of a cause and its companion adopted together, one that names no joint on its own is not named
+    // (the companion first: when both name none, the cause stays as adopted).
+    for &(cause, comp) in &companions {
+        let joints_of_cause = |c: Cause| {
+            findings
+                .iter()
+                .find(|f| f.cause == c)
+                .map(|f| f.joints.is_empty())
+        };
+        if joints_of_cause(comp) == Some(true) {
+            findings.retain(|f| f.cause != comp);
+        } else if joints_of_cause(cause) == Some(true) {
+            // Named without a joint only when the final model without it is worse on both tests.
+            let mut reduced = current.spec.clone();
+            reduced.causes.retain(|c| *c != cause);
+            progress(&reduced.name());
+            let without = evaluate(model, &split, &reduced, options)?;
+            let tz = significance::paired(&without.pose_sq, &current.pose_sq).z;
+            let trz = train_z(&without.cal, &current.cal);
+            if tz > significance::normal_upper_quantile(options.held_out_alpha)
+                && trz > significance::normal_upper_quantile(options.alpha)
+            {
+                continue;
+            }
+            let why_not = format!(
+                "not {cause}, fitted with it: none of its parameters differs from zero by more \
+                 than {} standard deviations on its own, and the final model without it predicts \
+                 the held-out poses as well (z = {tz:.1}, training z = {trz:.1}), so only {comp} \
+                 is named",
+                options.joint_z
+            );
+            let gain = findings
+                .iter()
+                .find(|f| f.cause == cause)
+                .map_or(0.0, |f| f.gain);
+            findings.retain(|f| f.cause != cause);
+            if let Some(f) = findings.iter_mut().find(|f| f.cause == comp) {
+                f.rival = Some(Rival {
+                    name: cause.to_string(),
+                    gain,
+                    why_not,
+                });
+                f.evidence = evidence(
+                    comp,
+                    &f.joints,
+                    &f.parameters,
+                    f.r,
+                    false,
+                    f.rival.as_ref(),
+                    options.joint_z,
+                );
+            }
+        }
     }
     let (noise_floor_m, noise_floor_source) = match options.noise_floor_m {
         Some(v) => (v, "given (--noise-floor)".to_string()),

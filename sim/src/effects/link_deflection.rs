@@ -83,8 +83,8 @@ use nalgebra::{Matrix3, Vector3};
 /// pays for more factorizations.
 pub const REFRESH_STEP_RAD: f64 = 1e-2;
 
-pub use super::deflection_compliance::{MAX_COMPLIANCE_RAD_PER_NM, deflection_axes};
 use super::deflection_compliance::{EFFECT, bad, check_len, check_values};
+pub use super::deflection_compliance::{MAX_COMPLIANCE_RAD_PER_NM, deflection_axes};
 
 /// Per-joint compliance across the joint axis (see the module docs for the model).
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
