@@ -6,12 +6,13 @@
 //! effect never reaches the code under test except through the measurement file.
 //!
 //! The draws cover the whole vocabulary (each cause alone, deflection with compliance, transmission
-//! error with backlash, compliance with backlash, backlash with thermal drift) and two effects outside
-//! it, which must come back as unexplained structure with no finding: one joint's angle error
-//! proportional to another joint's angle (`joint_coupling`) and a transmission error of 4 to 6 cycles
-//! per revolution (beyond the three harmonics the estimator models).
+//! error with backlash, compliance with backlash, backlash with thermal drift) and three effects
+//! outside it, which must come back as unexplained structure with no finding: one joint's angle error
+//! proportional to another joint's angle (`joint_coupling`), a transmission error of 4 to 6 cycles
+//! per revolution (beyond the three harmonics the estimator models), and one joint's angle error
+//! periodic in another joint's angle (`coupled_transmission`).
 //!
-//! `ROBOCAL_BLIND_SEED=N` draws other cases; `ROBOCAL_BLIND_CASES=K` runs K of them (default 48: every
+//! `ROBOCAL_BLIND_SEED=N` draws other cases; `ROBOCAL_BLIND_CASES=K` runs K of them (default 52: every
 //! kind 4 times); `ROBOCAL_BLIND_KEEP=DIR` keeps each case's campaign in `DIR/caseK` to look at. The ignored test `confusion_matrix` runs `ROBOCAL_BLIND_CASES` (default 1,000) and
 //! writes the matrix of hidden against named causes for docs/diagnose.md
 //! (`scripts/blind_confusion.sh`).
@@ -32,7 +33,7 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 
 const DEFAULT_SEED: u64 = 0x5eed_b11d;
-const DEFAULT_CASES: usize = 48;
+const DEFAULT_CASES: usize = 52;
 
 /// The base campaign: the iiwa 7 with drawn geometric errors, 300 random poses, a typical tracker.
 fn base() -> ScenarioBuilder {
@@ -80,10 +81,13 @@ enum Kind {
     Coupling,
     /// Outside the vocabulary: a transmission error of 4 to 6 cycles per revolution.
     HigherHarmonic,
+    /// Outside the vocabulary: one joint's angle error periodic in ANOTHER joint's angle
+    /// (`coupled_transmission`).
+    CoupledTransmission,
 }
 
 impl Kind {
-    const ALL: [Kind; 12] = [
+    const ALL: [Kind; 13] = [
         Kind::Nothing,
         Kind::Compliance,
         Kind::Backlash,
@@ -96,11 +100,15 @@ impl Kind {
         Kind::BacklashAndThermal,
         Kind::Coupling,
         Kind::HigherHarmonic,
+        Kind::CoupledTransmission,
     ];
 
     /// Whether the hidden effect is outside the causes diagnose knows.
     fn outside(self) -> bool {
-        matches!(self, Kind::Coupling | Kind::HigherHarmonic)
+        matches!(
+            self,
+            Kind::Coupling | Kind::HigherHarmonic | Kind::CoupledTransmission
+        )
     }
 }
 
@@ -209,7 +217,7 @@ fn draw(rng: &mut StdRng, seed: u64, kind: Kind) -> Case {
     let mut outside_joint = None;
     let mut aliases = BTreeMap::new();
     let (compliance, backlash, thermal, te, deflection) = match kind {
-        Kind::Nothing | Kind::Coupling | Kind::HigherHarmonic => {
+        Kind::Nothing | Kind::Coupling | Kind::HigherHarmonic | Kind::CoupledTransmission => {
             (false, false, false, false, false)
         }
         Kind::Compliance => (true, false, false, false, false),
@@ -352,6 +360,33 @@ fn draw(rng: &mut StdRng, seed: u64, kind: Kind) -> Case {
             description.push(text);
             outside_joint = Some(joint);
         }
+        Kind::CoupledTransmission => {
+            // A drive whose error follows another joint's motor (a coupled wrist, a cable routed
+            // through the previous joint): joint i's angle error A sin(q_j + φ), A 150-300 µrad (as
+            // the periodic error below), i on joints 1-4, j any other of joints 1-6. Smaller errors
+            // are under the probes' level on 100 held-out poses: 121 µrad at joint 4 gave z = 2.7
+            // against the 3.9 of α = 0.001 over 30 probes (the probe found the right joints). Not
+            // a neighbouring joint j = i ± 1: joint i's axis seen from link i − 2 turns with q(i−1),
+            // so a rotation error of joint i − 1 (a kinematic twist) makes an angle error of joint
+            // i in sin and cos of q(i−1), and the kinematic fit takes up most of such an error (joint
+            // 4 in q3: 61 µm RMS injected, 30 µm left beside 23 µm of noise; joint 3 in q4, whose
+            // axis lines up with joint 5's at q4 = 0: 84 µm injected, 33 µm left), under the
+            // probes' level: see docs/diagnose.md, Limits.
+            let i = rng.random_range(1..=4);
+            let others: Vec<usize> = (1..=6usize).filter(|j| j.abs_diff(i) >= 2).collect();
+            let j = others[rng.random_range(0..others.len())];
+            let a = rng.random_range(1.5e-4..3e-4);
+            let phase = rng.random_range(-std::f64::consts::PI..std::f64::consts::PI);
+            scenario = scenario.coupled_transmission(
+                vec![[i, j]],
+                Magnitude::List(vec![Magnitude::Number(a)]),
+                Magnitude::List(vec![Magnitude::Number(phase)]),
+            );
+            description.push(format!(
+                "coupled transmission: joint {i} gains {a:.2e} rad sin(q{j} {phase:+.2})"
+            ));
+            outside_joint = Some(i);
+        }
         _ => {}
     }
     let _ = used;
@@ -369,7 +404,7 @@ fn draw(rng: &mut StdRng, seed: u64, kind: Kind) -> Case {
     }
 }
 
-/// `n` cases from `seed`: the kinds in a shuffled cycle (every kind once in each run of 12), the
+/// `n` cases from `seed`: the kinds in a shuffled cycle (every kind once in each run of 13), the
 /// rest of each case drawn.
 fn cases(seed: u64, n: usize) -> Vec<Case> {
     let mut rng = StdRng::seed_from_u64(seed);
@@ -474,10 +509,29 @@ struct Outcome {
 /// joints are nearly parallel lines (joint 1's x and y and joint 2's x, 0.19 m apart at q2 = 0), so a
 /// realistic bending is often not told apart between neighbours, and diagnose then names only the
 /// joints whose parameters are determined on their own.
+///
+/// A hidden link deflection also counts as named when only its alias is: joint compliance at a joint
+/// after a bending one (and not itself hidden). That bending is, to any measurement, that joint's
+/// compliance; when the bending about the other axis moves the target by less than the noise (small
+/// moments across it without payload), the alias is all the data show, and naming only it is right
+/// (the final held-out RMS must still be within 1.5× the noise floor).
 fn matches_hidden(got: &BTreeMap<String, Vec<usize>>, case: &Case) -> bool {
     let hidden_named = case.hidden.iter().all(|(cause, joints)| {
-        got.get(cause)
-            .is_some_and(|g| cause == "link_deflection" || joints.iter().all(|j| g.contains(j)))
+        let alias_named = || {
+            let hidden_compliance = case.hidden.get("joint_compliance");
+            case.aliases.get("joint_compliance").is_some_and(|a| {
+                got.get("joint_compliance").is_some_and(|g| {
+                    g.iter()
+                        .any(|j| a.contains(j) && !hidden_compliance.is_some_and(|h| h.contains(j)))
+                })
+            })
+        };
+        if cause == "link_deflection" {
+            got.contains_key(cause) || alias_named()
+        } else {
+            got.get(cause)
+                .is_some_and(|g| joints.iter().all(|j| g.contains(j)))
+        }
     });
     let nothing_else = got.iter().all(|(cause, g)| {
         let allowed: Vec<usize> = case

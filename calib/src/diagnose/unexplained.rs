@@ -13,6 +13,11 @@
 //!   coefficients): one joint's error growing with another's angle (cable wind-up, coupled wrist
 //!   drives) or with its own (a wrong gear ratio). Its *drivers* are the joints whose term moves the
 //!   angle most over the data (`|cᵢ| · std qᵢ` at least half the largest).
+//! - **joint j periodic in the other joints' angles**: `f = Σ_{i≠j} aᵢ sin qᵢ + bᵢ cos qᵢ`
+//!   (2(n − 1) coefficients): one joint's error following another joint's turn (a coupled drive or
+//!   transmission, the simulator's `coupled_transmission`), which neither the own-angle harmonics nor
+//!   the linear probe sees over a joint's full range. Its drivers are the joints whose amplitude
+//!   `√(aᵢ² + bᵢ²)` is at least half the largest.
 //!
 //! The learned residual models ([`crate::learned`]: polynomial and kernel ridge regression over all
 //! joint angles, cross-validated) are the generic fourth. They see the residual in the tracker frame,
@@ -50,6 +55,8 @@ pub enum ProbeKind {
     HigherHarmonics,
     /// An angle error of one joint linear in every joint's angle.
     Linear,
+    /// An angle error of one joint periodic (one cycle per revolution) in the other joints' angles.
+    CrossHarmonics,
     /// A learned model of the tracker-frame residual over all joint angles.
     Learned,
 }
@@ -119,6 +126,10 @@ impl Probe {
                     ),
                 }
             }
+            ProbeKind::CrossHarmonics => format!(
+                "the angle of {}: joint {j}'s angle error is periodic in it (a coupled drive or transmission)",
+                crate::extensions::joint_words(&self.drivers)
+            ),
             ProbeKind::Learned => format!("the joint angles ({})", self.name),
         }
     }
@@ -323,6 +334,38 @@ pub(crate) fn probes(
                 &|_| Vec::new(),
             );
         }
+        // One cycle per revolution of every other joint's angle.
+        let cross_width = 2 * (n - 1);
+        let cross_features = |q: &[f64]| -> Vec<f64> {
+            let mut out = Vec::with_capacity(q.len() / n * cross_width);
+            for row in q.chunks_exact(n) {
+                for (i, v) in row.iter().enumerate() {
+                    if i != j {
+                        let (s, c) = v.sin_cos();
+                        out.extend([s, c]);
+                    }
+                }
+            }
+            out
+        };
+        probe(
+            format!("joint {} periodic in the other joints' angles", j + 1),
+            ProbeKind::CrossHarmonics,
+            cross_width,
+            &cross_features(&q_train),
+            &cross_features(&q_test),
+            &|coef| {
+                let others: Vec<usize> = (0..n).filter(|&i| i != j).collect();
+                let amp: Vec<f64> = (0..n - 1)
+                    .map(|k| coef[2 * k].hypot(coef[2 * k + 1]))
+                    .collect();
+                let top = amp.iter().copied().fold(0.0, f64::max);
+                (0..n - 1)
+                    .filter(|&k| top > 0.0 && amp[k] >= 0.5 * top)
+                    .map(|k| others[k] + 1)
+                    .collect()
+            },
+        );
         probe(
             format!("joint {} linear in the joint angles", j + 1),
             ProbeKind::Linear,
