@@ -55,6 +55,8 @@ enum Injection {
     Deflection(Vec<Vec<f64>>),
     /// `[effects.coupling]`: joint `.0`'s angle gains `.2` rad per rad of joint `.1`'s (1-based).
     Coupling(usize, usize, f64),
+    /// `[effects.coupled_transmission]`: joint `.0`'s angle gains `.2 sin(q.1 + .3)` rad (1-based).
+    CoupledTransmission(usize, usize, f64, f64),
     /// `[campaign.payload]`: up to this many kg, centre of mass 6 cm in front of the flange.
     Payload(f64),
 }
@@ -83,6 +85,9 @@ impl Injection {
             }),
             Injection::Deflection(c) => b.link_deflection(table(c)),
             Injection::Coupling(i, j, c) => b.joint_coupling(vec![[*i, *j]], list(&[*c])),
+            Injection::CoupledTransmission(i, j, a, phase) => {
+                b.coupled_transmission(vec![[*i, *j]], list(&[*a]), list(&[*phase]))
+            }
             Injection::Payload(m) => b.payload(PayloadSection {
                 mass_kg: None,
                 choice_kg: Some(vec![0.0, m / 2.0, *m]),
@@ -279,10 +284,11 @@ fn deflection(rng: &mut Rng) -> Hidden {
 }
 
 /// Draws what to hide: nothing, each cause alone, two at once, or an effect outside the vocabulary
-/// (one joint's angle error growing with another's angle, a transmission error of 4-6 cycles per
-/// revolution), which diagnose must report as unexplained without naming a cause.
+/// (one joint's angle error growing with another's angle, or periodic in another's angle, a
+/// transmission error of 4-6 cycles per revolution), which diagnose must report as unexplained
+/// without naming a cause.
 fn draw_hidden(rng: &mut Rng) -> Vec<Hidden> {
-    match rng.random_range(0..11) {
+    match rng.random_range(0..12) {
         0 => Vec::new(),
         1 => vec![compliance(rng)],
         2 => vec![backlash(rng, &[])],
@@ -328,6 +334,25 @@ fn draw_hidden(rng: &mut Rng) -> Vec<Hidden> {
                     c * 1e6
                 ),
                 injection: vec![Injection::Coupling(i, j, c)],
+                outside: true,
+            }]
+        }
+        11 => {
+            // Not a neighbouring joint: that error is mostly a kinematic twist (docs/diagnose.md).
+            let i = rng.random_range(1..=4);
+            let others: Vec<usize> = (1..=6usize).filter(|j| j.abs_diff(i) >= 2).collect();
+            let j = others[rng.random_range(0..others.len())];
+            let a = rng.random_range(1.5e-4..3e-4);
+            let phase = rng.random_range(-std::f64::consts::PI..std::f64::consts::PI);
+            vec![Hidden {
+                cause: "coupled transmission",
+                joints: Vec::new(),
+                description: format!(
+                    "joint {i}'s angle error {:.0} µrad × sin(q{j} {phase:+.2}), periodic in another \
+                     joint's angle (a coupled drive)",
+                    a * 1e6
+                ),
+                injection: vec![Injection::CoupledTransmission(i, j, a, phase)],
                 outside: true,
             }]
         }
