@@ -874,6 +874,11 @@ struct Bookkeeping<'b> {
     trials: &'b mut Vec<Trial>,
     health: &'b mut Health,
     progress: &'b mut dyn FnMut(&str),
+    /// Every model fitted so far by its name (`None`: too few poses), so that a selection run again
+    /// after a rejection does not refit what it fitted before (the fits are deterministic).
+    fits: &'b mut std::collections::BTreeMap<String, Option<Evaluated>>,
+    /// The rival probes on each model's residual, by the model's name.
+    rivals: &'b mut std::collections::BTreeMap<String, Vec<unexplained::Probe>>,
 }
 
 /// Forward selection from `start` over `candidates`: each round extends the current model by every
@@ -910,7 +915,11 @@ fn select(
         // The rivals no known cause names: angle errors of one joint periodic in its angle or linear
         // in the joint angles. A cause that is really there explains its residual better than such a
         // generic term, except the one that models it (the transmission error, the harmonics).
-        let rivals = unexplained::probes(model, split, &current, &[], options.seed);
+        let rivals = book
+            .rivals
+            .entry(current.spec.name())
+            .or_insert_with(|| unexplained::probes(model, split, &current, &[], options.seed))
+            .clone();
         let mut tried: Vec<(Cause, Evaluated, f64, f64, f64)> = Vec::new();
         for cause in remaining {
             crate::cancel::checkpoint()?;
@@ -919,12 +928,22 @@ fn select(
                 spec = spec.with(c);
             }
             (book.progress)(&spec.name());
-            let cand = match evaluate(model, split, &spec, options) {
-                Ok(c) => c,
-                Err(CalibError::TooFewPoses { .. }) => continue,
-                Err(e) => return Err(e),
+            let cand = match book.fits.get(&spec.name()) {
+                Some(Some(c)) => c.clone(),
+                Some(None) => continue,
+                None => match evaluate(model, split, &spec, options) {
+                    Ok(c) => {
+                        book.health.merge(&c.cal.report.health);
+                        book.fits.insert(spec.name(), Some(c.clone()));
+                        c
+                    }
+                    Err(CalibError::TooFewPoses { .. }) => {
+                        book.fits.insert(spec.name(), None);
+                        continue;
+                    }
+                    Err(e) => return Err(e),
+                },
             };
-            book.health.merge(&cand.cal.report.health);
             let tz = significance::paired(&current.pose_sq, &cand.pose_sq).z;
             let trz = train_z(&current.cal, &cand.cal);
             let gain = 1.0 - cand.step.test_rms_m / current.step.test_rms_m;
@@ -1125,6 +1144,8 @@ pub fn diagnose_with_progress(
     // again without it (it may have stood in for another cause), until every adopted cause holds.
     let mut rejected: Vec<Rejected> = Vec::new();
     let mut round = 0;
+    let mut fits = std::collections::BTreeMap::new();
+    let mut rival_probes = std::collections::BTreeMap::new();
     let Selection {
         current,
         steps,
@@ -1147,6 +1168,8 @@ pub fn diagnose_with_progress(
                 trials: &mut trials,
                 health: &mut health,
                 progress,
+                fits: &mut fits,
+                rivals: &mut rival_probes,
             },
         )?;
         match invalid_finding(&sel, options) {
@@ -1209,7 +1232,10 @@ pub fn diagnose_with_progress(
             let mut reduced = current.spec.clone();
             reduced.causes.retain(|c| *c != cause);
             progress(&reduced.name());
-            let without = evaluate(model, &split, &reduced, options)?;
+            let without = match fits.get(&reduced.name()) {
+                Some(Some(c)) => c.clone(),
+                _ => evaluate(model, &split, &reduced, options)?,
+            };
             let tz = significance::paired(&without.pose_sq, &current.pose_sq).z;
             let trz = train_z(&without.cal, &current.cal);
             if tz > significance::normal_upper_quantile(options.held_out_alpha)
@@ -1247,6 +1273,7 @@ pub fn diagnose_with_progress(
             }
         }
     }
+    drop(fits);
     let (noise_floor_m, noise_floor_source) = match options.noise_floor_m {
         Some(v) => (v, "given (--noise-floor)".to_string()),
         None => noise_floor::estimate(table, &split.test.rows, &options.calibration.noise),
