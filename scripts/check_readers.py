@@ -7,8 +7,8 @@ shared/spec/measurements.md), reads each with pandas (pyarrow engine), polars an
   1. within each file, all three readers give the same column names in the same order, the same
      dtypes, and bit-identical values (floats compared by their 64-bit patterns, so -0.0 differs
      from 0.0 and subnormals must survive);
-  2. the contract's types: in the Parquet file `pose` is int64, `dir*` int8 and every other column
-     float64; in the CSV file `pose` and `dir*` are integers and every other column float64 (the
+  2. the contract's types: in the Parquet file `pose` and `campaign` are int64, `dir*` int8 and every
+     other column float64; in the CSV file `pose`, `campaign` and `dir*` are integers and every other column float64 (the
      writer puts a '.' or an exponent in every float so that readers infer floats);
   3. across the two files, the same columns in the same order and exactly the same values (integers
      as int64, floats bit for bit).
@@ -139,7 +139,7 @@ def compare_values(what, name, a, b, label_a, label_b):
 
 
 def expected_dtype(name, fmt):
-    if name == "pose":
+    if name in ("pose", "campaign"):
         return "int64"
     if name.startswith("dir"):
         return "int8" if fmt == "parquet" else "int"

@@ -28,7 +28,7 @@ fn robocal(args: &[&str]) -> (Option<i32>, String) {
 }
 
 /// Asserts exit `code` with exactly one line on stderr that contains every `needle`.
-fn check(args: &[&str], code: i32, needles: &[&str]) {
+fn check(args: &[&str], code: i32, needles: &[&str]) -> String {
     let (c, e) = robocal(args);
     assert_eq!(c, Some(code), "{args:?}: {e}");
     assert_eq!(e.trim().lines().count(), 1, "{args:?}: not one line: {e}");
@@ -37,6 +37,7 @@ fn check(args: &[&str], code: i32, needles: &[&str]) {
     for n in needles {
         assert!(e.contains(n), "{args:?}: error does not name {n}: {e}");
     }
+    e
 }
 
 /// A small generated campaign (noise-free iiwa 7, `poses` poses).
@@ -187,12 +188,48 @@ fn bad_input_and_unknown_flag_values_exit_2() {
         2,
         &["--selection", "best", "random, planned"],
     );
-    // Too few poses once the test set is held out: the typed error, with the hint about the split.
+    // Too few poses for the model itself: the typed error, without a hint about validation.
     let few = self::data(&d, "8");
-    check(
+    let e = check(
         &["calibrate", "--data", few.to_str().unwrap(), "--out", out],
         2,
-        &["distinct poses", "--test-fraction 0.3 held out"],
+        &["8 distinct poses", "at least 11 distinct poses"],
+    );
+    assert!(!e.contains("--folds"), "{e}");
+    assert!(!Path::new(out).exists());
+    // Enough for the model on every pose (11), too few for a fold's 4/5 of them: the hint says so.
+    let twelve = self::data(&d, "12");
+    check(
+        &[
+            "calibrate",
+            "--data",
+            twelve.to_str().unwrap(),
+            "--out",
+            out,
+        ],
+        2,
+        &[
+            "fold",
+            "distinct poses",
+            "--folds 5 fits each fold on 4/5 of the poses",
+        ],
+    );
+    // The same with an explicit split.
+    check(
+        &[
+            "calibrate",
+            "--data",
+            twelve.to_str().unwrap(),
+            "--out",
+            out,
+            "--test-fraction",
+            "0.3",
+        ],
+        2,
+        &[
+            "training set",
+            "--test-fraction 0.3 held out part of the poses",
+        ],
     );
     assert!(!Path::new(out).exists());
     let _ = std::fs::remove_dir_all(&d);
@@ -216,5 +253,22 @@ fn the_robust_losses_are_accepted_by_name() {
         assert_eq!(c, Some(0), "{loss}: {e}");
         assert!(out.is_file());
     }
+    let _ = std::fs::remove_dir_all(&d);
+}
+
+/// Fuzzing case 16900 (seed 15, the suite's first version): `fk` with as many `--q` values as the URDF should have, on a URDF
+/// whose chain came out shorter, named the flag and the robot but not the file. The error names the
+/// `--robot` argument it loaded.
+#[test]
+fn fuzz_case_16900_a_joint_count_error_names_the_robot_file() {
+    let d = dir("fk_count");
+    let urdf = d.join("six.urdf");
+    std::fs::copy(repo().join("sim/robots/ur5.urdf"), &urdf).unwrap();
+    let urdf = urdf.to_str().unwrap();
+    check(
+        &["fk", "--robot", urdf, "--q", "0,0,0,0,0,0,0"],
+        2,
+        &["--q", "expected 6 joint values, got 7", urdf],
+    );
     let _ = std::fs::remove_dir_all(&d);
 }

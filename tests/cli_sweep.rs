@@ -376,10 +376,19 @@ fn a_single_cell_and_a_single_run_reproduce_alone() {
         "0.3",
         "--json",
     ]);
+    // calibrate saves the model fitted on every pose; its --test-fraction validation is the sweep's
+    // run: the split's held-out poses predicted by the model fitted on the others.
     let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
-    let rep = &v["report"];
-    assert_eq!(rep["n_train_poses"].as_f64().unwrap(), a["train_poses"][r]);
-    let test_rms = rep["after"]["test"]["rms_m"].as_f64().unwrap();
+    assert_eq!(
+        v["report"]["n_train_poses"].as_f64().unwrap(),
+        a["poses"][r]
+    );
+    let held = &v["validation"]["after"];
+    assert_eq!(
+        held["n_poses"].as_f64().unwrap(),
+        a["poses"][r] - a["train_poses"][r]
+    );
+    let test_rms = held["rms_m"].as_f64().unwrap();
     let want = a["test_rms_measured_m"][r];
     assert!(
         ((test_rms - want) / want).abs() < 1e-9,

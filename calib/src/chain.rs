@@ -11,7 +11,8 @@
 //! T_tracker_flange = Fₙ H'ₙ⁻¹ M,   p_tracker = T_tracker_flange p_flange
 //! ```
 //!
-//! prepared once per parameter point ([`Chain::update`]).
+//! prepared once per parameter point ([`Chain::update`]). With several measurement campaigns, `F₀` is the
+//! row's campaign's `T_tracker_base` and `p_flange` its target ([`Chain::forward_in`]).
 //!
 //! # Jacobian
 //! With `Pᵢ = T_tracker_base E₁ ⋯ Eᵢ = Fᵢ Hᵢ'⁻¹` (tracker frame; `Eᵢ = exp([Sᵢ'] θᵢ)`, `P₀ = T_tracker_base`),
@@ -45,10 +46,17 @@ pub struct Chain {
     home_inv: Vec<Pose>,
     /// `H'ₙ⁻¹ M`: flange in the last joint frame (m).
     flange_offset: Pose,
+    /// The nominal home pose `Hᵢ` of each joint frame (base frame, m).
+    home: Vec<Pose>,
+    /// The nominal flange at q = 0, `M` (base frame, m).
+    home_flange: Pose,
     zero_offset: Vec<f64>,
-    t_tracker_base: Pose,
-    p_flange_target: Vector3<f64>,
-    r_flange_target: Option<Matrix3<f64>>,
+    /// `T_tracker_base` per campaign (m).
+    bases: Vec<Pose>,
+    /// The target position per campaign (flange frame, m).
+    targets: Vec<Vector3<f64>>,
+    /// The target orientation per campaign (flange frame), with orientation parameters.
+    target_rotations: Vec<Option<Matrix3<f64>>>,
 }
 
 /// Per-evaluation workspace of a [`Chain`]: made once, reused without allocating.
@@ -67,6 +75,8 @@ pub struct ChainScratch {
     /// With a bent chain: each joint's axis, tracker frame, before its bend (the frames then carry
     /// the bend after the joint's rotation).
     pub axes: Vec<Vector3<f64>>,
+    /// Campaign (index) of the last configuration: whose tracker frame the above are in.
+    pub campaign: usize,
 }
 
 impl ChainScratch {
@@ -79,6 +89,7 @@ impl ChainScratch {
             r_tracker_target: Matrix3::identity(),
             bent: false,
             axes: vec![Vector3::zeros(); n],
+            campaign: 0,
         }
     }
 }
@@ -94,10 +105,12 @@ impl Chain {
             terms: vec![[Matrix3::zeros(); 3]; n],
             home_inv: vec![Pose::identity(); n],
             flange_offset: Pose::identity(),
+            home: model.joints.iter().map(|j| j.home).collect(),
+            home_flange: model.home_flange,
             zero_offset: vec![0.0; n],
-            t_tracker_base: Pose::identity(),
-            p_flange_target: Vector3::zeros(),
-            r_flange_target: None,
+            bases: Vec::new(),
+            targets: Vec::new(),
+            target_rotations: Vec::new(),
         };
         c.update(model, params);
         c
@@ -109,55 +122,112 @@ impl Chain {
         self.kind.len()
     }
 
-    /// Re-prepares for new parameters of the same robot, without allocating.
+    /// Number of campaigns (tracker registrations).
+    #[inline]
+    pub fn n_campaigns(&self) -> usize {
+        self.bases.len()
+    }
+
+    /// `T_tracker_base` of campaign `c` (m).
+    #[inline]
+    pub fn t_tracker_base(&self, c: usize) -> &Pose {
+        &self.bases[c]
+    }
+
+    /// Re-prepares for new parameters of the same robot, without allocating (unless the number of
+    /// campaigns changes).
     ///
     /// # Panics
     /// If `params` has a different joint count than `model`.
     pub fn update(&mut self, model: &Model, params: &KinematicParams) {
         assert_eq!(params.joint_error.len(), model.nq(), "joint count");
+        self.update_params(params);
+    }
+
+    /// [`Chain::update`] for the robot this chain was made for, without allocating: a chain per
+    /// evaluation thread can follow parameters that change from row to row.
+    ///
+    /// # Panics
+    /// If `params` has a different joint count.
+    pub fn update_params(&mut self, params: &KinematicParams) {
+        assert_eq!(params.joint_error.len(), self.nq(), "joint count");
         let mut prev_inv = Pose::identity();
-        for (i, joint) in model.joints.iter().enumerate() {
-            let home = params.joint_error[i] * joint.home;
+        for i in 0..self.nq() {
+            let home = params.joint_error[i] * self.home[i];
             let origin = prev_inv * home;
             self.origin[i] = origin;
-            self.terms[i] = Joint::rotation_terms_for(&origin, &joint.axis);
+            self.terms[i] = Joint::rotation_terms_for(&origin, &self.axis[i]);
             prev_inv = home.inverse();
             self.home_inv[i] = prev_inv;
         }
-        self.flange_offset = prev_inv * model.home_flange;
+        self.flange_offset = prev_inv * self.home_flange;
         self.zero_offset.copy_from_slice(&params.zero_offset);
-        self.t_tracker_base = params.t_tracker_base;
-        self.p_flange_target = params.p_flange_target;
-        self.r_flange_target = params.r_flange_target;
+        let k = params.n_campaigns();
+        self.bases.resize(k, Pose::identity());
+        self.targets.resize(k, Vector3::zeros());
+        self.target_rotations.resize(k, None);
+        for c in 0..k {
+            self.bases[c] = *params.t_tracker_base_of(c);
+            self.targets[c] = *params.p_flange_target_of(c);
+            self.target_rotations[c] = params.r_flange_target_of(c).copied();
+        }
     }
 
-    /// Evaluates the chain at the controller's joint values `q` (rad or m) into `s`.
+    /// Evaluates the chain at the controller's joint values `q` (rad or m) into `s`, in the first
+    /// campaign's tracker frame.
     ///
     /// # Panics
     /// If `q.len()` differs from the joint count.
+    #[inline]
     pub fn forward(&self, s: &mut ChainScratch, q: &[f64]) {
-        self.evaluate(s, q, None);
+        self.forward_in(s, q, 0);
     }
 
-    /// [`Chain::forward`] with everything beyond joint `i` turned about the joint's origin by the
+    /// Evaluates the chain at the controller's joint values `q` (rad or m) into `s`, in campaign
+    /// `campaign`'s tracker frame with its target.
+    ///
+    /// # Panics
+    /// If `q.len()` differs from the joint count or the campaign is out of range.
+    #[inline]
+    pub fn forward_in(&self, s: &mut ChainScratch, q: &[f64], campaign: usize) {
+        self.evaluate(s, q, campaign, None);
+    }
+
+    /// [`Chain::forward_in`] with everything beyond joint `i` turned about the joint's origin by the
     /// rotation vector `bend[i]` (rad, joint frame `i`: the child link's frame, turning with the
     /// joint), after the joint's own motion: `Fᵢ = Fᵢ₋₁ Oᵢ exp([Aᵢ] θᵢ) exp([φᵢ])` (link deflection).
+    /// The bend is the robot's, the same in every campaign; `campaign` only selects the tracker frame
+    /// (`F₀ = T_tracker_base` of the campaign) and the target.
     /// The joint-twist columns of the Jacobian keep their form (they depend on `Fᵢ` only through
     /// `Pᵢ = Fᵢ H'ᵢ⁻¹`); the zero-offset column turns about the axis before the bend, which
     /// [`ChainScratch::axes`] keeps; [`Chain::bend_axis`] gives the bend's own column.
     ///
     /// # Panics
-    /// If `q.len()` or `bend.len()` differs from the joint count.
-    pub fn forward_bent(&self, s: &mut ChainScratch, q: &[f64], bend: &[Vector3<f64>]) {
+    /// If `q.len()` or `bend.len()` differs from the joint count or the campaign is out of range.
+    pub fn forward_bent(
+        &self,
+        s: &mut ChainScratch,
+        q: &[f64],
+        campaign: usize,
+        bend: &[Vector3<f64>],
+    ) {
         assert_eq!(bend.len(), self.nq(), "one bend per joint");
-        self.evaluate(s, q, Some(bend));
+        self.evaluate(s, q, campaign, Some(bend));
     }
 
     #[inline(always)]
-    fn evaluate(&self, s: &mut ChainScratch, q: &[f64], bend: Option<&[Vector3<f64>]>) {
+    fn evaluate(
+        &self,
+        s: &mut ChainScratch,
+        q: &[f64],
+        campaign: usize,
+        bend: Option<&[Vector3<f64>]>,
+    ) {
         assert_eq!(q.len(), self.nq(), "joint vector length");
-        let mut r = *self.t_tracker_base.rotation.matrix();
-        let mut p = self.t_tracker_base.translation.vector;
+        let base = &self.bases[campaign];
+        s.campaign = campaign;
+        let mut r = *base.rotation.matrix();
+        let mut p = base.translation.vector;
         for (i, &qi) in q.iter().enumerate() {
             let theta = qi + self.zero_offset[i];
             let o = &self.origin[i];
@@ -183,8 +253,8 @@ impl Chain {
         }
         s.bent = bend.is_some();
         s.t_tracker_flange = s.frames[self.nq() - 1] * self.flange_offset;
-        s.p_tracker = (s.t_tracker_flange * nalgebra::Point3::from(self.p_flange_target)).coords;
-        s.r_tracker_target = match &self.r_flange_target {
+        s.p_tracker = (s.t_tracker_flange * nalgebra::Point3::from(self.targets[campaign])).coords;
+        s.r_tracker_target = match &self.target_rotations[campaign] {
             Some(rf) => s.t_tracker_flange.rotation.matrix() * rf,
             None => Matrix3::identity(),
         };
@@ -235,13 +305,41 @@ impl Chain {
     }
 
     /// Jacobian of the predicted target position (tracker frame, m per parameter unit) at the last
-    /// [`Chain::forward`] configuration, row-major into `out` (3 rows of `layout.len()`).
+    /// [`Chain::forward`] configuration, row-major into `out` (3 rows of `layout.len()`). The columns
+    /// of the campaigns other than the row's are zero.
     pub fn position_jacobian(&self, s: &ChainScratch, layout: &ParamLayout, out: &mut [f64]) {
+        self.position_jacobian_of(s, layout, true, out);
+    }
+
+    /// [`Chain::position_jacobian`], with the joint columns (error twists and zero offsets) only when
+    /// `joints` (else they are left as they are): a fit of the registration alone needs no more.
+    pub fn position_jacobian_of(
+        &self,
+        s: &ChainScratch,
+        layout: &ParamLayout,
+        joints: bool,
+        out: &mut [f64],
+    ) {
         let np = layout.len();
         debug_assert_eq!(out.len(), 3 * np);
+        if layout.n_campaigns() > 1 {
+            for row in 0..3 {
+                out[row * np + layout.base()..row * np + layout.kinematic_len()].fill(0.0);
+            }
+        }
+        if joints {
+            self.joint_columns(s, layout, out);
+        }
+        self.registration_columns(s, layout, out);
+    }
+
+    /// The joint columns of [`Chain::position_jacobian_of`].
+    fn joint_columns(&self, s: &ChainScratch, layout: &ParamLayout, out: &mut [f64]) {
+        let np = layout.len();
         let p = s.p_tracker;
-        let mut prev_r = *self.t_tracker_base.rotation.matrix();
-        let mut prev_a = rot_block(&prev_r, &(p - self.t_tracker_base.translation.vector));
+        let base = &self.bases[s.campaign];
+        let mut prev_r = *base.rotation.matrix();
+        let mut prev_a = rot_block(&prev_r, &(p - base.translation.vector));
         for i in 0..self.nq() {
             let f = &s.frames[i];
             let fr = f.rotation.matrix();
@@ -265,8 +363,15 @@ impl Chain {
             prev_r = cur_r;
             prev_a = cur_a;
         }
-        let kb = layout.base();
-        let kt = layout.target_position();
+    }
+
+    /// The registration (base twist and target) columns of [`Chain::position_jacobian_of`].
+    fn registration_columns(&self, s: &ChainScratch, layout: &ParamLayout, out: &mut [f64]) {
+        let np = layout.len();
+        let p = s.p_tracker;
+        let campaign = s.campaign;
+        let kb = layout.campaign_base(campaign);
+        let kt = layout.campaign_target_position(campaign);
         let rf = s.t_tracker_flange.rotation.matrix();
         // [−[p], I]: column c of −[p] is e_c × p.
         let ec_cross_p = [
@@ -283,9 +388,9 @@ impl Chain {
             for c in 0..3 {
                 out[row * np + kt + c] = rf[(row, c)];
             }
-            if let Some(ko) = layout.target_orientation() {
-                for c in 0..3 {
-                    out[row * np + ko + c] = 0.0;
+            if let Some(ko) = layout.campaign_target_orientation(campaign) {
+                for a in 0..3 {
+                    out[row * np + ko + a] = 0.0;
                 }
             }
         }
@@ -298,7 +403,8 @@ impl Chain {
         let np = layout.len();
         debug_assert_eq!(out.len(), 3 * np);
         out.fill(0.0);
-        let mut prev_r = *self.t_tracker_base.rotation.matrix();
+        let campaign = s.campaign;
+        let mut prev_r = *self.bases[campaign].rotation.matrix();
         for i in 0..self.nq() {
             let fr = s.frames[i].rotation.matrix();
             let cur_r = fr * self.home_inv[i].rotation.matrix();
@@ -317,11 +423,11 @@ impl Chain {
             }
             prev_r = cur_r;
         }
-        let kb = layout.base();
+        let kb = layout.campaign_base(campaign);
         for row in 0..3 {
             out[row * np + kb + row] = 1.0;
         }
-        if let Some(ko) = layout.target_orientation() {
+        if let Some(ko) = layout.campaign_target_orientation(campaign) {
             for row in 0..3 {
                 for c in 0..3 {
                     out[row * np + ko + c] = s.r_tracker_target[(row, c)];

@@ -300,8 +300,7 @@ pub fn describe_null_space(
     sub: &Subspace,
     obs: &Observations,
 ) -> NullSpaceReport {
-    let layout =
-        ParamLayout::new(model, obs.orientation.is_some()).with_extensions(obs.ext.params.clone());
+    let layout = ParamLayout::for_params(model, params, obs.ext.params.clone());
     let p = layout.len();
     assert_eq!(gram.ncols(), p, "the normal matrix of all parameters");
     let k = p - sub.rank;

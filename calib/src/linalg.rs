@@ -49,12 +49,12 @@ pub fn r_factor_scaled(a: &DMatrix<f64>, scales: Option<&[f64]>) -> DMatrix<f64>
             }
         }
     };
-    if n < TALL_ROWS || n < 4 * p {
+    if !is_tall(n, p) {
         let mut m = a.clone();
         scale(&mut m);
         return m.qr().r();
     }
-    let block = QR_BLOCK_ROWS.max(4 * p);
+    let block = tsqr_block_rows(p);
     let starts: Vec<usize> = (0..n).step_by(block).collect();
     let factors: Vec<DMatrix<f64>> = starts
         .par_iter()
@@ -65,10 +65,29 @@ pub fn r_factor_scaled(a: &DMatrix<f64>, scales: Option<&[f64]>) -> DMatrix<f64>
             m.qr().r()
         })
         .collect();
+    stacked_r_factor(&factors, p)
+}
+
+/// Whether an `n × p` matrix takes the tall-skinny path of [`r_factor`].
+#[inline]
+pub fn is_tall(n: usize, p: usize) -> bool {
+    n >= TALL_ROWS && n >= 4 * p
+}
+
+/// Rows per block of the tall-skinny path of [`r_factor`] for `p` columns: block `b` is rows
+/// `b · tsqr_block_rows(p) ..`, the last one shorter.
+#[inline]
+pub fn tsqr_block_rows(p: usize) -> usize {
+    QR_BLOCK_ROWS.max(4 * p)
+}
+
+/// The `R` factor of the blocks' `R` factors `factors` stacked in order (`p` columns): the second
+/// stage of the tall-skinny QR, whatever computed the blocks.
+pub fn stacked_r_factor(factors: &[DMatrix<f64>], p: usize) -> DMatrix<f64> {
     let stacked_rows: usize = factors.iter().map(|r| r.nrows()).sum();
     let mut stacked = DMatrix::zeros(stacked_rows, p);
     let mut at = 0;
-    for r in &factors {
+    for r in factors {
         stacked.rows_mut(at, r.nrows()).copy_from(r);
         at += r.nrows();
     }

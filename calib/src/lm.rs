@@ -80,6 +80,18 @@ pub trait LeastSquaresProblem {
         gradient.copy_from_slice(g.as_slice());
         r.iter().map(|v| v * v).sum()
     }
+
+    /// A square factor `R` (p × p) of the column-scaled Jacobian at the trial point, `RᵀR = D JᵀJ D`,
+    /// for the SVD that decides the rank ([`Subspace::from_factor`]): the `R` of a QR decomposition
+    /// ([`crate::linalg::r_factor_scaled`]) when `m > p`, else `J D` padded with zero rows. The default
+    /// forms `J`; problems override it to factor blocks of rows without forming all of `J`, with the
+    /// same arithmetic.
+    fn scaled_factor(&mut self, scales: &[f64]) -> DMatrix<f64> {
+        let (m, p) = (self.n_residuals(), self.n_params());
+        let mut j = DMatrix::zeros(m, p);
+        self.jacobian(&mut j);
+        Subspace::square_factor(&j, scales)
+    }
 }
 
 /// Settings of [`minimize`].
@@ -225,8 +237,20 @@ impl Subspace {
     /// Computes the split for the weighted Jacobian `j` (m × p) with column scales `scales`: singular
     /// values above `max(rtol · σ_max, floor)` are identifiable.
     pub fn analyze(j: &DMatrix<f64>, scales: &[f64], rtol: f64, floor: f64) -> Subspace {
+        Self::from_factor(
+            &Self::square_factor(j, scales),
+            scales,
+            rtol,
+            floor,
+            j.nrows(),
+        )
+    }
+
+    /// The square factor of `j D` that [`Subspace::from_factor`] decomposes: `R` of its QR when it has
+    /// more rows than columns, else `j D` padded with zero rows (p × p).
+    pub fn square_factor(j: &DMatrix<f64>, scales: &[f64]) -> DMatrix<f64> {
         let (m, p) = j.shape();
-        let square = if m > p {
+        if m > p {
             crate::linalg::r_factor_scaled(j, Some(scales))
         } else {
             let mut sq = DMatrix::zeros(p, p);
@@ -235,8 +259,20 @@ impl Subspace {
                 sq.column_mut(c).scale_mut(*s);
             }
             sq
-        };
-        let svd = square.svd(false, true);
+        }
+    }
+
+    /// The split from a square factor `square` (p × p) of the scaled Jacobian of `m` rows
+    /// ([`Subspace::square_factor`]).
+    pub fn from_factor(
+        square: &DMatrix<f64>,
+        scales: &[f64],
+        rtol: f64,
+        floor: f64,
+        m: usize,
+    ) -> Subspace {
+        let p = square.ncols();
+        let svd = square.clone().svd(false, true);
         let vt = svd.v_t.expect("SVD was asked for V");
         let mut order: Vec<usize> = (0..p).collect();
         order.sort_by(|&a, &b| svd.singular_values[b].total_cmp(&svd.singular_values[a]));
@@ -300,11 +336,11 @@ impl Subspace {
     }
 }
 
-/// Buffers of [`minimize`], reusable across solves of the same size.
+/// Buffers of [`minimize`], reusable across solves of the same size. The full Jacobian is never
+/// kept (its rank decision factors it by blocks, [`LeastSquaresProblem::scaled_factor`]).
 #[derive(Clone, Debug)]
 pub struct LmWorkspace {
     residuals: Vec<f64>,
-    jacobian: DMatrix<f64>,
     gram: DMatrix<f64>,
     gradient: Vec<f64>,
 }
@@ -314,25 +350,19 @@ impl LmWorkspace {
     pub fn new(m: usize, p: usize) -> Self {
         LmWorkspace {
             residuals: vec![0.0; m],
-            jacobian: DMatrix::zeros(m, p),
             gram: DMatrix::zeros(p, p),
             gradient: vec![0.0; p],
         }
     }
 
-    /// The weighted Jacobian (m × p) at the end of the last solve, unscaled.
-    pub fn jacobian(&self) -> &DMatrix<f64> {
-        &self.jacobian
+    /// The weighted residuals at the end of the last solve.
+    pub fn residuals(&self) -> &[f64] {
+        &self.residuals
     }
 
     /// The column-scaled normal matrix `D JᵀJ D` (p × p) at the end of the last solve.
     pub fn gram(&self) -> &DMatrix<f64> {
         &self.gram
-    }
-
-    /// The weighted residuals at the end of the last solve.
-    pub fn residuals(&self) -> &[f64] {
-        &self.residuals
     }
 }
 
@@ -362,10 +392,11 @@ fn locate_non_finite<P: LeastSquaresProblem>(
     health: &mut Health,
 ) {
     problem.residuals(&mut ws.residuals);
-    problem.jacobian(&mut ws.jacobian);
+    let mut jacobian = DMatrix::zeros(problem.n_residuals(), problem.n_params());
+    problem.jacobian(&mut jacobian);
     let mut n = record_non_finite_residuals(&ws.residuals, health);
-    for row in 0..ws.jacobian.nrows() {
-        if ws.jacobian.row(row).iter().any(|v| !v.is_finite()) {
+    for row in 0..jacobian.nrows() {
+        if jacobian.row(row).iter().any(|v| !v.is_finite()) {
             health.record(Warning::NonFiniteJacobian, row);
             n += 1;
         }
@@ -382,7 +413,7 @@ fn normal_equations_finite(cost: f64, gram: &DMatrix<f64>) -> bool {
 
 /// Minimises `χ² = ‖r‖²` of `problem` from its current point with column scales `scales` (physical units
 /// per scaled unit, 0 = frozen). On return the problem's linearisation point is the solution and its
-/// trial point equals it; the workspace holds the final residuals and Jacobian, and the returned
+/// trial point equals it; the workspace holds the final residuals and normal matrix, and the returned
 /// [`Subspace`] is the SVD at the solution (for covariance and identifiability).
 pub fn minimize<P: LeastSquaresProblem>(
     problem: &mut P,
@@ -457,13 +488,14 @@ pub fn minimize<P: LeastSquaresProblem>(
             // No rank decision for a solve the caller stopped: its result is not used.
             return (report, nothing_solved());
         }
-        problem.jacobian(&mut ws.jacobian);
+        let factor = problem.scaled_factor(scales);
         problem.residuals(&mut ws.residuals);
-        sub = Subspace::analyze(
-            &ws.jacobian,
+        sub = Subspace::from_factor(
+            &factor,
             scales,
             options.rank_rtol,
             options.min_singular_value,
+            m,
         );
         report.rank = sub.rank;
         let settled = sub.rank == basis.ncols();

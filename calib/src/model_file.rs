@@ -4,7 +4,7 @@
 //! # MODEL.json
 //! ```json
 //! {
-//!   "format": "robocal-calibrated-model", "format_version": 1, "software": "robocal-calib 0.1.0",
+//!   "format": "robocal-calibrated-model", "format_version": 2, "software": "robocal-calib 0.1.0",
 //!   "model": "kinematic",
 //!   "robot": {"name": "iiwa7", "source": "built-in robot 'iiwa7'", "base_link": "…", "tip_link": "…",
 //!             "urdf": "<?xml …"},
@@ -13,11 +13,17 @@
 //!     "zero_offsets": [δq₁, …],                              // rad (m for prismatic joints)
 //!     "t_tracker_base": {"translation_m": [x, y, z], "rotation": [[…], […], […]]},
 //!     "p_flange_target_m": [x, y, z],
-//!     "r_flange_target": [[…], […], […]] or null
+//!     "r_flange_target": [[…], […], […]] or null,
+//!     "campaign": 0,                                          // id of the campaign registered above
+//!     "campaigns": [{"id": 1, "t_tracker_base": {…},          // further campaigns (absent: none)
+//!                    "p_flange_target_m": [x, y, z] or null, "r_flange_target": … or null}],
+//!     "default_campaign": 0                                   // campaign of rows without a `campaign`
 //!   },
-//!   "covariance": {"parameters": ["joint 1 twist ω_x", …], "matrix": [[…], …], "variance_factor": 1.02}
+//!   "covariance": {"parameters": ["joint 1 twist ω_x", …], "matrix": [[…], …], "variance_factor": 1.02},
+//!   "fit": {"train_rms_m": 1.1e-5, "held_out_rms_m": 1.2e-5, "n_train_poses": 200}
 //! }
 //! ```
+//! Format version 1 (before campaigns) is still read: one campaign, id 0.
 //! The real screw of joint `i` is `Ad(exp[ξᵢ]) Sᵢ` with `Sᵢ` the embedded URDF's screw; the covariance is
 //! that of a step at the solution in [`crate::params::ParamLayout`] order (physical units). Floats are written by
 //! `serde_json` as the shortest decimal that reads back to the same `f64`.
@@ -28,19 +34,21 @@ use crate::error::{CalibError, Result};
 use crate::extensions::{Cause, ExtensionSettings, ModelSpec, Regressors};
 use crate::learned::LearnedResidual;
 use crate::lie3::quaternion_from_rotation;
-use crate::params::KinematicParams;
+use crate::params::{KinematicParams, ParamKind, ParamLayout};
 use crate::predict::Prediction;
 use crate::robot::Robot;
 use crate::units::Unit;
 use nalgebra::{Matrix3, Vector3, Vector6};
-use sim::lie::pose_from;
+use sim::lie::{Pose, pose_from};
 use sim::measurement_table::MeasurementTable;
 use sim::{ChainSpec, Model};
 
 /// The `format` value of a calibrated model file.
 pub const FORMAT: &str = "robocal-calibrated-model";
-/// The current `format_version`.
-pub const FORMAT_VERSION: u32 = 1;
+/// The current `format_version` (2: campaigns and the fit summary).
+pub const FORMAT_VERSION: u32 = 2;
+/// Format versions this version reads.
+pub const READABLE_VERSIONS: [u32; 2] = [1, 2];
 
 /// The robot, embedded.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -117,6 +125,42 @@ pub struct ModelParameters {
     pub p_flange_target_m: [f64; 3],
     /// Target orientation in the flange frame (rotation matrix rows), or `null` for position-only models.
     pub r_flange_target: Option<[[f64; 3]; 3]>,
+    /// Id of the measurement campaign registered by `t_tracker_base` (0 for data without a
+    /// `campaign` column; absent in version 1 files).
+    #[serde(default)]
+    pub campaign: i64,
+    /// The registrations of further campaigns.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub campaigns: Vec<CampaignJson>,
+    /// The campaign of rows that name none (a table without a `campaign` column); absent: `campaign`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub default_campaign: Option<i64>,
+}
+
+/// The tracker registration of a campaign after the first.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CampaignJson {
+    /// Campaign id (the `campaign` column's value).
+    pub id: i64,
+    /// Its `T_tracker_base`.
+    pub t_tracker_base: PoseJson,
+    /// Its own target position in the flange frame (m), or `null` when it shares the first's.
+    pub p_flange_target_m: Option<[f64; 3]>,
+    /// Its own target orientation (rotation matrix rows), or `null`.
+    pub r_flange_target: Option<[[f64; 3]; 3]>,
+}
+
+/// How well the model fits: what `robocal register` compares a new campaign's residual with.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct FitSummary {
+    /// RMS position error on the calibration rows (m).
+    pub train_rms_m: f64,
+    /// RMS position error on held-out poses (cross-validated or a test set; m), when validated.
+    pub held_out_rms_m: Option<f64>,
+    /// Distinct poses of the calibration.
+    pub n_train_poses: usize,
 }
 
 /// Covariance of the parameters.
@@ -129,6 +173,56 @@ pub struct CovarianceJson {
     pub matrix: Vec<Vec<f64>>,
     /// The variance factor `σ̂²` it includes.
     pub variance_factor: f64,
+}
+
+/// Checks what any covariance matrix is: one row and column per named parameter, finite entries,
+/// variances ≥ 0, symmetric and within the Cauchy–Schwarz bound `|Cᵢⱼ| ≤ √(Cᵢᵢ Cⱼⱼ)` (both to a
+/// relative 1e-6, far above the rounding of the matrix as written); a finite variance factor ≥ 0.
+/// (The fuzzing suite found covariances of 1e308 or negative variances loaded without a word.)
+fn check_covariance(c: &CovarianceJson) -> std::result::Result<(), String> {
+    let n = c.parameters.len();
+    let at = |i: usize, j: usize| format!("key 'covariance.matrix'[{i}][{j}]");
+    if c.matrix.len() != n || c.matrix.iter().any(|r| r.len() != n) {
+        return Err(format!(
+            "key 'covariance.matrix' is not {n} × {n} (one row and column per name in 'covariance.parameters')"
+        ));
+    }
+    if !(c.variance_factor.is_finite() && c.variance_factor >= 0.0) {
+        return Err(format!(
+            "key 'covariance.variance_factor' is {:e}: a variance factor is finite and ≥ 0",
+            c.variance_factor
+        ));
+    }
+    for (i, row) in c.matrix.iter().enumerate() {
+        for (j, v) in row.iter().enumerate() {
+            if !v.is_finite() {
+                return Err(format!("{} is {v}: not finite", at(i, j)));
+            }
+        }
+        if row[i] < 0.0 {
+            return Err(format!("{} is {:e}: a variance is ≥ 0", at(i, i), row[i]));
+        }
+    }
+    for i in 0..n {
+        for j in 0..i {
+            let (a, b) = (c.matrix[i][j], c.matrix[j][i]);
+            let scale = (c.matrix[i][i] * c.matrix[j][j]).sqrt();
+            if (a - b).abs() > 1e-6 * scale.max(a.abs()) {
+                return Err(format!(
+                    "{} is {a:e} but {} is {b:e}: a covariance matrix is symmetric",
+                    at(i, j),
+                    at(j, i)
+                ));
+            }
+            if a.abs() > scale * (1.0 + 1e-6) {
+                return Err(format!(
+                    "{} is {a:e}, beyond √(C{i}{i} C{j}{j}) = {scale:e}: not a covariance",
+                    at(i, j)
+                ));
+            }
+        }
+    }
+    Ok(())
 }
 
 /// A calibrated model file.
@@ -155,6 +249,9 @@ pub struct CalibratedModel {
     /// The learned residual correction.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub learned: Option<LearnedResidual>,
+    /// How well it fits (absent in version 1 files).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub fit: Option<FitSummary>,
 }
 
 /// The model extensions of a calibrated model.
@@ -175,7 +272,6 @@ impl CalibratedModel {
     /// The file form of a calibration of `robot`.
     pub fn new(robot: &Robot, cal: &Calibration) -> Self {
         let p = &cal.params;
-        let n = robot.model.nq();
         let vf = if cal.report.chi2_per_dof.is_finite() {
             cal.report.chi2_per_dof
         } else {
@@ -194,21 +290,7 @@ impl CalibratedModel {
                 urdf: robot.urdf.clone(),
                 urdf_fnv1a64: Some(urdf_checksum(&robot.urdf)),
             },
-            parameters: ModelParameters {
-                joint_error_twists: (0..n)
-                    .map(|i| {
-                        let x = p.joint_twist(i);
-                        [x[0], x[1], x[2], x[3], x[4], x[5]]
-                    })
-                    .collect(),
-                zero_offsets: p.zero_offset.clone(),
-                t_tracker_base: PoseJson {
-                    translation_m: p.t_tracker_base.translation.vector.into(),
-                    rotation: rows(p.t_tracker_base.rotation.matrix()),
-                },
-                p_flange_target_m: p.p_flange_target.into(),
-                r_flange_target: p.r_flange_target.as_ref().map(rows),
-            },
+            parameters: parameters_json(p),
             covariance: Some(CovarianceJson {
                 parameters: (0..cal.layout.len()).map(|k| cal.layout.name(k)).collect(),
                 matrix: (0..cal.covariance.nrows())
@@ -223,7 +305,68 @@ impl CalibratedModel {
                 values: p.extension.clone(),
             }),
             learned: cal.learned.clone(),
+            fit: Some(FitSummary {
+                train_rms_m: cal
+                    .report
+                    .learned
+                    .as_ref()
+                    .map_or(cal.report.after.train.rms_m, |l| l.train.rms_m),
+                held_out_rms_m: None,
+                n_train_poses: cal.report.n_train_poses,
+            }),
         }
+    }
+
+    /// The model with a campaign registered by [`crate::register::register`] (`reg`): its
+    /// parameters, the default campaign, and the covariance grown by the registration's block (a
+    /// registration is conditional on the robot: no cross terms). `model` is the embedded robot.
+    pub fn registered(&self, model: &Model, reg: &crate::register::Registration) -> Self {
+        let mut out = self.clone();
+        out.format_version = FORMAT_VERSION;
+        out.software = format!("robocal-calib {}", env!("CARGO_PKG_VERSION"));
+        out.parameters = parameters_json(&reg.params);
+        keep_unrefitted(&mut out.parameters, &self.parameters, reg.report.campaign);
+        let ext = self
+            .extensions
+            .as_ref()
+            .map_or(Vec::new(), |e| e.settings.params(model));
+        let old = ParamLayout::for_params(model, &self.params(), ext.clone());
+        let new = ParamLayout::for_params(model, &reg.params, ext);
+        if let Some(cov) = &self.covariance
+            && cov.matrix.len() == old.len()
+        {
+            let map = layout_map(&old, &new);
+            let mut m = vec![vec![0.0; new.len()]; new.len()];
+            for (i, mi) in map.iter().enumerate() {
+                for (j, mj) in map.iter().enumerate() {
+                    if let (Some(a), Some(b)) = (mi, mj) {
+                        m[*a][*b] = cov.matrix[i][j];
+                    }
+                }
+            }
+            for (a, &ka) in reg.indices.iter().enumerate() {
+                for (b, &kb) in reg.indices.iter().enumerate() {
+                    m[ka][kb] = reg.covariance[(a, b)];
+                }
+                // The registration is refitted: its old cross terms no longer hold.
+                for (k, row) in m.iter_mut().enumerate() {
+                    if !reg.indices.contains(&k) {
+                        row[ka] = 0.0;
+                    }
+                }
+                for (k, v) in m[ka].iter_mut().enumerate() {
+                    if !reg.indices.contains(&k) {
+                        *v = 0.0;
+                    }
+                }
+            }
+            out.covariance = Some(CovarianceJson {
+                parameters: (0..new.len()).map(|k| new.name(k)).collect(),
+                matrix: m,
+                variance_factor: cov.variance_factor,
+            });
+        }
+        out
     }
 
     /// JSON text (pretty-printed).
@@ -258,10 +401,15 @@ impl CalibratedModel {
             }
         }
         let m: CalibratedModel = serde_json::from_value(v).map_err(|e| bad(format!("{e}")))?;
-        if m.format_version != FORMAT_VERSION {
+        if !READABLE_VERSIONS.contains(&m.format_version) {
             return Err(bad(format!(
-                "key 'format_version' is {}, this version reads {FORMAT_VERSION}",
-                m.format_version
+                "key 'format_version' is {}, this version reads {} (a newer robocal wrote it?)",
+                m.format_version,
+                READABLE_VERSIONS
+                    .iter()
+                    .map(|v| v.to_string())
+                    .collect::<Vec<_>>()
+                    .join(" and ")
             )));
         }
         let p = &m.parameters;
@@ -384,6 +532,9 @@ impl CalibratedModel {
                 "(own unit)",
             )?;
         }
+        if let Some(c) = &m.covariance {
+            check_covariance(c).map_err(bad)?;
+        }
         if let Some(stored) = &m.robot.urdf_fnv1a64 {
             let actual = urdf_checksum(&m.robot.urdf);
             if *stored != actual {
@@ -393,6 +544,7 @@ impl CalibratedModel {
                 )));
             }
         }
+        check_campaigns(p, &bad)?;
         let n = p.joint_error_twists.len();
         if p.zero_offsets.len() != n {
             return Err(bad(format!(
@@ -435,7 +587,7 @@ impl CalibratedModel {
             .iter()
             .map(|t| Vector6::from_row_slice(t))
             .collect();
-        KinematicParams::from_twists(
+        let params = KinematicParams::from_twists(
             &twists,
             p.zero_offsets.clone(),
             pose_from(
@@ -449,7 +601,28 @@ impl CalibratedModel {
             self.extensions
                 .as_ref()
                 .map_or(Vec::new(), |e| e.values.clone()),
-        )
+        );
+        let mut ids = vec![p.campaign];
+        ids.extend(p.campaigns.iter().map(|c| c.id));
+        let starts: Vec<Pose> = p
+            .campaigns
+            .iter()
+            .map(|c| pose(&c.t_tracker_base))
+            .collect();
+        let own = p
+            .campaigns
+            .first()
+            .is_some_and(|c| c.p_flange_target_m.is_some());
+        let mut params = params.with_campaigns(&ids, &starts, own);
+        for (reg, c) in params.campaigns.iter_mut().zip(&p.campaigns) {
+            reg.p_flange_target = c.p_flange_target_m.map(Vector3::from);
+            reg.r_flange_target = c.r_flange_target.as_ref().map(matrix);
+        }
+        params.default_campaign = p
+            .default_campaign
+            .and_then(|d| ids.iter().position(|&i| i == d))
+            .unwrap_or(0);
+        params
     }
 }
 
@@ -542,13 +715,54 @@ impl Predictor {
     /// # Panics
     /// If `q` has the wrong length (check tables with [`Predictor::predict_table`]).
     pub fn predict(&mut self, q: &[f64]) -> (Vector3<f64>, Matrix3<f64>) {
-        self.chain.forward(&mut self.scratch, q);
+        let c = self.params.default_campaign;
+        if self.learned.as_ref().is_some_and(|l| l.adjoint().is_some()) {
+            let p = Prediction::new(&self.model, &self.params).with_learned(self.learned.as_ref());
+            let mut s = p.scratch();
+            let pos = p.row_in(&Regressors::none(), 0, q, c, &mut s);
+            return (pos, s.chain.r_tracker_target);
+        }
+        self.chain.forward_in(&mut self.scratch, q, c);
+        // The learned correction lives in the first campaign's tracker frame.
+        let frame = self.params.t_tracker_base_of(c).rotation.matrix()
+            * self.params.t_tracker_base.rotation.matrix().transpose();
         let p = self.scratch.p_tracker
-            + self
-                .learned
-                .as_ref()
-                .map_or(Vector3::zeros(), |l| l.predict(q));
+            + frame
+                * self
+                    .learned
+                    .as_ref()
+                    .map_or(Vector3::zeros(), |l| l.predict(q));
         (p, self.scratch.r_tracker_target)
+    }
+
+    /// The campaign index of every row of `table` (each row's `campaign`, or the model's default
+    /// campaign without the column); an id the model does not register is a one-line error naming
+    /// `file` and the row.
+    pub fn campaigns_of(&self, table: &MeasurementTable, file: &str) -> Result<Vec<usize>> {
+        let p = &self.params;
+        match &table.campaign {
+            None => Ok(vec![p.default_campaign; table.len()]),
+            Some(ids) => ids
+                .iter()
+                .enumerate()
+                .map(|(r, &id)| {
+                    p.campaign_index(id).ok_or_else(|| CalibError::BadValue {
+                        context: format!("{file}: row {}", r + 1),
+                        field: "campaign".into(),
+                        value: id.to_string(),
+                        problem: format!(
+                            "the model knows campaigns {}: this campaign's tracker registration is \
+                             unknown (register it with `robocal register`)",
+                            p.campaign_ids
+                                .iter()
+                                .map(|c| c.to_string())
+                                .collect::<Vec<_>>()
+                                .join(", ")
+                        ),
+                    })
+                })
+                .collect(),
+        }
     }
 
     /// Predictions for every row of `table` (its x, y, z are ignored); `file` names it in errors.
@@ -565,6 +779,7 @@ impl Predictor {
                 ),
             });
         }
+        let campaign = self.campaigns_of(table, file)?;
         let orientation = self.params.r_flange_target.is_some();
         let mut out = Predictions {
             pose: table.pose.clone(),
@@ -583,9 +798,206 @@ impl Predictor {
         let mut rotation = orientation.then(|| vec![Matrix3::identity(); table.len()]);
         Prediction::new(&self.model, &self.params)
             .with_learned(self.learned.as_ref())
-            .positions(&table.q, &regs, &mut position, rotation.as_deref_mut());
+            .positions_in(
+                &table.q,
+                &campaign,
+                &regs,
+                &mut position,
+                rotation.as_deref_mut(),
+            );
         out.position = position.iter().map(|p| (*p).into()).collect();
         out.orientation = rotation.map(|r| r.iter().map(quaternion_from_rotation).collect());
         Ok(out)
     }
+}
+
+/// The parameters in file form.
+fn parameters_json(p: &KinematicParams) -> ModelParameters {
+    ModelParameters {
+        joint_error_twists: (0..p.joint_error.len())
+            .map(|i| {
+                let x = p.joint_twist(i);
+                [x[0], x[1], x[2], x[3], x[4], x[5]]
+            })
+            .collect(),
+        zero_offsets: p.zero_offset.clone(),
+        t_tracker_base: pose_json(&p.t_tracker_base),
+        p_flange_target_m: p.p_flange_target.into(),
+        r_flange_target: p.r_flange_target.as_ref().map(rows),
+        campaign: p.campaign_ids[0],
+        campaigns: p
+            .campaigns
+            .iter()
+            .zip(&p.campaign_ids[1..])
+            .map(|(c, &id)| CampaignJson {
+                id,
+                t_tracker_base: pose_json(&c.t_tracker_base),
+                p_flange_target_m: c.p_flange_target.map(Into::into),
+                r_flange_target: c.r_flange_target.as_ref().map(rows),
+            })
+            .collect(),
+        default_campaign: Some(p.campaign_ids[p.default_campaign]),
+    }
+}
+
+/// The robot's parameters and every registration that `refitted` (a campaign id) is not, as `old`
+/// (the file registered from) has them: the same numbers, not their round trip through a pose
+/// (exp and log move the last digit).
+fn keep_unrefitted(new: &mut ModelParameters, old: &ModelParameters, refitted: i64) {
+    new.joint_error_twists = old.joint_error_twists.clone();
+    new.zero_offsets = old.zero_offsets.clone();
+    if old.campaign != refitted {
+        new.t_tracker_base = old.t_tracker_base.clone();
+        new.p_flange_target_m = old.p_flange_target_m;
+        new.r_flange_target = old.r_flange_target;
+    }
+    for c in new.campaigns.iter_mut().filter(|c| c.id != refitted) {
+        if let Some(o) = old.campaigns.iter().find(|o| o.id == c.id) {
+            c.t_tracker_base = o.t_tracker_base.clone();
+            if c.p_flange_target_m.is_some() && o.p_flange_target_m.is_some() {
+                c.p_flange_target_m = o.p_flange_target_m;
+                c.r_flange_target = o.r_flange_target;
+            }
+        }
+    }
+}
+
+/// Where each parameter of `old` (a layout of the same robot and extensions) sits in `new`, which
+/// registers the same campaigns (by id) and perhaps more, perhaps with own targets: `None` for a
+/// parameter `new` does not have.
+fn layout_map(old: &ParamLayout, new: &ParamLayout) -> Vec<Option<usize>> {
+    (0..old.len())
+        .map(|k| match old.kind(k) {
+            ParamKind::JointTwist { joint, component } => Some(new.joint_twist(joint) + component),
+            ParamKind::ZeroOffset { joint } => Some(new.zero_offset(joint)),
+            ParamKind::BaseTwist {
+                campaign,
+                component,
+            } => new
+                .campaign_ids
+                .iter()
+                .position(|&id| id == old.campaign_ids[campaign])
+                .map(|c| new.campaign_base(c) + component),
+            ParamKind::TargetPosition { campaign, axis } => {
+                let id = old.campaign_ids[campaign];
+                let c = new.campaign_ids.iter().position(|&i| i == id)?;
+                // A shared target stays the shared one.
+                let c = if campaign == 0 || !old.campaign_targets {
+                    0
+                } else {
+                    c
+                };
+                Some(new.campaign_target_position(c) + axis)
+            }
+            ParamKind::TargetOrientation { campaign, axis } => {
+                let id = old.campaign_ids[campaign];
+                let c = new.campaign_ids.iter().position(|&i| i == id)?;
+                let c = if campaign == 0 || !old.campaign_targets {
+                    0
+                } else {
+                    c
+                };
+                new.campaign_target_orientation(c).map(|o| o + axis)
+            }
+            ParamKind::Extension { index } => Some(new.extension(index)),
+        })
+        .collect()
+}
+
+/// A pose in file form.
+fn pose_json(t: &Pose) -> PoseJson {
+    PoseJson {
+        translation_m: t.translation.vector.into(),
+        rotation: rows(t.rotation.matrix()),
+    }
+}
+
+/// A pose from file form (rotation checked on load).
+fn pose(t: &PoseJson) -> Pose {
+    pose_from(matrix(&t.rotation), Vector3::from(t.translation_m))
+}
+
+/// The campaign keys: distinct ids, a known default, finite and plausible registrations, own targets
+/// for all campaigns after the first or for none (and orientations exactly when the model has them).
+fn check_campaigns(p: &ModelParameters, bad: &dyn Fn(String) -> CalibError) -> Result<()> {
+    let mut ids = vec![p.campaign];
+    for (k, c) in p.campaigns.iter().enumerate() {
+        if ids.contains(&c.id) {
+            return Err(bad(format!(
+                "key 'parameters.campaigns[{k}].id' is {}, a campaign already registered",
+                c.id
+            )));
+        }
+        ids.push(c.id);
+        let key = format!("parameters.campaigns[{k}]");
+        let t = &c.t_tracker_base;
+        let values: Vec<f64> = t
+            .translation_m
+            .iter()
+            .chain(t.rotation.as_flattened())
+            .chain(c.p_flange_target_m.iter().flatten())
+            .chain(c.r_flange_target.iter().flat_map(|r| r.as_flattened()))
+            .copied()
+            .collect();
+        if values.iter().any(|v| !v.is_finite()) {
+            return Err(bad(format!("key '{key}' has a value that is not finite")));
+        }
+        let norm = |v: &[f64; 3]| (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+        if norm(&t.translation_m) > MAX_TRACKER_DISTANCE_M {
+            return Err(bad(format!(
+                "key '{key}.t_tracker_base.translation_m' is {:e} m from the base, beyond the plausible \
+                 {MAX_TRACKER_DISTANCE_M:e} m",
+                norm(&t.translation_m)
+            )));
+        }
+        for (what, r) in std::iter::once(("t_tracker_base.rotation", &t.rotation))
+            .chain(c.r_flange_target.as_ref().map(|r| ("r_flange_target", r)))
+        {
+            let m = matrix(r);
+            let e = (m.transpose() * m - Matrix3::identity()).amax();
+            if e > 1e-9 || m.determinant() < 0.0 {
+                return Err(bad(format!(
+                    "key '{key}.{what}' is not a rotation matrix (|RᵀR − I| = {e:.1e})"
+                )));
+            }
+        }
+        if let Some(v) = &c.p_flange_target_m
+            && norm(v) > MAX_TARGET_OFFSET_M
+        {
+            return Err(bad(format!(
+                "key '{key}.p_flange_target_m' is {:e} m from the flange, beyond the plausible \
+                 {MAX_TARGET_OFFSET_M:e} m",
+                norm(v)
+            )));
+        }
+        let own_first = p.campaigns[0].p_flange_target_m.is_some();
+        if c.p_flange_target_m.is_some() != own_first {
+            return Err(bad(format!(
+                "key '{key}.p_flange_target_m': either every further campaign has its own target or none"
+            )));
+        }
+        let orientation = p.r_flange_target.is_some();
+        if c.r_flange_target.is_some() != (own_first && orientation) {
+            return Err(bad(format!(
+                "key '{key}.r_flange_target' must be {} (own target: {own_first}, orientation: {orientation})",
+                if own_first && orientation {
+                    "given"
+                } else {
+                    "null"
+                }
+            )));
+        }
+    }
+    if let Some(d) = p.default_campaign
+        && !ids.contains(&d)
+    {
+        return Err(bad(format!(
+            "key 'parameters.default_campaign' is {d}, not one of the campaigns ({})",
+            ids.iter()
+                .map(|i| i.to_string())
+                .collect::<Vec<_>>()
+                .join(", ")
+        )));
+    }
+    Ok(())
 }

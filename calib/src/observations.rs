@@ -4,6 +4,7 @@
 use crate::error::{CalibError, Result};
 use crate::extensions::Regressors;
 use crate::lie3::rotation_from_quaternion;
+use crate::params::KinematicParams;
 use nalgebra::{Matrix3, Vector3};
 use sim::measurement_table::MeasurementTable;
 
@@ -59,6 +60,9 @@ pub struct Observations {
     pub source_row: Vec<usize>,
     /// Regressors of the model extensions per row ([`Regressors::none`] for the kinematic model).
     pub ext: Regressors,
+    /// Campaign id per row, from the table's `campaign` column (`None` without it: every row is in
+    /// the parameters' default campaign, [`KinematicParams::default_campaign`]).
+    pub campaign: Option<Vec<i64>>,
 }
 
 impl Observations {
@@ -114,7 +118,66 @@ impl Observations {
             pose: rows.iter().map(|&r| table.pose[r]).collect(),
             source_row: rows.to_vec(),
             ext: Regressors::none(),
+            campaign: table
+                .campaign
+                .as_ref()
+                .map(|c| rows.iter().map(|&r| c[r]).collect()),
         })
+    }
+
+    /// Distinct campaign ids of the rows, ascending; `[0]` without a campaign column.
+    pub fn campaign_ids(&self) -> Vec<i64> {
+        match &self.campaign {
+            Some(c) => {
+                let mut ids = c.clone();
+                ids.sort_unstable();
+                ids.dedup();
+                ids
+            }
+            None => vec![0],
+        }
+    }
+
+    /// The campaign index (in `params`' order) of every row: the default campaign for all rows
+    /// without a campaign column. Errors with the first row (index into these rows) whose campaign
+    /// `params` does not register, and its id.
+    pub fn campaign_indices(
+        &self,
+        params: &KinematicParams,
+    ) -> std::result::Result<Vec<usize>, (usize, i64)> {
+        match &self.campaign {
+            None => Ok(vec![params.default_campaign; self.len()]),
+            Some(ids) => ids
+                .iter()
+                .enumerate()
+                .map(|(r, &id)| params.campaign_index(id).ok_or((r, id)))
+                .collect(),
+        }
+    }
+
+    /// [`Observations::campaign_indices`], with an unknown campaign as a one-line error naming the
+    /// table `source`, its row and the campaigns `params` knows.
+    pub fn campaign_indices_or_error(
+        &self,
+        params: &KinematicParams,
+        source: &str,
+    ) -> Result<Vec<usize>> {
+        self.campaign_indices(params)
+            .map_err(|(r, id)| CalibError::BadValue {
+                context: format!("{source}: row {}", self.source_row[r] + 1),
+                field: "campaign".into(),
+                value: id.to_string(),
+                problem: format!(
+                    "the model knows campaigns {}: this campaign's tracker registration is unknown \
+                     (register it with `robocal register`)",
+                    params
+                        .campaign_ids
+                        .iter()
+                        .map(|c| c.to_string())
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                ),
+            })
     }
 
     /// Number of measurement rows.
@@ -141,9 +204,12 @@ impl Observations {
         &self.q[r * self.n_joints..(r + 1) * self.n_joints]
     }
 
-    /// Number of distinct pose ids.
+    /// Number of distinct poses (pose ids, per campaign).
     pub fn n_poses(&self) -> usize {
-        let mut ids = self.pose.clone();
+        let mut ids: Vec<(i64, i64)> = match &self.campaign {
+            Some(c) => c.iter().copied().zip(self.pose.iter().copied()).collect(),
+            None => self.pose.iter().map(|&p| (0, p)).collect(),
+        };
         ids.sort_unstable();
         ids.dedup();
         ids.len()
@@ -152,11 +218,10 @@ impl Observations {
     /// Number of distinct joint configurations (rows with bit-identical joint values count once,
     /// whatever their pose ids): what determines the parameters.
     pub fn n_configurations(&self) -> usize {
-        let mut rows: Vec<Vec<u64>> = (0..self.len())
-            .map(|r| self.q_row(r).iter().map(|v| v.to_bits()).collect())
-            .collect();
-        rows.sort_unstable();
-        rows.dedup();
+        let bits = |r: usize| self.q_row(r).iter().map(|v| v.to_bits());
+        let mut rows: Vec<usize> = (0..self.len()).collect();
+        rows.sort_unstable_by(|&a, &b| bits(a).cmp(bits(b)));
+        rows.dedup_by(|a, b| bits(*a).eq(bits(*b)));
         rows.len()
     }
 }

@@ -4,8 +4,11 @@
 //! Step vector layout (length [`ParamLayout::len`]): for each joint `i` (0-based) seven entries
 //! `[ξᵢ (ω_x, ω_y, ω_z, v_x, v_y, v_z), δqᵢ]`, then the tracker-to-base twist `β` (6, tracker frame),
 //! the target position `p_flange` (3, flange frame) and, with orientation measurements, the target
-//! rotation `ρ` (3, target frame), and last the parameters of any model extension
-//! ([`crate::extensions`], in [`ParamLayout::extensions`] order).
+//! rotation `ρ` (3, target frame); with several measurement campaigns, for each campaign after the
+//! first its own tracker-to-base twist (6) and, with per-campaign targets, its own target position
+//! (3) and rotation (3, with orientation); and last the parameters of any model extension
+//! ([`crate::extensions`], in [`ParamLayout::extensions`] order). One campaign gives exactly the
+//! layout of a table without a `campaign` column.
 
 use crate::extensions::ExtensionParam;
 use crate::lie3::exp_rotation;
@@ -32,18 +35,26 @@ pub enum ParamKind {
         /// 0-based joint index.
         joint: usize,
     },
-    /// Component (0..6, `[ω; v]`) of the tracker-to-base twist `β` (tracker frame; rad, m).
+    /// Component (0..6, `[ω; v]`) of campaign `campaign`'s tracker-to-base twist `β` (its tracker
+    /// frame; rad, m).
     BaseTwist {
+        /// 0-based campaign index ([`ParamLayout::campaign_ids`] order).
+        campaign: usize,
         /// 0..3 rotation (rad), 3..6 translation (m).
         component: usize,
     },
-    /// Axis (0..3) of the target position `p_flange` (flange frame, m).
+    /// Axis (0..3) of the target position `p_flange` (flange frame, m): the shared target (campaign
+    /// 0), or a campaign's own with per-campaign targets.
     TargetPosition {
+        /// 0-based campaign index (0 for the shared target).
+        campaign: usize,
         /// 0 = x, 1 = y, 2 = z.
         axis: usize,
     },
-    /// Axis (0..3) of the target rotation increment `ρ` (target frame, rad).
+    /// Axis (0..3) of the target rotation increment `ρ` (target frame, rad), shared or per campaign.
     TargetOrientation {
+        /// 0-based campaign index (0 for the shared target).
+        campaign: usize,
         /// 0 = x, 1 = y, 2 = z.
         axis: usize,
     },
@@ -65,6 +76,11 @@ pub struct ParamLayout {
     pub prismatic: Vec<bool>,
     /// Parameters of the model extensions, after the kinematic ones (empty for the kinematic model).
     pub extensions: Vec<ExtensionParam>,
+    /// Measurement campaigns, one tracker registration each, by id in parameter order (`[0]`: one
+    /// campaign, the table without a `campaign` column).
+    pub campaign_ids: Vec<i64>,
+    /// Whether each campaign after the first has its own target (a re-seated reflector).
+    pub campaign_targets: bool,
 }
 
 impl ParamLayout {
@@ -79,6 +95,82 @@ impl ParamLayout {
                 .map(|j| j.kind == JointKind::Prismatic)
                 .collect(),
             extensions: Vec::new(),
+            campaign_ids: vec![0],
+            campaign_targets: false,
+        }
+    }
+
+    /// The layout for the parameter point `params` (its campaigns) of `model`, with `extensions`.
+    pub fn for_params(
+        model: &Model,
+        params: &KinematicParams,
+        extensions: Vec<ExtensionParam>,
+    ) -> Self {
+        ParamLayout::new(model, params.r_flange_target.is_some())
+            .with_campaigns(&params.campaign_ids, params.has_campaign_targets())
+            .with_extensions(extensions)
+    }
+
+    /// The same layout with one tracker registration per campaign of `ids` (parameter order), and a
+    /// target per campaign when `own_targets`. Panics without ids.
+    pub fn with_campaigns(mut self, ids: &[i64], own_targets: bool) -> Self {
+        assert!(!ids.is_empty(), "at least one campaign");
+        self.campaign_ids = ids.to_vec();
+        self.campaign_targets = own_targets && ids.len() > 1;
+        self
+    }
+
+    /// Number of campaigns (tracker registrations).
+    #[inline]
+    pub fn n_campaigns(&self) -> usize {
+        self.campaign_ids.len()
+    }
+
+    /// Parameters of the first campaign's target: 3, or 6 with orientation.
+    #[inline]
+    fn target_len(&self) -> usize {
+        if self.orientation { 6 } else { 3 }
+    }
+
+    /// Parameters of each campaign after the first: its base twist and, with own targets, its target.
+    #[inline]
+    fn campaign_block(&self) -> usize {
+        6 + if self.campaign_targets {
+            self.target_len()
+        } else {
+            0
+        }
+    }
+
+    /// Index of component 0 of campaign `c`'s tracker-to-base twist.
+    #[inline]
+    pub fn campaign_base(&self, c: usize) -> usize {
+        if c == 0 {
+            self.base()
+        } else {
+            7 * self.n_joints + 6 + self.target_len() + (c - 1) * self.campaign_block()
+        }
+    }
+
+    /// Index of the x of the target position campaign `c` uses (its own, or the shared one).
+    #[inline]
+    pub fn campaign_target_position(&self, c: usize) -> usize {
+        if c == 0 || !self.campaign_targets {
+            self.target_position()
+        } else {
+            self.campaign_base(c) + 6
+        }
+    }
+
+    /// Index of the x of the target rotation campaign `c` uses, when orientation is modelled.
+    #[inline]
+    pub fn campaign_target_orientation(&self, c: usize) -> Option<usize> {
+        if !self.orientation {
+            None
+        } else if c == 0 || !self.campaign_targets {
+            self.target_orientation()
+        } else {
+            Some(self.campaign_base(c) + 9)
         }
     }
 
@@ -88,10 +180,11 @@ impl ParamLayout {
         self
     }
 
-    /// Number of kinematic parameters: `7 n + 9`, or `7 n + 12` with orientation.
+    /// Number of kinematic parameters: `7 n + 9`, or `7 n + 12` with orientation, plus those of the
+    /// campaigns after the first (6 each, 9 or 12 with their own targets).
     #[inline]
     pub fn kinematic_len(&self) -> usize {
-        7 * self.n_joints + if self.orientation { 12 } else { 9 }
+        7 * self.n_joints + 6 + self.target_len() + (self.n_campaigns() - 1) * self.campaign_block()
     }
 
     /// Index of extension parameter `e`.
@@ -160,11 +253,54 @@ impl ParamLayout {
                 }
             }
         } else if k < nj + 6 {
-            ParamKind::BaseTwist { component: k - nj }
-        } else if k < nj + 9 {
-            ParamKind::TargetPosition { axis: k - nj - 6 }
+            ParamKind::BaseTwist {
+                campaign: 0,
+                component: k - nj,
+            }
+        } else if k < nj + 6 + self.target_len() {
+            let t = k - nj - 6;
+            if t < 3 {
+                ParamKind::TargetPosition {
+                    campaign: 0,
+                    axis: t,
+                }
+            } else {
+                ParamKind::TargetOrientation {
+                    campaign: 0,
+                    axis: t - 3,
+                }
+            }
         } else {
-            ParamKind::TargetOrientation { axis: k - nj - 9 }
+            let rest = k - nj - 6 - self.target_len();
+            let (campaign, t) = (
+                1 + rest / self.campaign_block(),
+                rest % self.campaign_block(),
+            );
+            if t < 6 {
+                ParamKind::BaseTwist {
+                    campaign,
+                    component: t,
+                }
+            } else if t < 9 {
+                ParamKind::TargetPosition {
+                    campaign,
+                    axis: t - 6,
+                }
+            } else {
+                ParamKind::TargetOrientation {
+                    campaign,
+                    axis: t - 9,
+                }
+            }
+        }
+    }
+
+    /// ` (campaign ID)` after a registration parameter's name when there are several campaigns.
+    fn campaign_suffix(&self, c: usize, shared: bool) -> String {
+        if self.n_campaigns() == 1 || (shared && !self.campaign_targets) {
+            String::new()
+        } else {
+            format!(" (campaign {})", self.campaign_ids[c])
         }
     }
 
@@ -176,11 +312,24 @@ impl ParamLayout {
                 format!("joint {} twist {}", joint + 1, TWIST_COMPONENTS[component])
             }
             ParamKind::ZeroOffset { joint } => format!("joint {} zero offset", joint + 1),
-            ParamKind::BaseTwist { component } => {
-                format!("base twist {}", TWIST_COMPONENTS[component])
-            }
-            ParamKind::TargetPosition { axis } => format!("target p_{}", AXES[axis]),
-            ParamKind::TargetOrientation { axis } => format!("target rotation ρ_{}", AXES[axis]),
+            ParamKind::BaseTwist {
+                campaign,
+                component,
+            } => format!(
+                "base twist {}{}",
+                TWIST_COMPONENTS[component],
+                self.campaign_suffix(campaign, false)
+            ),
+            ParamKind::TargetPosition { campaign, axis } => format!(
+                "target p_{}{}",
+                AXES[axis],
+                self.campaign_suffix(campaign, true)
+            ),
+            ParamKind::TargetOrientation { campaign, axis } => format!(
+                "target rotation ρ_{}{}",
+                AXES[axis],
+                self.campaign_suffix(campaign, true)
+            ),
             ParamKind::Extension { index } => self.extensions[index].name(),
         }
     }
@@ -188,7 +337,7 @@ impl ParamLayout {
     /// Unit of entry `k`: `rad` or `m` (extensions: their own, e.g. `rad/(N m)`).
     pub fn unit(&self, k: usize) -> Unit {
         match self.kind(k) {
-            ParamKind::JointTwist { component, .. } | ParamKind::BaseTwist { component } => {
+            ParamKind::JointTwist { component, .. } | ParamKind::BaseTwist { component, .. } => {
                 Unit::angle_or_length(component < 3)
             }
             ParamKind::ZeroOffset { joint } => Unit::angle_or_length(!self.prismatic[joint]),
@@ -262,7 +411,7 @@ impl ParameterScales {
                     self.zero_offset_rad
                 }
             }
-            ParamKind::BaseTwist { component } => {
+            ParamKind::BaseTwist { component, .. } => {
                 if component < 3 {
                     self.base_rotation_rad
                 } else {
@@ -295,6 +444,26 @@ pub struct KinematicParams {
     /// Values of the extension parameters ([`ParamLayout::extensions`] order and units; empty for the
     /// kinematic model).
     pub extension: Vec<f64>,
+    /// Ids of the measurement campaigns, in parameter order: the first is registered by
+    /// `t_tracker_base` (and the target above), the others by `campaigns`. `[0]` for one campaign.
+    pub campaign_ids: Vec<i64>,
+    /// The registrations of the campaigns after the first (`campaign_ids[1..]`).
+    pub campaigns: Vec<CampaignRegistration>,
+    /// Index (into `campaign_ids`) of the campaign of rows that name none (a table without a
+    /// `campaign` column): 0, or the campaign `robocal register` added last.
+    pub default_campaign: usize,
+}
+
+/// The tracker registration of a measurement campaign after the first: where its tracker stood, and,
+/// with per-campaign targets, its own target (a re-seated reflector).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CampaignRegistration {
+    /// `T_tracker_base` of this campaign (m).
+    pub t_tracker_base: Pose,
+    /// Its own target position in the flange frame (m), or `None` to share the first campaign's.
+    pub p_flange_target: Option<Vector3<f64>>,
+    /// Its own target orientation in the flange frame (with own targets and orientation).
+    pub r_flange_target: Option<Matrix3<f64>>,
 }
 
 impl KinematicParams {
@@ -307,7 +476,88 @@ impl KinematicParams {
             p_flange_target: Vector3::zeros(),
             r_flange_target: orientation.then(Matrix3::identity),
             extension: Vec::new(),
+            campaign_ids: vec![0],
+            campaigns: Vec::new(),
+            default_campaign: 0,
         }
+    }
+
+    /// Number of campaigns (tracker registrations).
+    #[inline]
+    pub fn n_campaigns(&self) -> usize {
+        self.campaign_ids.len()
+    }
+
+    /// Whether the campaigns after the first have their own targets.
+    #[inline]
+    pub fn has_campaign_targets(&self) -> bool {
+        self.campaigns
+            .first()
+            .is_some_and(|c| c.p_flange_target.is_some())
+    }
+
+    /// Index of campaign `id`, if the parameters register it.
+    #[inline]
+    pub fn campaign_index(&self, id: i64) -> Option<usize> {
+        self.campaign_ids.iter().position(|&c| c == id)
+    }
+
+    /// `T_tracker_base` of campaign `c` (index).
+    #[inline]
+    pub fn t_tracker_base_of(&self, c: usize) -> &Pose {
+        if c == 0 {
+            &self.t_tracker_base
+        } else {
+            &self.campaigns[c - 1].t_tracker_base
+        }
+    }
+
+    /// The target position (flange frame, m) campaign `c` uses.
+    #[inline]
+    pub fn p_flange_target_of(&self, c: usize) -> &Vector3<f64> {
+        match c {
+            0 => &self.p_flange_target,
+            _ => self.campaigns[c - 1]
+                .p_flange_target
+                .as_ref()
+                .unwrap_or(&self.p_flange_target),
+        }
+    }
+
+    /// The target orientation (flange frame) campaign `c` uses, when orientation is modelled.
+    #[inline]
+    pub fn r_flange_target_of(&self, c: usize) -> Option<&Matrix3<f64>> {
+        match c {
+            0 => self.r_flange_target.as_ref(),
+            _ => self.campaigns[c - 1]
+                .r_flange_target
+                .as_ref()
+                .or(self.r_flange_target.as_ref()),
+        }
+    }
+
+    /// The same parameters with the campaigns `ids` (parameter order; the first keeps the current
+    /// registration, the others start at `T_tracker_base = start[k]`), each with its own target (a copy
+    /// of the shared one) when `own_targets` and there are several.
+    pub fn with_campaigns(mut self, ids: &[i64], start: &[Pose], own_targets: bool) -> Self {
+        assert!(!ids.is_empty(), "at least one campaign");
+        assert_eq!(
+            start.len() + 1,
+            ids.len(),
+            "a start for each campaign after the first"
+        );
+        let own = own_targets && ids.len() > 1;
+        self.campaign_ids = ids.to_vec();
+        self.campaigns = start
+            .iter()
+            .map(|t| CampaignRegistration {
+                t_tracker_base: *t,
+                p_flange_target: own.then_some(self.p_flange_target),
+                r_flange_target: if own { self.r_flange_target } else { None },
+            })
+            .collect();
+        self.default_campaign = 0;
+        self
     }
 
     /// From error twists `ξᵢ = [ω; v]` (base frame; rad, m) and the other parameters.
@@ -325,12 +575,25 @@ impl KinematicParams {
             p_flange_target,
             r_flange_target,
             extension: Vec::new(),
+            campaign_ids: vec![0],
+            campaigns: Vec::new(),
+            default_campaign: 0,
         }
     }
 
     /// The same parameters with extension values `extension` ([`ParamLayout::extensions`] order).
     pub fn with_extension(mut self, extension: Vec<f64>) -> Self {
         self.extension = extension;
+        self
+    }
+
+    /// The same parameters with a target of its own for every campaign after the first (a copy of
+    /// the shared one to start from); unchanged with one campaign.
+    pub fn with_own_targets(mut self) -> Self {
+        for c in &mut self.campaigns {
+            c.p_flange_target = Some(self.p_flange_target);
+            c.r_flange_target = self.r_flange_target;
+        }
         self
     }
 
@@ -361,6 +624,23 @@ impl KinematicParams {
         if let (Some(o), Some(r)) = (layout.target_orientation(), self.r_flange_target.as_mut()) {
             let rho = Vector3::from_column_slice(&step[o..o + 3]);
             *r *= exp_rotation(&rho);
+        }
+        for (c, reg) in self.campaigns.iter_mut().enumerate() {
+            let b = layout.campaign_base(c + 1);
+            let beta = Vector6::from_column_slice(&step[b..b + 6]);
+            if beta.iter().any(|v| *v != 0.0) {
+                reg.t_tracker_base = exp_twist(&beta) * reg.t_tracker_base;
+            }
+            if let Some(p) = reg.p_flange_target.as_mut() {
+                let t = layout.campaign_target_position(c + 1);
+                *p += Vector3::from_column_slice(&step[t..t + 3]);
+            }
+            if let (Some(r), Some(o)) = (
+                reg.r_flange_target.as_mut(),
+                layout.campaign_target_orientation(c + 1),
+            ) {
+                *r *= exp_rotation(&Vector3::from_column_slice(&step[o..o + 3]));
+            }
         }
         for (x, &d) in self
             .extension

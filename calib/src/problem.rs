@@ -12,7 +12,7 @@ use crate::extensions::Term;
 use crate::lie3::{left_jacobian_inverse, log_rotation};
 use crate::lm::LeastSquaresProblem;
 use crate::params::{KinematicParams, ParamLayout};
-use crate::predict::{PredictScratch, physical_row};
+use crate::physical_row::{PredictScratch, physical_row};
 use nalgebra::{DMatrix, Vector3};
 use rayon::prelude::*;
 use sim::Model;
@@ -22,9 +22,15 @@ pub use crate::observations::{NoiseModel, Observations};
 /// Turns the kinematic position Jacobian of `p_kin` into that of the grown prediction
 /// `p = t + (1 + γ)(p_kin − t)` (`t` the base origin, tracker frame): every column that moves `p_kin`
 /// only is multiplied by `1 + γ`; the base twist moves `p` rigidly, `[−[p], I]` at the final `p` (m).
-fn grow_columns(layout: &ParamLayout, growth: f64, p: &Vector3<f64>, block: &mut [f64]) {
+fn grow_columns(
+    layout: &ParamLayout,
+    campaign: usize,
+    growth: f64,
+    p: &Vector3<f64>,
+    block: &mut [f64],
+) {
     let np = layout.len();
-    let kb = layout.base();
+    let kb = layout.campaign_base(campaign);
     let ec_cross_p = [
         Vector3::new(0.0, -p.z, p.y),
         Vector3::new(p.z, 0.0, -p.x),
@@ -118,6 +124,10 @@ pub struct KinematicProblem<'a> {
     step_full: Vec<f64>,
     /// The serial path's row workspace (problems of at most [`CHUNK_ROWS`] rows).
     ws: RowScratch,
+    /// Campaign index of every row (empty: all in the first campaign).
+    campaign: Vec<usize>,
+    /// Whether a joint or extension parameter is active (else the joint columns are not needed).
+    joint_columns: bool,
 }
 
 /// Measurement rows per parallel work item. The partial sums of the normal equations are added in
@@ -164,31 +174,41 @@ fn copy_params(dst: &mut KinematicParams, src: &KinematicParams) {
     dst.p_flange_target = src.p_flange_target;
     dst.r_flange_target = src.r_flange_target;
     dst.extension.copy_from_slice(&src.extension);
+    dst.campaigns.copy_from_slice(&src.campaigns);
 }
 
 impl<'a> KinematicProblem<'a> {
     /// The problem at `start`; `active` lists the [`ParamLayout`] indices to solve for (the others stay).
     ///
     /// # Panics
-    /// If `start` or `obs` do not fit `model`, or an active index is out of range.
+    /// If `start` or `obs` do not fit `model`, an active index is out of range, or a row's campaign is
+    /// not one of `start`'s.
     pub fn new(
         model: &'a Model,
         obs: &'a Observations,
         start: KinematicParams,
         active: Vec<usize>,
     ) -> Self {
-        let layout = ParamLayout::new(model, obs.orientation.is_some())
-            .with_extensions(obs.ext.params.clone());
+        let layout = ParamLayout::for_params(model, &start, obs.ext.params.clone());
+        let campaign = if obs.campaign.is_none() && start.default_campaign == 0 {
+            Vec::new()
+        } else {
+            obs.campaign_indices(&start)
+                .unwrap_or_else(|(r, id)| panic!("row {r}: campaign {id} is not registered"))
+        };
         assert_eq!(obs.n_joints, model.nq(), "joint count of the observations");
         assert!(active.iter().all(|&k| k < layout.len()), "active index");
         assert_eq!(
             start.r_flange_target.is_some(),
-            layout.orientation,
+            obs.orientation.is_some(),
             "orientation parameters"
         );
         assert_eq!(start.extension.len(), obs.ext.len(), "extension parameters");
         let np = layout.len();
         let dim = obs.dim();
+        let joint_columns = active
+            .iter()
+            .any(|&k| k < layout.base() || k >= layout.kinematic_len());
         KinematicProblem {
             model,
             obs,
@@ -198,7 +218,9 @@ impl<'a> KinematicProblem<'a> {
             step_full: vec![0.0; np],
             ws: RowScratch::new(model.nq(), dim, np, active.len()),
             active,
+            joint_columns,
             layout,
+            campaign,
         }
     }
 
@@ -276,12 +298,14 @@ impl<'a> KinematicProblem<'a> {
     /// residuals (first `dim` entries used) at the trial point.
     fn row_block(&self, r: usize, with_jacobian: bool, ws: &mut RowScratch) -> [f64; 6] {
         let obs = self.obs;
+        let campaign = self.campaign.get(r).copied().unwrap_or(0);
         let pred = physical_row(
             &self.chain,
             &self.trial,
             &obs.ext,
             r,
             obs.q_row(r),
+            campaign,
             &mut ws.predict,
         );
         let (p, lever, growth) = (pred.p_tracker, pred.lever, pred.growth);
@@ -291,10 +315,14 @@ impl<'a> KinematicProblem<'a> {
         let mut res = [dp.x * sp, dp.y * sp, dp.z * sp, 0.0, 0.0, 0.0];
         let np = self.layout.len();
         if with_jacobian {
-            self.chain
-                .position_jacobian(&ws.predict.chain, &self.layout, &mut ws.block[..3 * np]);
+            self.chain.position_jacobian_of(
+                &ws.predict.chain,
+                &self.layout,
+                self.joint_columns,
+                &mut ws.block[..3 * np],
+            );
             if growth != 0.0 {
-                grow_columns(&self.layout, growth, &p, &mut ws.block[..3 * np]);
+                grow_columns(&self.layout, campaign, growth, &p, &mut ws.block[..3 * np]);
             }
             let bend = BendColumns {
                 chain: &self.chain,
@@ -475,6 +503,44 @@ impl LeastSquaresProblem for KinematicProblem<'_> {
                 }
             }
         }
+    }
+
+    fn scaled_factor(&mut self, scales: &[f64]) -> DMatrix<f64> {
+        let d = self.obs.dim();
+        let np = self.layout.len();
+        let p = self.active.len();
+        let m = self.obs.len() * d;
+        if !crate::linalg::is_tall(m, p) {
+            let mut j = DMatrix::zeros(m, p);
+            self.jacobian(&mut j);
+            return crate::lm::Subspace::square_factor(&j, scales);
+        }
+        // The blocks of rows of the tall-skinny QR, each made from the measurements it overlaps: the
+        // same matrices as cutting the whole Jacobian, without forming it.
+        let block = crate::linalg::tsqr_block_rows(p);
+        let this = &*self;
+        let factors: Vec<DMatrix<f64>> = (0..m.div_ceil(block))
+            .into_par_iter()
+            .map(|b| {
+                let (first, last) = (b * block, ((b + 1) * block).min(m));
+                let mut ws = this.scratch();
+                let mut out = DMatrix::zeros(last - first, p);
+                for r in first / d..last.div_ceil(d) {
+                    this.row_block(r, true, &mut ws);
+                    for row in 0..d {
+                        let k = r * d + row;
+                        if k < first || k >= last {
+                            continue;
+                        }
+                        for (a, &col) in this.active.iter().enumerate() {
+                            out[(k - first, a)] = ws.block[row * np + col] * scales[a];
+                        }
+                    }
+                }
+                out.qr().r()
+            })
+            .collect();
+        crate::linalg::stacked_r_factor(&factors, p)
     }
 
     fn normal_equations(

@@ -143,15 +143,20 @@ fn normal_equations_equal_the_jacobian_products() {
 /// Every column of an extended model, with every cause at once (the bending and transmission-error
 /// terms among them) and at a linearisation point where every extension value is non-zero (bends of
 /// up to 0.02 rad, so that the left Jacobian of the bend matters), against central differences:
-/// positions alone and with orientation.
+/// positions alone and with orientation, and with two campaigns (the rows alternate between two tracker
+/// placements, each with its own target: the bends are the robot's, the registration the row's).
 #[test]
 fn extended_jacobian_matches_central_differences() {
     use calib::calibrate::{CalibrationOptions, Dataset, observations};
     use calib::extensions::{ExtensionSettings, ModelSpec};
     use rand::RngExt;
     use sim::measurement_table::{MeasurementTable, OptionalColumns, Row};
-    for (name, orientation, seed) in [("iiwa7", false, 41), ("iiwa7", true, 42), ("ur5", true, 43)]
-    {
+    for (name, orientation, seed, two_campaigns) in [
+        ("iiwa7", false, 41, false),
+        ("iiwa7", true, 42, false),
+        ("ur5", true, 43, false),
+        ("iiwa7", true, 44, true),
+    ] {
         let model = robots::load_builtin(name).unwrap();
         let mut g = rng(seed);
         let truth = Truth::random(&model, orientation, &mut g);
@@ -161,6 +166,7 @@ fn extended_jacobian_matches_central_differences() {
             temp: true,
             dir: true,
             payload: true,
+            campaign: two_campaigns,
             ..OptionalColumns::NONE
         };
         let mut t = MeasurementTable::new(model.nq(), cols);
@@ -180,6 +186,7 @@ fn extended_jacobian_matches_central_differences() {
                 temp: Some(20.0 + g.random_range(0.0..10.0)),
                 dir: Some(&dir),
                 payload: Some([0.0, 2.0, 5.0][k % 3]),
+                campaign: two_campaigns.then_some(3 * (k % 2) as i64),
                 ..Row::default()
             })
             .unwrap();
@@ -207,12 +214,25 @@ fn extended_jacobian_matches_central_differences() {
             &at,
         )
         .unwrap();
-        let layout = ParamLayout::new(&model, orientation).with_extensions(obs.ext.params.clone());
-        assert_eq!(layout.len(), layout.kinematic_len() + n_ext);
         let mut params = truth_params(&truth).with_extension(at.clone());
         params.t_tracker_base =
             sim::lie::exp_twist(&nalgebra::Vector6::new(0.1, -0.2, 0.2, 0.03, -0.04, 0.0))
                 * params.t_tracker_base;
+        if two_campaigns {
+            let moved =
+                sim::lie::exp_twist(&nalgebra::Vector6::new(-0.3, 0.1, 0.6, 0.5, 0.2, -0.1))
+                    * params.t_tracker_base;
+            params = params.with_campaigns(&[0, 3], &[moved], true);
+            params.campaigns[0].p_flange_target =
+                Some(params.p_flange_target + nalgebra::Vector3::new(0.01, -0.02, 0.005));
+        }
+        let layout = ParamLayout::for_params(&model, &params, obs.ext.params.clone());
+        assert_eq!(layout.n_campaigns(), if two_campaigns { 2 } else { 1 });
+        assert_eq!(
+            layout.len(),
+            layout.kinematic_len() + n_ext,
+            "{name}: parameters"
+        );
         let all: Vec<usize> = (0..layout.len()).collect();
         let mut prob = KinematicProblem::new(&model, &obs, params, all);
         let (m, p) = (prob.n_residuals(), prob.n_params());
@@ -299,7 +319,7 @@ fn bent_chain_equals_the_robot_with_turned_links() {
             bent.flange_offset = turn(&bend[n - 1]) * model.flange_offset;
             let mut data = sim::Data::new(&bent);
             let flange = sim::flange_pose(&bent, &mut data, &q);
-            chain.forward_bent(&mut s, &q, &bend);
+            chain.forward_bent(&mut s, &q, 0, &bend);
             assert!(
                 (s.p_tracker - flange.translation.vector).amax() < 1e-14,
                 "{name}: {}",

@@ -186,8 +186,28 @@ fn linear_undamped_is_one_gauss_newton_step_to_the_closed_form() {
     assert_eq!(report.cost_initial, lin.wb.norm_squared());
     assert!((report.cost_final - chi2_min).abs() < 1e-12 * chi2_min);
     assert!(report.predicted_decrease <= options.decrease_tol);
-    // The workspace holds the residuals and Jacobian at the solution.
-    assert_eq!(ws.jacobian(), &lin.wa);
+    // The workspace holds the residuals and the normal matrix (scales 1: AᵀA) at the solution, and
+    // the subspace is the SVD of the Jacobian there.
+    let gram = lin.wa.transpose() * &lin.wa;
+    assert!((ws.gram() - &gram).amax() <= 1e-12 * gram.amax());
+    let svd = lin.wa.clone().svd(false, false);
+    for (k, s) in sub.singular_values.iter().enumerate() {
+        let e = svd
+            .singular_values
+            .iter()
+            .copied()
+            .fold(f64::NAN, |best: f64, v| {
+                if best.is_nan() || (v - s).abs() < (best - s).abs() {
+                    v
+                } else {
+                    best
+                }
+            });
+        assert!(
+            (e - s).abs() <= 1e-12 * s.max(1.0),
+            "singular value {k}: {s} against {e}"
+        );
+    }
     let r = &lin.wa * DVector::from_column_slice(&prob.x) - &lin.wb;
     assert_eq!(ws.residuals(), r.as_slice());
     assert_clean(&report.health);

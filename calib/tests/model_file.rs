@@ -274,3 +274,55 @@ fn planned_poses_beat_random_ones_and_are_reproducible() {
     );
     assert!(err_plan < err_rand);
 }
+
+/// Found by the fuzzing suite (`tests/fuzz.rs`, seed 15, the exit-0 listing of its value
+/// mutations, e.g. a covariance entry replaced by 1e308 or −1e308): `predict` does not use the
+/// covariance, so such files loaded and predicted without a word. A covariance must be square, finite,
+/// symmetric, with variances ≥ 0 and |Cᵢⱼ| ≤ √(Cᵢᵢ Cⱼⱼ); each failure names the entry.
+#[test]
+fn fuzz_found_covariance_garbage_is_refused_naming_the_entry() {
+    let (robot, _, cal, _) = calibrated("ur5", false, 404);
+    let text = CalibratedModel::new(&robot, &cal).to_json();
+    let base: serde_json::Value = serde_json::from_str(&text).unwrap();
+    let refused = |edit: &dyn Fn(&mut serde_json::Value), needles: &[&str]| {
+        let mut v = base.clone();
+        edit(&mut v);
+        let e = CalibratedModel::from_json(&v.to_string(), "m.json")
+            .unwrap_err()
+            .to_string();
+        assert!(e.starts_with("m.json:") && !e.contains('\n'), "{e}");
+        for n in needles {
+            assert!(e.contains(n), "{n}: {e}");
+        }
+    };
+    let m = |v: &mut serde_json::Value, i: usize, j: usize, x: f64| {
+        v["covariance"]["matrix"][i][j] = serde_json::json!(x)
+    };
+    refused(&|v| m(v, 7, 3, 1e308), &["covariance.matrix'[7][3]"]);
+    refused(
+        &|v| {
+            m(v, 7, 3, 1e308);
+            m(v, 3, 7, 1e308)
+        },
+        &["covariance.matrix'[7][3]", "not a covariance"],
+    );
+    refused(&|v| m(v, 4, 4, -1e-9), &["[4][4]", "a variance is ≥ 0"]);
+    refused(
+        &|v| {
+            v["covariance"]["matrix"]
+                .as_array_mut()
+                .unwrap()
+                .truncate(5)
+        },
+        &["covariance.matrix", "not"],
+    );
+    refused(
+        &|v| v["covariance"]["variance_factor"] = serde_json::json!(-1.0),
+        &["variance_factor"],
+    );
+    // The covariance as written loads, and so does a model without one.
+    assert!(CalibratedModel::from_json(&text, "m.json").is_ok());
+    let mut v = base.clone();
+    v["covariance"] = serde_json::Value::Null;
+    assert!(CalibratedModel::from_json(&v.to_string(), "m.json").is_ok());
+}

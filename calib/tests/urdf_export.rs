@@ -76,10 +76,14 @@ fn model_file(text: &str, model: &Model, truth: &Truth, model_name: &str) -> Cal
             },
             p_flange_target_m: truth.p_flange.into(),
             r_flange_target: truth.r_flange_target.as_ref().map(rows),
+            campaign: 0,
+            campaigns: Vec::new(),
+            default_campaign: None,
         },
         covariance: None,
         extensions: None,
         learned: None,
+        fit: None,
     }
 }
 

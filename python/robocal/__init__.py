@@ -8,12 +8,12 @@ from measurements, predict, and diagnose what the model still gets wrong::
     T = robot.fk([0, 0.5, 0, -1.2, 0, 0.8, 0])          # T_base_flange, 4x4 numpy (m)
     ds = robocal.generate("scenarios/iiwa7_all.toml", seed=7)
     model = robocal.calibrate(ds.measurements, robot="iiwa7", model="kinematic")
-    model.report["report"]["after"]["test"]["rms_m"]    # held-out RMS error (m)
+    model.report["validation"]["after"]["rms_m"]       # 5-fold cross-validated RMS error (m)
     robocal.diagnose(ds.measurements, robot="iiwa7")["findings"]
 
 Units are SI (m, rad, s, kg, °C); positions are in the tracker frame, ``T_base_flange`` in the robot's
 base frame. Measurement tables follow the contract of the command line (columns ``pose, q1..qN, x, y,
-z`` and optionally ``qw..qz, t, temp, dir1..dirN, payload, sigma``). Options have the names of the
+z`` and optionally ``qw..qz, t, temp, dir1..dirN, payload, sigma, campaign``). Options have the names of the
 command line's flags (``test_fraction=`` for ``--test-fraction``). Errors raise :class:`BadInput`
 (the command line's exit 2) or :class:`RuntimeFailure` (exit 1) with the command line's message.
 Long work releases the GIL, and Ctrl-C interrupts it (``KeyboardInterrupt``). See docs/python.md.
@@ -48,6 +48,7 @@ __all__ = [
     "load_model",
     "options",
     "read_table",
+    "register",
 ]
 
 __version__: str = _robocal.VERSION
@@ -70,8 +71,8 @@ def _check_options(command: str, given: dict[str, Any]) -> None:
 
 
 def options(command: str) -> list[str]:
-    """The keyword options of ``command`` (``"calibrate"``, ``"diagnose"``, ``"generate"``): the
-    command line's value flags, ``--test-fraction`` as ``test_fraction``."""
+    """The keyword options of ``command`` (``"calibrate"``, ``"diagnose"``, ``"generate"``,
+    ``"register"``): the command line's value flags, ``--test-fraction`` as ``test_fraction``."""
     return list(_robocal.options(command))
 
 
@@ -181,8 +182,24 @@ class Model:
         """Where the calibrated robot puts the target for each row of ``data``, as ``robocal
         predict``: a DataFrame ``pose, x, y, z`` (tracker frame, m) and ``qw, qx, qy, qz`` when the
         model has orientation. ``data`` needs ``pose, q1..qN`` (rad) and what the model's causes read
-        (``temp`` or ``t``, ``dir1..dirN``, ``payload``); ``x, y, z`` are ignored when present."""
+        (``temp`` or ``t``, ``dir1..dirN``, ``payload``); ``x, y, z`` are ignored when present. Each
+        row is predicted in the tracker frame of its ``campaign`` (an id the model knows); rows
+        without that column in the model's default campaign (the one :meth:`register` added last)."""
         return to_frame(self._native.predict(to_table(data, configurations=True)))
+
+    def register(self, data: DataLike, **options: Any) -> "Model":
+        """A new measurement campaign (the tracker was moved), as ``robocal register``: the
+        tracker-to-base transform (and with ``target=True`` the target offset) fitted to ``data``,
+        every robot parameter kept. ``campaign=ID`` refits a campaign the model knows instead.
+
+        Returns:
+            The model with the campaign registered (its default campaign); ``report`` is the
+            ``register --json`` document (``model``, ``out``: None), with the registration residual,
+            the tracker pose's σ and a warning when the robot seems to have changed.
+        """
+        _check_options("register", options)
+        native, report = _robocal.register(self._native, to_table(data), flags(options))
+        return Model(native, json.loads(report))
 
     def save(self, path: str | os.PathLike[str]) -> None:
         """Writes the model file: the same bytes as ``robocal calibrate --out`` for the same
@@ -202,6 +219,11 @@ def load_model(path: str | os.PathLike[str]) -> Model:
     return Model(_robocal.CalibratedModel.load(os.fspath(path)), None)
 
 
+def register(model: Model, data: DataLike, **options: Any) -> Model:
+    """:meth:`Model.register`: ``model`` with the campaign measured in ``data`` registered."""
+    return model.register(data, **options)
+
+
 def calibrate(
     data: DataLike,
     *,
@@ -217,13 +239,18 @@ def calibrate(
         robot: a built-in robot name, a URDF path or a :class:`Robot` (for ``base_link``/``tip_link``).
         model: ``kinematic`` (default), a ``+``-joined extension such as
             ``kinematic+joint_compliance+thermal_drift``, ``kinematic+learned:kernel``, or ``auto``
-            (what diagnose chooses).
-        test_data: held-out measurements for validation instead of splitting ``data``.
-        **options: the other ``calibrate`` flags: ``test_fraction=0.3`` (poses of ``data`` held out),
-            ``seed=0`` (of that split), ``robust="huber"|"cauchy"``; :func:`options` lists them.
+            (what diagnose chooses, then the learned residual when it pays).
+        test_data: held-out measurements for validation instead of cross-validation.
+        **options: the other ``calibrate`` flags: ``folds=5`` (k-fold cross-validation by pose, 0 for
+            none), or ``test_fraction=0.3`` (one split instead), ``seed=0`` (of the folds or the
+            split), ``per_campaign_target=True`` (each campaign its own target),
+            ``robust="huber"|"cauchy"``; :func:`options` lists them. The model is fitted on every
+            pose of ``data`` whichever validation is chosen; a ``campaign`` column gives each
+            campaign its own tracker registration.
 
     Returns:
-        The :class:`Model`, with ``report`` (dict, as ``calibrate --json``).
+        The :class:`Model`, with ``report`` (dict, as ``calibrate --json``; ``validation`` holds the
+        held-out RMS, mean, max and ISO 9283-style mean before and after).
 
     Raises:
         BadInput: unusable data or options (the message names the column, row and field).

@@ -92,10 +92,14 @@ def calibrate(
 def diagnose(robot: Robot, data: Table, args: list[str]) -> str:
     """``robocal diagnose --json`` with value flags ``args``: the JSON text."""
 
+def register(model: CalibratedModel, data: Table, args: list[str]) -> tuple[CalibratedModel, str]:
+    """``robocal register`` with value flags ``args``: (model with the campaign registered, the
+    ``register --json`` document)."""
+
 def generate(scenario: str, out: str, args: list[str]) -> str:
     """``robocal generate --scenario SCENARIO --out OUT --json`` with value flags ``args``."""
 
 def options(command: str) -> list[str]:
-    """The keyword options (value flags) of ``calibrate``, ``diagnose`` or ``generate``."""
+    """The keyword options (value flags) of ``calibrate``, ``diagnose``, ``generate`` or ``register``."""
 
 def builtin_robots() -> list[str]: ...

@@ -25,6 +25,7 @@ use pyo3::prelude::*;
 use pyo3::types::PyType;
 use robocal::cli::{
     calibrate as cal_cli, diagnose as diag_cli, flags, generate as gen_cli, predict,
+    register as reg_cli,
 };
 use robocal::error::CliError;
 use sim::measurement_table::{self, Column, ColumnValues, MeasurementTable};
@@ -663,9 +664,38 @@ fn calibrate(
     let report = outcome.json(robot, &data.source, None, None);
     let failure = outcome.failure();
     let model = failure.is_none().then(|| CalibratedModel {
-        file: calib::model_file::CalibratedModel::new(robot, &outcome.cal),
+        file: outcome.model_file(robot),
     });
     Ok((model, report.to_string(), failure))
+}
+
+/// Registers a new campaign as `robocal register`: `args` are its value flags (`["--target"]`).
+/// Returns `(model with the campaign registered, the `register --json` document as text)`; warnings about the
+/// data are issued as `DataWarning`s.
+#[pyfunction]
+fn register(
+    py: Python<'_>,
+    model: &CalibratedModel,
+    data: &Table,
+    args: Vec<String>,
+) -> PyResult<(CalibratedModel, String)> {
+    let options: reg_cli::Options = quick(py, flags::parse("register", &args))?;
+    let (file, report, warnings) = work(py, || {
+        let robot = Predictor::from_file(&model.file)?.model;
+        let warnings = robocal::cli::shared::check_table(&data.table, &robot, &data.source)?;
+        let (file, report) = reg_cli::register(
+            &model.file,
+            cal_cli::Named {
+                table: &data.table,
+                name: &data.source,
+            },
+            &options,
+        )?;
+        let report = reg_cli::json(None, &data.source, None, &report).to_string();
+        Ok((file, report, warnings))
+    })?;
+    warn(py, &warnings, 2)?;
+    Ok((CalibratedModel { file }, report))
 }
 
 /// Diagnoses as `robocal diagnose`: `args` are its value flags. Returns the diagnose JSON text.
@@ -699,17 +729,19 @@ fn generate(py: Python<'_>, scenario: &str, out: &str, args: Vec<String>) -> PyR
     })
 }
 
-/// The keyword options a command accepts (`calibrate`, `diagnose`, `generate`): its value flags.
+/// The keyword options a command accepts (`calibrate`, `diagnose`, `generate`, `register`): its
+/// value flags.
 #[pyfunction]
 fn options(py: Python<'_>, command: &str) -> PyResult<Vec<String>> {
     match command {
         "calibrate" => Ok(flags::keywords::<cal_cli::Options>("calibrate")),
         "diagnose" => Ok(flags::keywords::<diag_cli::Options>("diagnose")),
         "generate" => Ok(flags::keywords::<gen_cli::Options>("generate")),
+        "register" => Ok(flags::keywords::<reg_cli::Options>("register")),
         other => Err(raise(
             py,
             CliError::Input(format!(
-                "'{other}': not one of calibrate, diagnose, generate"
+                "'{other}': not one of calibrate, diagnose, generate, register"
             )),
         )),
     }
@@ -729,6 +761,7 @@ fn _robocal(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<CalibratedModel>()?;
     m.add_function(wrap_pyfunction!(calibrate, m)?)?;
     m.add_function(wrap_pyfunction!(diagnose, m)?)?;
+    m.add_function(wrap_pyfunction!(register, m)?)?;
     m.add_function(wrap_pyfunction!(generate, m)?)?;
     m.add_function(wrap_pyfunction!(options, m)?)?;
     m.add_function(wrap_pyfunction!(builtin_robots, m)?)?;

@@ -31,6 +31,7 @@ def test_the_hierarchy():
     [
         ({"robust": "tukey"}, ["--robust", "tukey"]),
         ({"test_fraction": 1.5}, ["--test-fraction", "1.5"]),
+        ({"folds": 3, "test_fraction": 0.2}, ["--folds", "3", "--test-fraction", "0.2"]),
         ({"model": "kinematic+gravity_wells"}, ["--model", "kinematic+gravity_wells"]),
     ],
 )
@@ -68,8 +69,8 @@ def test_bad_diagnose_and_generate_options(cli, generated, tmp_path):
 
 
 def test_unknown_options_are_type_errors(generated):
-    with pytest.raises(TypeError, match="unexpected keyword argument 'folds'.*test_fraction"):
-        robocal.calibrate(str(generated / "measurements.parquet"), folds=5)
+    with pytest.raises(TypeError, match="unexpected keyword argument 'alpha'.*folds, test_fraction"):
+        robocal.calibrate(str(generated / "measurements.parquet"), alpha=0.01)
     with pytest.raises(TypeError, match="unexpected keyword argument 'robust'"):
         robocal.diagnose(str(generated / "measurements.parquet"), robust="huber")
 
@@ -127,7 +128,7 @@ def test_too_few_poses_names_the_split(cli, tmp_path, frame):
     small = tmp_path / "small.csv"
     frame.head(12).to_csv(small, index=False, float_format="%.17g")
     code, message = cli.error("calibrate", "--data", small, "--out", tmp_path / "m.json")
-    assert code == 2 and "--test-fraction 0.3 held out part of the poses" in message
+    assert code == 2 and "--folds 5 fits each fold on 4/5 of the poses" in message
     with pytest.raises(robocal.BadInput) as e:
         robocal.calibrate(str(small))
     assert str(e.value) == message

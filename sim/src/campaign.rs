@@ -387,11 +387,11 @@ impl CampaignBuilder {
     }
 }
 
-/// The most measurement rows (poses × repeats) one campaign may have: 2,000,000, ten thousand times
-/// the shipped scenarios' 200. The generator holds every row in memory until it writes the files
-/// (about 1.6 kB a row for the iiwa 7 with every effect, measured: 320 MB resident for 200,000 rows),
-/// so this bound keeps a campaign under about 3.5 GB; larger counts are refused up front, naming the
-/// key or flag and the number, instead of failing on an allocation.
+/// The most measurement rows (poses × repeats) a campaign planned and simulated in memory may have
+/// ([`plan`], used by `robocal sweep` and `demo`, which calibrate on the rows they make):
+/// 2,000,000, ten thousand times the shipped scenarios' 200 (about 1.6 kB a row with the simulation
+/// and the table, so about 3.5 GB). `robocal generate` streams ([`Planner`]) and has no such limit,
+/// only [`MAX_FORMAT_ROWS`] and the free disk space.
 pub const MAX_ROWS: usize = 2_000_000;
 
 /// Refuses `rows` measurement rows beyond [`MAX_ROWS`]; `what` says where the count comes from.
@@ -399,7 +399,7 @@ pub fn check_row_count(rows: Option<usize>, what: &str) -> std::result::Result<(
     match rows {
         Some(r) if r <= MAX_ROWS => Ok(()),
         _ => Err(format!(
-            "{what}: more than the limit of {MAX_ROWS} measurement rows (poses × repeats) one campaign may have (see docs/generate.md)"
+            "{what}: more than the limit of {MAX_ROWS} measurement rows (poses × repeats) a campaign held in memory may have (see docs/generate.md)"
         )),
     }
 }
@@ -411,16 +411,6 @@ fn check_model_free(spec: &CampaignSpec, file: &str) -> Result<()> {
     }
     if spec.poses == Some(0) {
         return Err(err(file, "campaign.poses", "0: must be ≥ 1".into()));
-    }
-    check_row_count(Some(spec.repeats), &spec.repeats.to_string())
-        .map_err(|m| err(file, "campaign.repeats", m))?;
-    if let Some(p) = spec.poses {
-        check_row_count(Some(p), &p.to_string()).map_err(|m| err(file, "campaign.poses", m))?;
-        check_row_count(
-            p.checked_mul(spec.repeats),
-            &format!("{p} poses × {} repeats", spec.repeats),
-        )
-        .map_err(|m| err(file, "campaign.repeats", m))?;
     }
     for (key, v) in [
         ("campaign.seconds_per_pose", spec.seconds_per_pose),
@@ -447,19 +437,32 @@ fn check_model_free(spec: &CampaignSpec, file: &str) -> Result<()> {
             format!("mass {m} must be finite and ≥ 0 kg"),
         ));
     }
+    // What the measurement table accepts (its rows are checked again when written).
+    let max = crate::measurement_table::MAX_PAYLOAD_KG;
+    if let Some(m) = masses.iter().find(|m| **m > max) {
+        return Err(err(
+            file,
+            "campaign.payload",
+            format!("mass {m} kg is beyond {max} kg: not a robot payload (kilograms are expected)"),
+        ));
+    }
     Ok(())
 }
 
-/// The rows of a campaign: what the controller reports and the environment imposes at each
-/// measurement. Row `r` belongs to pose `r / repeats`.
+/// Rows of a campaign: what the controller reports and the environment imposes at each
+/// measurement. All of them ([`plan`]), or a chunk of consecutive ones ([`Planner::next_chunk`]): row
+/// `i` here is row `first_row + i` of the campaign, which belongs to pose `(first_row + i) / repeats`
+/// and is its repeat `(first_row + i) % repeats`.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Plan {
     /// Joints of the robot.
     pub nq: usize,
-    /// Number of poses.
+    /// Number of poses of the campaign.
     pub n_poses: usize,
     /// Measurements per pose.
     pub repeats: usize,
+    /// The campaign row of this plan's first row (0 for a whole campaign).
+    pub first_row: usize,
     /// Pose id per row (0-based pose index).
     pub pose: Vec<i64>,
     /// Commanded joint positions per row, row-major `nq` per row (rad or m).
@@ -494,6 +497,10 @@ impl Plan {
         self.dir
             .as_ref()
             .map(|d| &d[r * self.nq..(r + 1) * self.nq])
+    }
+    /// Repeat index of row `r` within its pose (0-based).
+    pub fn repeat_of(&self, r: usize) -> usize {
+        (self.first_row + r) % self.repeats
     }
 }
 
@@ -626,20 +633,373 @@ fn sign(x: f64) -> i8 {
     }
 }
 
-/// The joint positions of every pose (row-major, `nq` per pose).
-fn pose_list(model: &Model, spec: &CampaignSpec, seed: u64, file: &str) -> Result<Vec<Vec<f64>>> {
+/// Where the joint positions of pose `k` come from, resolved once for a robot by [`Planner::new`].
+#[derive(Clone, Debug)]
+enum PoseSource {
+    /// Drawn per pose from its own generator (uniform in `ranges`, filtered by reachability).
+    Random {
+        /// Sampling interval per joint (rad or m).
+        ranges: Vec<(f64, f64)>,
+        /// Draws per pose before giving up.
+        max_tries: usize,
+    },
+    /// A finite list, cycled: joint values row-major, `nq` per entry.
+    List(Vec<f64>),
+    /// The reachable points of a joint-space grid, cycled: their odometer index (last joint fastest;
+    /// 4 bytes a point, where the joint values would take 8 per joint).
+    Grid {
+        /// Reachable points' indices, in grid order.
+        index: Vec<u32>,
+        /// Grid values per joint.
+        points_per_joint: Vec<usize>,
+        /// Interval per joint (rad or m).
+        ranges: Vec<(f64, f64)>,
+    },
+}
+
+/// Value `k` of `count` evenly spaced over `(lo, hi)` (the midpoint for one value).
+fn grid_value((lo, hi): (f64, f64), count: usize, k: usize) -> f64 {
+    if count == 1 {
+        0.5 * (lo + hi)
+    } else {
+        lo + (hi - lo) * k as f64 / (count - 1) as f64
+    }
+}
+
+/// The joint values of grid point `index` (odometer order, last joint fastest) into `q`.
+fn grid_point(index: u64, points_per_joint: &[usize], ranges: &[(f64, f64)], q: &mut [f64]) {
+    let mut rest = index;
+    for i in (0..q.len()).rev() {
+        let c = points_per_joint[i] as u64;
+        q[i] = grid_value(ranges[i], points_per_joint[i], (rest % c) as usize);
+        rest /= c;
+    }
+}
+
+/// The largest row count a campaign may have: Parquet counts rows (and robocal numbers poses) in
+/// signed 64-bit integers.
+pub const MAX_FORMAT_ROWS: u64 = i64::MAX as u64;
+
+/// The rows of a campaign, made in order, a chunk at a time ([`Planner::next_chunk`]), so that a
+/// campaign of any length is planned in bounded memory: pose `k` draws from its own generators (see
+/// the module docs) and the `move` direction rule carries the previous pose from chunk to chunk, so
+/// the rows do not depend on the chunk sizes. [`plan`] is the one-chunk case.
+#[derive(Debug)]
+pub struct Planner<'a> {
+    model: &'a Model,
+    spec: &'a CampaignSpec,
+    seed: u64,
+    file: String,
+    source: PoseSource,
+    n_poses: usize,
+    rows: usize,
+    /// The next row to plan.
+    next_row: usize,
+    /// `move` rule: poses folded into `prev` and `last` so far, the last one's joint values and every
+    /// joint's last direction.
+    moved: usize,
+    prev: Vec<f64>,
+    last: Vec<i8>,
+}
+
+impl<'a> Planner<'a> {
+    /// Resolves the pose source of `spec` for `model` (draws nothing for random sampling; runs the
+    /// inverse kinematics of ISO 9283, filters the grid, reads the pose file) and checks the counts:
+    /// poses × repeats at most [`MAX_FORMAT_ROWS`]. `file` names the scenario in errors.
+    ///
+    /// # Errors
+    /// [`SimError::Scenario`] naming `file` and the key; a pose file that cannot be read.
+    pub fn new(model: &'a Model, spec: &'a CampaignSpec, seed: u64, file: &str) -> Result<Self> {
+        let n = model.nq();
+        check_model_free(spec, file)?;
+        let (source, n_poses) = pose_source(model, spec, file)?;
+        let rows = n_poses
+            .checked_mul(spec.repeats)
+            .filter(|&r| r as u64 <= MAX_FORMAT_ROWS)
+            .ok_or_else(|| {
+                let key = if spec.repeats > 1 {
+                    "campaign.repeats"
+                } else {
+                    "campaign.poses"
+                };
+                err(
+                    file,
+                    key,
+                    format!(
+                        "{n_poses} poses × {} repeats = {:.4e} measurement rows: more than the {MAX_FORMAT_ROWS} \
+                         a Parquet file can count (signed 64-bit)",
+                        spec.repeats,
+                        n_poses as f64 * spec.repeats as f64
+                    ),
+                )
+            })?;
+        // The last measurement's time must be a number (t = k · seconds_per_pose + r ·
+        // seconds_per_repeat): 1e308 s a pose overflows at the second pose (fuzzing case 8805).
+        let last_pose = n_poses.saturating_sub(1) as f64 * spec.seconds_per_pose;
+        let last_repeat = spec.repeats.saturating_sub(1) as f64 * spec.seconds_per_repeat;
+        for (key, v, what) in [
+            ("campaign.seconds_per_pose", last_pose, "the last pose"),
+            (
+                "campaign.seconds_per_repeat",
+                last_repeat,
+                "the last repeat",
+            ),
+            (
+                "campaign.seconds_per_pose",
+                last_pose + last_repeat,
+                "the last measurement",
+            ),
+        ] {
+            if !v.is_finite() {
+                return Err(err(
+                    file,
+                    key,
+                    format!(
+                        "{what} would be measured at t = {v} s ({n_poses} poses {} s apart, {} repeats {} s \
+                         apart): too long a campaign to time",
+                        spec.seconds_per_pose, spec.repeats, spec.seconds_per_repeat
+                    ),
+                ));
+            }
+        }
+        let prev = match &spec.start_q {
+            Some(s) => {
+                model
+                    .check_q(s)
+                    .map_err(|e| err(file, "campaign.start_q", e.to_string()))?;
+                s.clone()
+            }
+            None => model
+                .joints
+                .iter()
+                .map(|j| j.limits.map_or(0.0, |l| 0.0f64.clamp(l.lower, l.upper)))
+                .collect(),
+        };
+        Ok(Planner {
+            model,
+            spec,
+            seed,
+            file: file.to_string(),
+            source,
+            n_poses,
+            rows,
+            next_row: 0,
+            moved: 0,
+            prev,
+            last: vec![0; n],
+        })
+    }
+
+    /// Poses of the campaign.
+    pub fn n_poses(&self) -> usize {
+        self.n_poses
+    }
+    /// Measurements per pose.
+    pub fn repeats(&self) -> usize {
+        self.spec.repeats
+    }
+    /// Rows of the campaign (poses × repeats).
+    pub fn rows(&self) -> usize {
+        self.rows
+    }
+    /// Joints of the robot.
+    pub fn nq(&self) -> usize {
+        self.model.nq()
+    }
+    /// Whether the rows have `dir` columns.
+    pub fn has_dir(&self) -> bool {
+        self.spec.directions != DirectionRule::Unknown
+    }
+
+    /// The next at most `max_rows` rows (at least 1), or `None` when every row is planned. A pose's
+    /// repeats may straddle two chunks.
+    ///
+    /// # Errors
+    /// A random pose for which no draw passes the reachability filter, naming the pose.
+    pub fn next_chunk(&mut self, max_rows: usize) -> Result<Option<Plan>> {
+        if self.next_row >= self.rows {
+            return Ok(None);
+        }
+        let n = self.model.nq();
+        let repeats = self.spec.repeats;
+        let (r0, r1) = (
+            self.next_row,
+            self.rows.min(self.next_row.saturating_add(max_rows.max(1))),
+        );
+        let (k0, k1) = (r0 / repeats, (r1 - 1) / repeats + 1);
+        let qs = self.joint_values(k0..k1)?;
+        let dirs = self.directions(k0..k1, &qs);
+        let rows = r1 - r0;
+        let mut plan = Plan {
+            nq: n,
+            n_poses: self.n_poses,
+            repeats,
+            first_row: r0,
+            pose: Vec::with_capacity(rows),
+            q: Vec::with_capacity(rows * n),
+            t_s: Vec::with_capacity(rows),
+            temp_c: Vec::with_capacity(rows),
+            dir: dirs.as_ref().map(|_| Vec::with_capacity(rows * n)),
+            payload_kg: Vec::with_capacity(rows),
+            payload_com_m: self.spec.payload_com_m,
+        };
+        let mut mass = 0.0;
+        for row in r0..r1 {
+            let (k, r) = (row / repeats, row % repeats);
+            let i = k - k0;
+            if row == r0 || r == 0 {
+                mass = match &self.spec.payload {
+                    PayloadRule::Fixed(m) => *m,
+                    PayloadRule::Choice(v) => {
+                        let mut rng = rng_for(self.seed, STREAM_PAYLOAD, k as u64);
+                        v[rng.random_range(0..v.len())]
+                    }
+                };
+            }
+            let t = k as f64 * self.spec.seconds_per_pose + r as f64 * self.spec.seconds_per_repeat;
+            plan.pose.push(k as i64);
+            plan.q.extend_from_slice(&qs[i * n..(i + 1) * n]);
+            let temp = self.spec.temperature.temp_at(t);
+            let (low, high) = crate::measurement_table::TEMP_RANGE_C;
+            if !(low..=high).contains(&temp) {
+                return Err(err(
+                    &self.file,
+                    "campaign.temperature",
+                    format!(
+                        "{temp:e} °C at pose {k} (t = {t} s) is outside [{low}, {high}] °C: not a robot's \
+                         temperature (degrees Celsius are expected)"
+                    ),
+                ));
+            }
+            plan.t_s.push(t);
+            plan.temp_c.push(temp);
+            if let (Some(out), Some(d)) = (plan.dir.as_mut(), dirs.as_ref()) {
+                out.extend_from_slice(&d[i * n..(i + 1) * n]);
+            }
+            plan.payload_kg.push(mass);
+        }
+        self.next_row = r1;
+        Ok(Some(plan))
+    }
+
+    /// Joint values of poses `ks`, row-major.
+    fn joint_values(&self, ks: std::ops::Range<usize>) -> Result<Vec<f64>> {
+        let n = self.model.nq();
+        let mut out = vec![0.0; ks.len() * n];
+        match &self.source {
+            PoseSource::List(list) => {
+                let len = list.len() / n;
+                for (i, k) in ks.enumerate() {
+                    let e = k % len;
+                    out[i * n..(i + 1) * n].copy_from_slice(&list[e * n..(e + 1) * n]);
+                }
+            }
+            PoseSource::Grid {
+                index,
+                points_per_joint,
+                ranges,
+            } => {
+                for (i, k) in ks.enumerate() {
+                    let idx = u64::from(index[k % index.len()]);
+                    grid_point(idx, points_per_joint, ranges, &mut out[i * n..(i + 1) * n]);
+                }
+            }
+            PoseSource::Random { ranges, max_tries } => {
+                let (model, spec, seed) = (self.model, self.spec, self.seed);
+                let p_flange = Vector3::from(spec.p_flange_m);
+                let k0 = ks.start;
+                let found: Vec<bool> = out
+                    .par_chunks_mut(n)
+                    .enumerate()
+                    .with_min_len(64)
+                    .map_init(
+                        || Data::new(model),
+                        |data, (i, q)| {
+                            let mut rng = rng_for(seed, STREAM_POSES, (k0 + i) as u64);
+                            for _ in 0..*max_tries {
+                                for (qi, (lo, hi)) in q.iter_mut().zip(ranges) {
+                                    let u: f64 = rng.random();
+                                    *qi = lo + (hi - lo) * u;
+                                }
+                                forward_kinematics(model, data, q);
+                                if reachable(data, &p_flange, &spec.reachability) {
+                                    return true;
+                                }
+                            }
+                            false
+                        },
+                    )
+                    .collect();
+                if let Some(i) = found.iter().position(|ok| !ok) {
+                    return Err(err(
+                        &self.file,
+                        "campaign",
+                        format!(
+                            "pose {}: no configuration passed the reachability filter (floor_z_m = {}, \
+                             min_axis_distance_m = {}) in {max_tries} draws; loosen them",
+                            k0 + i,
+                            spec.reachability.floor_z_m,
+                            spec.reachability.min_axis_distance_m
+                        ),
+                    ));
+                }
+            }
+        }
+        Ok(out)
+    }
+
+    /// Directions of poses `ks` (row-major), whose joint values are `qs`; `None` without `dir`.
+    fn directions(&mut self, ks: std::ops::Range<usize>, qs: &[f64]) -> Option<Vec<i8>> {
+        let n = self.model.nq();
+        match self.spec.directions {
+            DirectionRule::Unknown => None,
+            DirectionRule::Random => Some(
+                ks.flat_map(|k| {
+                    let mut rng = rng_for(self.seed, STREAM_DIRECTIONS, k as u64);
+                    (0..n)
+                        .map(move |_| if rng.random::<bool>() { 1 } else { -1 })
+                        .collect::<Vec<i8>>()
+                })
+                .collect(),
+            ),
+            DirectionRule::Move => {
+                let mut out = Vec::with_capacity(ks.len() * n);
+                for (i, k) in ks.enumerate() {
+                    // Only the first pose of a chunk can be folded in already (its repeats straddle
+                    // two chunks): its directions are the state as it stands.
+                    if k >= self.moved {
+                        let q = &qs[i * n..(i + 1) * n];
+                        for ((last, prev), qj) in self.last.iter_mut().zip(&self.prev).zip(q) {
+                            let s = sign(qj - prev);
+                            if s != 0 {
+                                *last = s;
+                            }
+                        }
+                        self.prev.copy_from_slice(q);
+                        self.moved = k + 1;
+                    }
+                    out.extend_from_slice(&self.last);
+                }
+                Some(out)
+            }
+        }
+    }
+}
+
+/// The pose source of `spec` for `model` and the number of poses (see the module docs).
+fn pose_source(model: &Model, spec: &CampaignSpec, file: &str) -> Result<(PoseSource, usize)> {
     let n = model.nq();
     let p_flange = Vector3::from(spec.p_flange_m);
-    let cycle = |list: Vec<Vec<f64>>, default_all: bool| -> Result<Vec<Vec<f64>>> {
-        if list.is_empty() {
+    // A list source: cycled to the pose count, or used once (or 150 times round for ISO 9283).
+    let count = |len: usize, default_all: bool| -> Result<usize> {
+        if len == 0 {
             return Err(err(file, "campaign", "the pose list is empty".into()));
         }
-        let count = match spec.poses {
+        Ok(match spec.poses {
             Some(c) => c,
-            None if default_all => list.len(),
+            None if default_all => len,
             None => 150,
-        };
-        Ok((0..count).map(|k| list[k % list.len()].clone()).collect())
+        })
     };
     match &spec.sampling {
         Sampling::Random {
@@ -657,45 +1017,13 @@ fn pose_list(model: &Model, spec: &CampaignSpec, seed: u64, file: &str) -> Resul
                     )
                 })
                 .collect::<Result<Vec<_>>>()?;
-            let count = spec.poses.unwrap_or(100);
-            let found: Vec<Option<Vec<f64>>> = (0..count)
-                .into_par_iter()
-                .map_init(
-                    || Data::new(model),
-                    |data, k| {
-                        let mut rng = rng_for(seed, STREAM_POSES, k as u64);
-                        let mut q = vec![0.0; n];
-                        for _ in 0..*max_tries_per_pose {
-                            for (qi, (lo, hi)) in q.iter_mut().zip(&ranges) {
-                                let u: f64 = rng.random();
-                                *qi = lo + (hi - lo) * u;
-                            }
-                            forward_kinematics(model, data, &q);
-                            if reachable(data, &p_flange, &spec.reachability) {
-                                return Some(q);
-                            }
-                        }
-                        None
-                    },
-                )
-                .collect();
-            found
-                .into_iter()
-                .enumerate()
-                .map(|(k, q)| {
-                    q.ok_or_else(|| {
-                        err(
-                            file,
-                            "campaign",
-                            format!(
-                                "pose {k}: no configuration passed the reachability filter (floor_z_m = {}, \
-                                 min_axis_distance_m = {}) in {max_tries_per_pose} draws; loosen them",
-                                spec.reachability.floor_z_m, spec.reachability.min_axis_distance_m
-                            ),
-                        )
-                    })
-                })
-                .collect()
+            Ok((
+                PoseSource::Random {
+                    ranges,
+                    max_tries: *max_tries_per_pose,
+                },
+                spec.poses.unwrap_or(100),
+            ))
         }
         Sampling::Iso9283(iso) => {
             let key = "campaign.iso9283";
@@ -723,7 +1051,7 @@ fn pose_list(model: &Model, spec: &CampaignSpec, seed: u64, file: &str) -> Resul
                 .center_base_m
                 .map(Vector3::from)
                 .unwrap_or_else(|| (data.flange * nalgebra::Point3::from(p_flange)).coords);
-            let mut list = Vec::with_capacity(5);
+            let mut list = Vec::with_capacity(5 * n);
             for (k, p) in iso9283_points(&c, iso.cube_side_m).iter().enumerate() {
                 let q = solve_ik(model, &iso.seed_q, &p_flange, p, &r_seed).ok_or_else(|| {
                     err(
@@ -757,9 +1085,10 @@ fn pose_list(model: &Model, spec: &CampaignSpec, seed: u64, file: &str) -> Resul
                         ));
                     }
                 }
-                list.push(q);
+                list.extend_from_slice(&q);
             }
-            cycle(list, false)
+            let poses = count(5, false)?;
+            Ok((PoseSource::List(list), poses))
         }
         Sampling::Grid {
             points_per_joint,
@@ -811,41 +1140,32 @@ fn pose_list(model: &Model, spec: &CampaignSpec, seed: u64, file: &str) -> Resul
                     )
                 })
                 .collect::<Result<Vec<_>>>()?;
-            let value = |i: usize, k: usize| {
-                let (lo, hi) = ranges[i];
-                let c = points_per_joint[i];
-                if c == 1 {
-                    0.5 * (lo + hi)
-                } else {
-                    lo + (hi - lo) * k as f64 / (c - 1) as f64
-                }
-            };
             let mut data = Data::new(model);
-            let mut list = Vec::new();
-            let mut idx = vec![0usize; n];
-            for _ in 0..total {
-                let q: Vec<f64> = (0..n).map(|i| value(i, idx[i])).collect();
+            let mut index = Vec::new();
+            let mut q = vec![0.0; n];
+            for idx in 0..total as u32 {
+                grid_point(u64::from(idx), points_per_joint, &ranges, &mut q);
                 forward_kinematics(model, &mut data, &q);
                 if reachable(&data, &p_flange, &spec.reachability) {
-                    list.push(q);
-                }
-                // Odometer increment, last joint fastest.
-                for i in (0..n).rev() {
-                    idx[i] += 1;
-                    if idx[i] < points_per_joint[i] {
-                        break;
-                    }
-                    idx[i] = 0;
+                    index.push(idx);
                 }
             }
-            if list.is_empty() {
+            if index.is_empty() {
                 return Err(err(
                     file,
                     key,
                     format!("none of the {total} grid points passes the reachability filter"),
                 ));
             }
-            cycle(list, true)
+            let poses = count(index.len(), true)?;
+            Ok((
+                PoseSource::Grid {
+                    index,
+                    points_per_joint: points_per_joint.clone(),
+                    ranges,
+                },
+                poses,
+            ))
         }
         Sampling::List { q } => {
             for (k, qk) in q.iter().enumerate() {
@@ -860,7 +1180,8 @@ fn pose_list(model: &Model, spec: &CampaignSpec, seed: u64, file: &str) -> Resul
                     ));
                 }
             }
-            cycle(q.clone(), true)
+            let poses = count(q.len(), true)?;
+            Ok((PoseSource::List(q.concat()), poses))
         }
         Sampling::File { path, .. } => {
             let table = crate::measurement_table::read(path)?;
@@ -875,111 +1196,34 @@ fn pose_list(model: &Model, spec: &CampaignSpec, seed: u64, file: &str) -> Resul
                     ),
                 ));
             }
-            let list = table
-                .rows_by_pose()
-                .into_iter()
-                .map(|(_, rows)| table.q_row(rows[0]).to_vec())
-                .collect();
-            cycle(list, true)
+            let by_pose = table.rows_by_pose();
+            let mut list = Vec::with_capacity(by_pose.len() * n);
+            for (_, rows) in &by_pose {
+                list.extend_from_slice(table.q_row(rows[0]));
+            }
+            let poses = count(by_pose.len(), true)?;
+            Ok((PoseSource::List(list), poses))
         }
     }
 }
 
-/// Turns `spec` into the rows of the campaign for `model`, drawing from `seed` (see the module docs).
+/// Turns `spec` into the rows of the campaign for `model`, drawing from `seed` (see the module docs),
+/// all in memory: at most [`MAX_ROWS`] rows (larger campaigns are streamed with a [`Planner`]).
 /// `file` names the scenario in errors.
 pub fn plan(model: &Model, spec: &CampaignSpec, seed: u64, file: &str) -> Result<Plan> {
-    let n = model.nq();
-    check_model_free(spec, file)?;
-    let poses = pose_list(model, spec, seed, file)?;
-    let n_poses = poses.len();
-    let rows = n_poses
-        .checked_mul(spec.repeats)
-        .filter(|&r| r <= MAX_ROWS)
-        .ok_or_else(|| {
-            let what = format!("{n_poses} poses × {} repeats", spec.repeats);
-            err(
-                file,
-                "campaign.repeats",
-                check_row_count(None, &what).unwrap_err(),
-            )
-        })?;
-
-    // Directions per pose.
-    let dirs: Option<Vec<i8>> = match spec.directions {
-        DirectionRule::Unknown => None,
-        DirectionRule::Random => Some(
-            (0..n_poses)
-                .flat_map(|k| {
-                    let mut rng = rng_for(seed, STREAM_DIRECTIONS, k as u64);
-                    (0..n)
-                        .map(move |_| if rng.random::<bool>() { 1 } else { -1 })
-                        .collect::<Vec<i8>>()
-                })
-                .collect(),
-        ),
-        DirectionRule::Move => {
-            let mut prev = match &spec.start_q {
-                Some(s) => {
-                    model
-                        .check_q(s)
-                        .map_err(|e| err(file, "campaign.start_q", e.to_string()))?;
-                    s.clone()
-                }
-                None => model
-                    .joints
-                    .iter()
-                    .map(|j| j.limits.map_or(0.0, |l| 0.0f64.clamp(l.lower, l.upper)))
-                    .collect(),
-            };
-            let mut last = vec![0i8; n];
-            let mut out = Vec::with_capacity(n_poses * n);
-            for q in &poses {
-                for i in 0..n {
-                    let s = sign(q[i] - prev[i]);
-                    if s != 0 {
-                        last[i] = s;
-                    }
-                }
-                out.extend_from_slice(&last);
-                prev.clone_from(q);
-            }
-            Some(out)
-        }
-    };
-
-    let mut plan = Plan {
-        nq: n,
-        n_poses,
-        repeats: spec.repeats,
-        pose: Vec::with_capacity(rows),
-        q: Vec::with_capacity(rows * n),
-        t_s: Vec::with_capacity(rows),
-        temp_c: Vec::with_capacity(rows),
-        dir: dirs.as_ref().map(|_| Vec::with_capacity(rows * n)),
-        payload_kg: Vec::with_capacity(rows),
-        payload_com_m: spec.payload_com_m,
-    };
-    for (k, q) in poses.iter().enumerate() {
-        let mass = match &spec.payload {
-            PayloadRule::Fixed(m) => *m,
-            PayloadRule::Choice(v) => {
-                let mut rng = rng_for(seed, STREAM_PAYLOAD, k as u64);
-                v[rng.random_range(0..v.len())]
-            }
-        };
-        for r in 0..spec.repeats {
-            let t = k as f64 * spec.seconds_per_pose + r as f64 * spec.seconds_per_repeat;
-            plan.pose.push(k as i64);
-            plan.q.extend_from_slice(q);
-            plan.t_s.push(t);
-            plan.temp_c.push(spec.temperature.temp_at(t));
-            if let (Some(out), Some(d)) = (plan.dir.as_mut(), dirs.as_ref()) {
-                out.extend_from_slice(&d[k * n..(k + 1) * n]);
-            }
-            plan.payload_kg.push(mass);
-        }
+    let mut planner = Planner::new(model, spec, seed, file)?;
+    let rows = planner.rows();
+    if rows > MAX_ROWS {
+        let what = format!("{} poses × {} repeats", planner.n_poses(), spec.repeats);
+        return Err(err(
+            file,
+            "campaign.repeats",
+            check_row_count(None, &what).unwrap_err(),
+        ));
     }
-    Ok(plan)
+    planner
+        .next_chunk(rows)?
+        .ok_or_else(|| err(file, "campaign", "no rows".into()))
 }
 
 #[cfg(test)]

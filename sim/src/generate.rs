@@ -3,7 +3,8 @@
 //!
 //! # Pipeline
 //!
-//! 1. [`crate::campaign::plan`]: the rows (pose, q, t, temp, dir, payload).
+//! 1. [`crate::campaign::Planner`]: the rows (pose, q, t, temp, dir, payload), a chunk at a time
+//!    ([`crate::campaign::plan`]: all at once, for campaigns held in memory).
 //! 2. [`simulate`]: per row, the real robot's flange pose from the truth ([`crate::effects::Truth`],
 //!    made by [`truth_of`]: with `[truth] model = "rapier"` its joint-compliance stage is settled by
 //!    the rapier physics engine on the same real geometry, see [`crate::effects::rapier_compliance`])
@@ -13,7 +14,11 @@
 //!    depend on the number of threads or their scheduling.
 //! 3. [`write_dataset`]: three files in the output folder, replaced as a set: written into a hidden
 //!    staging folder beside it, then moved in ([`crate::io::StagedDir`]), so that an interrupted run
-//!    leaves the old set or the new one:
+//!    leaves the old set or the new one. Steps 1–3 stream: chunk `k` is written (on a thread of its
+//!    own, through [`crate::io::ParquetStream`], whose bytes do not depend on the chunking) while
+//!    chunk `k + 1` is planned and simulated, and the summary accumulates in row order, so memory
+//!    stays bounded (two chunks and one row group per file) and the bytes do not depend on the chunk
+//!    size ([`StreamOptions`]) or the threads:
 //!
 //! * `measurements.parquet`: the measurement contract (`shared/spec/measurements.md`) and nothing else:
 //!   `pose, q1..qN, x, y, z, [qw, qx, qy, qz], t, temp, [dir1..dirN], payload, [sigma]`. `qw..qz` only
@@ -62,10 +67,10 @@
 //! }
 //! ```
 
-use crate::campaign::{Plan, STREAM_TRACKER, derive_seed, plan, rng_for};
+use crate::campaign::{Plan, Planner, STREAM_TRACKER, derive_seed, plan, rng_for};
 use crate::effects::{ComplianceSolver, Conditions, Contributions, EffectId, Truth};
 use crate::error::{Result, SimError};
-use crate::io::write_atomic;
+use crate::io::{AtomicFile, write_atomic};
 use crate::measurement_table::{self, MeasurementTable, OptionalColumns};
 use crate::scenario::{Resolved, TruthModel};
 use crate::statics::Payload;
@@ -77,6 +82,8 @@ use rayon::prelude::*;
 use serde_json::json;
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
+
+mod summary;
 
 /// Software version written into `truth.json`.
 pub const VERSION: &str = env!("CARGO_PKG_VERSION");
@@ -183,7 +190,7 @@ pub fn simulate(
                 match truth.target(&cond, tracker.p_flange(), gravity, scratch) {
                     Ok(tp) => {
                         let pose = plan.pose[r] as u64;
-                        let repeat = (r % plan.repeats) as u64;
+                        let repeat = plan.repeat_of(r) as u64;
                         let mut rng = rng_for(
                             derive_seed(seed, STREAM_TRACKER, pose),
                             STREAM_TRACKER,
@@ -215,7 +222,7 @@ pub fn simulate(
     if let Some((r, e)) = failure.into_inner().unwrap_or_else(|p| p.into_inner()) {
         return Err(SimError::Scenario {
             file: "simulation".into(),
-            key: format!("pose {} (row {})", plan.pose[r], r + 1),
+            key: format!("pose {} (row {})", plan.pose[r], plan.first_row + r + 1),
             message: e.to_string(),
         });
     }
@@ -232,14 +239,7 @@ pub fn simulate(
 
 /// The measurement table of a simulation: contract columns only (see the module docs).
 pub fn measurement_table(plan: &Plan, sim: &Simulation, tracker: &Tracker) -> MeasurementTable {
-    let cols = OptionalColumns {
-        orientation: tracker.six_dof(),
-        t: true,
-        temp: true,
-        dir: plan.dir.is_some(),
-        payload: true,
-        sigma: tracker.noise_scale() > 0.0,
-    };
+    let cols = measurement_columns(plan.dir.is_some(), tracker);
     MeasurementTable {
         n_joints: plan.nq,
         pose: plan.pose.clone(),
@@ -258,6 +258,7 @@ pub fn measurement_table(plan: &Plan, sim: &Simulation, tracker: &Tracker) -> Me
         sigma: cols
             .sigma
             .then(|| sim.rows.iter().map(|r| r.reading.sigma_m).collect()),
+        campaign: None,
     }
 }
 
@@ -316,7 +317,7 @@ fn truth_batch(plan: &Plan, sim: &Simulation, six_dof: bool) -> Result<RecordBat
         Arc::new(Int64Array::from(plan.pose.clone())),
         Arc::new(Int64Array::from(
             (0..plan.len())
-                .map(|r| (r % plan.repeats) as i64)
+                .map(|r| plan.repeat_of(r) as i64)
                 .collect::<Vec<_>>(),
         )),
     ];
@@ -360,31 +361,27 @@ fn truth_batch(plan: &Plan, sim: &Simulation, six_dof: bool) -> Result<RecordBat
         }
         arrays.extend(col3(&|r| r.reading.orientation_noise));
     }
-    let names = truth_column_names(nq, six_dof);
-    let fields: Vec<Field> = names
-        .iter()
-        .zip(&arrays)
-        .map(|(n, a)| Field::new(n, a.data_type().clone(), false))
-        .collect();
-    debug_assert!(fields.iter().all(|f| matches!(
-        f.data_type(),
-        DataType::Int64 | DataType::Float64 | DataType::Boolean
-    )));
-    RecordBatch::try_new(Arc::new(Schema::new(fields)), arrays).map_err(|e| SimError::Io {
+    RecordBatch::try_new(truth_schema(nq, six_dof), arrays).map_err(|e| SimError::Io {
         path: PathBuf::from(TRUTH_PARQUET_FILE),
         source: std::io::Error::other(e.to_string()),
     })
 }
 
-/// Deterministic Parquet bytes of `batch` ([`crate::io::deterministic_writer_properties`], the row
-/// groups of the measurement table).
-fn parquet_bytes(batch: &RecordBatch, path: &Path) -> Result<Vec<u8>> {
-    let rows = measurement_table::PARQUET_MAX_ROW_GROUP_ROWS;
-    let props = crate::io::deterministic_writer_properties(rows).build();
-    crate::io::parquet_bytes(batch, props, rows).map_err(|e| SimError::Io {
-        path: path.to_path_buf(),
-        source: std::io::Error::other(format!("Parquet encoding failed: {e}")),
-    })
+/// The Arrow schema of `truth.parquet`: `pose`, `repeat` and `compliance_iterations` Int64, `outlier`
+/// Boolean, every other column Float64; none nullable.
+fn truth_schema(nq: usize, six_dof: bool) -> Arc<Schema> {
+    let fields: Vec<Field> = truth_column_names(nq, six_dof)
+        .into_iter()
+        .map(|name| {
+            let dt = match name.as_str() {
+                "pose" | "repeat" | "compliance_iterations" => DataType::Int64,
+                "outlier" => DataType::Boolean,
+                _ => DataType::Float64,
+            };
+            Field::new(name, dt, false)
+        })
+        .collect();
+    Arc::new(Schema::new(fields))
 }
 
 /// Root-mean-square displacement (m) and largest one of one effect over the rows.
@@ -502,55 +499,30 @@ impl Summary {
     }
 }
 
-fn summarize(res: &Resolved, plan: &Plan, sim: &Simulation, files: Vec<String>) -> Summary {
-    let n = sim.rows.len().max(1) as f64;
-    let len = |v: [f64; 3]| (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
-    let size = |name: &'static str, g: &dyn Fn(&Contributions) -> [f64; 3]| {
-        let mut s2 = 0.0;
-        let mut mx: f64 = 0.0;
-        for r in &sim.rows {
-            let l = len(g(&r.contribution));
-            s2 += l * l;
-            mx = mx.max(l);
-        }
-        EffectSize {
-            effect: name,
-            rms_m: (s2 / n).sqrt(),
-            max_m: mx,
-        }
-    };
-    let effects: Vec<EffectSize> = res
-        .effects
-        .ids()
-        .map(|id| size(id.name(), &|c| c.get(id)))
-        .collect();
-    let total = size("total", &|c| c.total());
-    let mut d: Vec<f64> = sim.rows.iter().map(|r| len(r.reading.p_true)).collect();
-    d.sort_unstable_by(f64::total_cmp);
-    let median = if d.is_empty() { 0.0 } else { d[d.len() / 2] };
+/// The summary of a campaign of `poses` poses and `rows` rows from its accumulated statistics and the
+/// median target distance (m).
+fn summarize(
+    res: &Resolved,
+    (poses, rows): (usize, usize),
+    totals: summary::Totals,
+    median: f64,
+    files: Vec<String>,
+) -> Summary {
     let (sr, st) = res.tracker.sigmas(median);
-    let (mut s2, mut m) = (0.0, 0usize);
-    for r in sim.rows.iter().filter(|r| !r.reading.outlier) {
-        let l = len(r.reading.noise);
-        s2 += l * l;
-        m += 1;
-    }
-    let steps = sim.rows.iter().map(|r| r.compliance_iterations as f64);
-    let steps_max = steps.clone().fold(0.0, f64::max);
     Summary {
         robot: res.model.name.clone(),
         truth_model: res.truth_model,
-        compliance_steps_mean_max: [steps.sum::<f64>() / n, steps_max],
+        compliance_steps_mean_max: totals.steps_mean_max,
         seed: res.seed,
-        poses: plan.n_poses,
-        rows: plan.len(),
-        effects,
-        total_rms_m: total.rms_m,
+        poses,
+        rows,
+        effects: totals.effects,
+        total_rms_m: totals.total_rms_m,
         noise_scale: res.tracker.noise_scale(),
         median_distance_m: median,
         sigma_at_median_m: [sr, st],
-        noise_rms_m: if m > 0 { (s2 / m as f64).sqrt() } else { 0.0 },
-        outliers: sim.rows.iter().filter(|r| r.reading.outlier).count(),
+        noise_rms_m: totals.noise_rms_m,
+        outliers: totals.outliers,
         files,
     }
 }
@@ -620,7 +592,7 @@ fn truth_record(res: &Resolved, summary: &Summary) -> serde_json::Value {
 }
 
 /// The `truth.json` document.
-fn truth_json(res: &Resolved, plan: &Plan, summary: &Summary) -> TruthDoc {
+fn truth_json(res: &Resolved, (nq, repeats): (usize, usize), summary: &Summary) -> TruthDoc {
     let sc = &res.scenario;
     let tr = &res.tracker;
     let file_name = Path::new(&sc.label)
@@ -654,39 +626,148 @@ fn truth_json(res: &Resolved, plan: &Plan, summary: &Summary) -> TruthDoc {
         }),
         campaign: json!({
             "spec": res.campaign,
-            "poses": plan.n_poses, "repeats": plan.repeats, "rows": plan.len(),
+            "poses": summary.poses, "repeats": repeats, "rows": summary.rows,
         }),
         summary: to_value(summary),
         files: json!({
             "measurements": MEASUREMENTS_FILE, "truth_rows": TRUTH_PARQUET_FILE,
-            "truth_rows_columns": truth_column_names(plan.nq, tr.six_dof()),
+            "truth_rows_columns": truth_column_names(nq, tr.six_dof()),
         }),
         scenario: to_value(&sc.file),
         scenario_text: sc.text.clone(),
     }
 }
 
-/// Plans, simulates and writes the dataset of `res` into `out_dir` (created if missing). The three
-/// files replace an earlier set as a whole ([`crate::io::StagedDir`]: written into a staging folder
-/// beside `out_dir`, then moved in; other files in `out_dir` are kept). Returns the summary. `progress` is called from worker threads with rows finished (the total is
-/// [`Plan::len`]; use [`plan_of`] first to know it).
+/// Tuning of the streaming generator ([`write_dataset_with`]). Neither setting changes a byte of the
+/// output: they trade memory against speed only.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct StreamOptions {
+    /// Rows planned, simulated and handed to the file writers at a time (≥ 1).
+    pub chunk_rows: usize,
+    /// Up to this many rows the median target distance of the summary is selected in memory (8 bytes
+    /// a row); beyond, by a radix selection that reads `truth.parquet` again once written (see
+    /// `generate/summary.rs`).
+    pub median_in_memory_rows: usize,
+}
+
+impl Default for StreamOptions {
+    /// 16,384 rows a chunk (about 15 MB of plan, simulation and Arrow arrays for the iiwa 7 with
+    /// every effect); the median in memory up to 2,097,152 rows (16 MB).
+    fn default() -> Self {
+        StreamOptions {
+            chunk_rows: 1 << 14,
+            median_in_memory_rows: 1 << 21,
+        }
+    }
+}
+
+/// Bytes `rows` rows of a campaign of `nq` joints take on disk, estimated from the columns of the two
+/// Parquet files: 8 bytes per 64-bit value, 1 per direction and flag (Snappy hardly compresses the
+/// noisy values; measured: 101 and 325 bytes a row for `iiwa7_all.toml`, against 127 and 345
+/// estimated), plus 1 MB of metadata.
+pub fn estimated_bytes(res: &Resolved, nq: usize, has_dir: bool, rows: usize) -> u64 {
+    let m = measurement_columns(has_dir, &res.tracker);
+    let wide = MeasurementTable::new(nq, m).column_names().len() - if has_dir { nq } else { 0 };
+    let narrow = if has_dir { nq } else { 0 };
+    let truth = truth_column_names(nq, res.tracker.six_dof()).len();
+    let per_row = 8 * (wide + truth - 1) + narrow + 1;
+    (rows as u64)
+        .saturating_mul(per_row as u64)
+        .saturating_add(1 << 20)
+}
+
+/// Refuses, before any work, a campaign whose files would not fit the free space of the file system
+/// that `out_dir` (or its nearest existing parent) is on, naming the counts and the sizes.
+fn check_disk(res: &Resolved, planner: &Planner<'_>, out_dir: &Path) -> Result<()> {
+    let need = estimated_bytes(res, planner.nq(), planner.has_dir(), planner.rows());
+    let Some(free) = crate::io::available_bytes(out_dir) else {
+        return Ok(());
+    };
+    if need <= free {
+        return Ok(());
+    }
+    let poses = match res.overrides.poses {
+        Some(p) => format!("{p} poses (--poses)"),
+        None => format!("{} poses", planner.n_poses()),
+    };
+    let key = if planner.repeats() > 1 {
+        "campaign.repeats"
+    } else {
+        "campaign.poses"
+    };
+    Err(SimError::Scenario {
+        file: res.scenario.label.clone(),
+        key: key.into(),
+        message: format!(
+            "{poses} × {} repeats = {} measurement rows need about {} on disk ({} bytes a row, \
+             estimated), but the file system of {} has {} free",
+            planner.repeats(),
+            planner.rows(),
+            fmt_bytes(need),
+            need.saturating_sub(1 << 20) / planner.rows().max(1) as u64,
+            out_dir.display(),
+            fmt_bytes(free)
+        ),
+    })
+}
+
+/// `b` bytes for people: `612.3 GB`.
+fn fmt_bytes(b: u64) -> String {
+    let units = ["bytes", "kB", "MB", "GB", "TB", "PB", "EB"];
+    let mut v = b as f64;
+    let mut u = 0;
+    while v >= 1000.0 && u + 1 < units.len() {
+        v /= 1000.0;
+        u += 1;
+    }
+    if u == 0 {
+        format!("{b} bytes")
+    } else {
+        format!("{v:.1} {}", units[u])
+    }
+}
+
+/// The optional columns of the measurement table (see the module docs).
+fn measurement_columns(has_dir: bool, tracker: &Tracker) -> OptionalColumns {
+    OptionalColumns {
+        orientation: tracker.six_dof(),
+        t: true,
+        temp: true,
+        dir: has_dir,
+        payload: true,
+        sigma: tracker.noise_scale() > 0.0,
+        campaign: false,
+    }
+}
+
+/// Plans, simulates and writes the dataset of `res` into `out_dir` (created if missing), streaming:
+/// rows are planned, simulated and written in chunks ([`StreamOptions::default`]), so memory does not
+/// grow with the number of rows. The three files replace an earlier set as a whole
+/// ([`crate::io::StagedDir`]: written into a staging folder beside `out_dir`, then moved in; other
+/// files in `out_dir` are kept). A campaign whose files would not fit the free disk space is refused
+/// before any work. Returns the summary. `progress` is called from worker threads with rows finished
+/// (the total is [`Planner::rows`]).
 pub fn write_dataset(
     res: &Resolved,
     out_dir: &Path,
-    plan: &Plan,
+    planner: Planner<'_>,
     progress: Option<Progress<'_>>,
 ) -> Result<Summary> {
+    write_dataset_with(res, out_dir, planner, progress, &StreamOptions::default())
+}
+
+/// [`write_dataset`] with chosen [`StreamOptions`] (the bytes written are the same for any).
+pub fn write_dataset_with(
+    res: &Resolved,
+    out_dir: &Path,
+    mut planner: Planner<'_>,
+    progress: Option<Progress<'_>>,
+    options: &StreamOptions,
+) -> Result<Summary> {
     let truth = truth_of(res)?;
-    let sim = simulate(&truth, &res.tracker, &res.gravity, plan, res.seed, progress).map_err(
-        |e| match e {
-            SimError::Scenario { key, message, .. } => SimError::Scenario {
-                file: res.scenario.label.clone(),
-                key,
-                message,
-            },
-            other => other,
-        },
-    )?;
+    check_disk(res, &planner, out_dir)?;
+    let (nq, six_dof) = (planner.nq(), res.tracker.six_dof());
+    let (poses, rows, repeats) = (planner.n_poses(), planner.rows(), planner.repeats());
     // Every file goes into a staging folder beside `out_dir`; the set replaces the old one as a whole
     // once all three are written (sim::io::StagedDir; files of the user's in `out_dir` are kept).
     let stage = crate::io::StagedDir::new(out_dir)?;
@@ -697,16 +778,89 @@ pub fn write_dataset(
             dir.join(TRUTH_PARQUET_FILE),
             dir.join(TRUTH_JSON_FILE),
         );
-        let table = measurement_table(plan, &sim, &res.tracker);
-        measurement_table::write(&m_path, &table)?;
-        let batch = truth_batch(plan, &sim, res.tracker.six_dof())?;
-        write_atomic(&t_path, &parquet_bytes(&batch, &t_path)?)?;
+        let mut measurements = measurement_table::ParquetTableWriter::new(
+            AtomicFile::create(&m_path)?,
+            nq,
+            measurement_columns(planner.has_dir(), &res.tracker),
+            &m_path.display().to_string(),
+        )?;
+        let truth_err = |e: parquet::errors::ParquetError| SimError::Io {
+            path: t_path.clone(),
+            source: std::io::Error::other(e.to_string()),
+        };
+        let group = measurement_table::PARQUET_MAX_ROW_GROUP_ROWS;
+        let mut truth_rows = crate::io::ParquetStream::new(
+            AtomicFile::create(&t_path)?,
+            truth_schema(nq, six_dof),
+            crate::io::deterministic_writer_properties(group).build(),
+            group,
+        )
+        .map_err(truth_err)?;
+        let ids: Vec<EffectId> = res.effects.ids().collect();
+        let mut stats = summary::Accumulator::new(ids, rows, options.median_in_memory_rows);
+        // Chunk k is written on a thread of its own while chunk k + 1 is planned and simulated (the
+        // simulation on the rayon pool): at most two chunks in memory. Chunks are allocated on this
+        // thread and the Arrow arrays on the writer's, whatever the number of pool threads, so the
+        // allocator keeps no chunk-sized leftovers in one arena per thread (measured: 220 MB resident
+        // with 8 threads when the write ran on whichever pool thread was free, against 105 MB with 1).
+        // Errors come in row order: a chunk's write failure before the next chunk's simulation's.
+        let (send, receive) = std::sync::mpsc::sync_channel::<(Plan, Simulation)>(0);
+        let (written, simulated) = std::thread::scope(|scope| {
+            let writer = scope.spawn(|| -> Result<()> {
+                for (plan, sim) in receive {
+                    measurements.append(&measurement_table(&plan, &sim, &res.tracker))?;
+                    truth_rows
+                        .write(&truth_batch(&plan, &sim, six_dof)?)
+                        .map_err(truth_err)?;
+                    stats.add(&sim);
+                }
+                Ok(())
+            });
+            let simulated = (|| -> Result<()> {
+                while let Some(plan) = planner.next_chunk(options.chunk_rows.max(1))? {
+                    let sim = simulate(
+                        &truth,
+                        &res.tracker,
+                        &res.gravity,
+                        &plan,
+                        res.seed,
+                        progress,
+                    )
+                    .map_err(|e| match e {
+                        SimError::Scenario { key, message, .. } => SimError::Scenario {
+                            file: res.scenario.label.clone(),
+                            key,
+                            message,
+                        },
+                        other => other,
+                    })?;
+                    if send.send((plan, sim)).is_err() {
+                        // The writer stopped on an error, which it returns.
+                        break;
+                    }
+                }
+                Ok(())
+            })();
+            drop(send);
+            let written = writer
+                .join()
+                .unwrap_or_else(|panic| std::panic::resume_unwind(panic));
+            (written, simulated)
+        });
+        written?;
+        simulated?;
+        measurements.finish()?.commit()?;
+        truth_rows.finish().map_err(truth_err)?.commit()?;
+        let totals = stats.finish();
+        let median = stats
+            .median
+            .select(|visit| replay_distances(&t_path, visit))?;
         let files = OUTPUT_FILES
             .iter()
             .map(|n| out_dir.join(n).display().to_string())
             .collect();
-        let summary = summarize(res, plan, &sim, files);
-        let doc = truth_json(res, plan, &summary);
+        let summary = summarize(res, (poses, rows), totals, median, files);
+        let doc = truth_json(res, (nq, repeats), &summary);
         let mut text = serde_json::to_string_pretty(&doc).map_err(|e| SimError::Io {
             path: j_path.clone(),
             source: std::io::Error::other(e.to_string()),
@@ -720,15 +874,63 @@ pub fn write_dataset(
     Ok(written)
 }
 
-/// The campaign rows of a resolved scenario (step 1 of the pipeline).
+/// Calls `visit` with the length of every row's noise-free target `p_tracker` (m), read back from
+/// the `truth.parquet` at `path` (the median's radix selection; the values are those simulated, bit
+/// for bit, as Parquet stores doubles exactly).
+fn replay_distances(path: &Path, visit: &mut dyn FnMut(f64)) -> Result<()> {
+    use arrow_array::cast::AsArray;
+    use arrow_array::types::Float64Type;
+    let io = |e: &dyn std::fmt::Display| SimError::Io {
+        path: path.to_path_buf(),
+        source: std::io::Error::other(format!("reading back: {e}")),
+    };
+    let f = std::fs::File::open(path).map_err(|e| io(&e))?;
+    let b = parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(f)
+        .map_err(|e| io(&e))?;
+    let mask = parquet::arrow::ProjectionMask::columns(
+        b.parquet_schema(),
+        ["p_tracker_x", "p_tracker_y", "p_tracker_z"],
+    );
+    let reader = b
+        .with_projection(mask)
+        .with_batch_size(1 << 16)
+        .build()
+        .map_err(|e| io(&e))?;
+    for batch in reader {
+        let batch = batch.map_err(|e| io(&e))?;
+        let col = |name: &str| {
+            batch
+                .column_by_name(name)
+                .and_then(|c| c.as_primitive_opt::<Float64Type>())
+                .ok_or_else(|| io(&format!("no Float64 column {name}")))
+        };
+        let (x, y, z) = (
+            col("p_tracker_x")?,
+            col("p_tracker_y")?,
+            col("p_tracker_z")?,
+        );
+        for i in 0..batch.num_rows() {
+            visit(summary::distance([x.value(i), y.value(i), z.value(i)]));
+        }
+    }
+    Ok(())
+}
+
+/// The campaign rows of a resolved scenario (step 1 of the pipeline), all in memory (at most
+/// [`crate::campaign::MAX_ROWS`]): for the sweep, the demo's diagnosis and tests.
 pub fn plan_of(res: &Resolved) -> Result<Plan> {
     plan(&res.model, &res.campaign, res.seed, &res.scenario.label)
 }
 
-/// The whole pipeline: plan, simulate, write. See [`write_dataset`].
+/// The campaign of a resolved scenario as a [`Planner`], which makes its rows a chunk at a time
+/// ([`write_dataset`] streams them).
+pub fn planner_of(res: &Resolved) -> Result<Planner<'_>> {
+    Planner::new(&res.model, &res.campaign, res.seed, &res.scenario.label)
+}
+
+/// The whole pipeline: plan, simulate, write, streaming. See [`write_dataset`].
 pub fn generate(res: &Resolved, out_dir: &Path, progress: Option<Progress<'_>>) -> Result<Summary> {
-    let p = plan_of(res)?;
-    write_dataset(res, out_dir, &p, progress)
+    write_dataset(res, out_dir, planner_of(res)?, progress)
 }
 
 /// Column names of a Parquet file, in file order (to check what a file holds without interpreting it).

@@ -3,9 +3,14 @@
 //! * [`write_atomic`] writes bytes to a temporary file with a unique name in the destination's own
 //!   folder, syncs it and renames it over the destination, so that a reader sees the old file or the
 //!   new one, never a half-written one; on every failure the temporary file is removed.
+//! * [`AtomicFile`] is the same for a file written piece by piece (a stream of Parquet row groups):
+//!   the pieces go to the temporary file, and [`AtomicFile::commit`] syncs it and renames it over the
+//!   destination; dropped without a commit, the temporary file is removed.
 //! * [`deterministic_writer_properties`] fixes every Parquet writer setting that shapes the bytes, and
-//!   [`parquet_bytes`] writes one record batch with them in row groups of a bounded size: the same data
-//!   always gives the same bytes, whatever the parquet crate's defaults become.
+//!   [`ParquetStream`] writes record batches with them in row groups of a bounded size, handing the
+//!   rows to the parquet writer in pieces of a fixed size ([`PARQUET_FEED_ROWS`]): the same rows always
+//!   give the same bytes, however they were split into batches, and whatever the parquet crate's
+//!   defaults become. [`parquet_bytes`] is the one-batch case.
 //!
 //! * [`StagedDir`] writes a folder of outputs as a whole (`robocal generate`, `dataset`, `diagnose
 //!   --report`): every file goes into a hidden staging folder beside the destination, and only when all
@@ -49,33 +54,129 @@ static TEMP_COUNTER: AtomicU64 = AtomicU64::new(0);
 /// [`SimError::Io`] naming `path` when `path` has no file name, or the folder does not exist or is not
 /// writable, or the write, sync or rename fails.
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
-    let io_err = |source: std::io::Error| SimError::Io {
-        path: path.to_path_buf(),
-        source,
-    };
-    let name = path.file_name().ok_or_else(|| {
-        io_err(std::io::Error::new(
-            std::io::ErrorKind::InvalidInput,
-            "not a file name",
-        ))
-    })?;
-    let dir = match path.parent() {
-        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
-        _ => PathBuf::from("."),
-    };
-    let tmp = dir.join(temp_name(name));
-    let result = (|| {
-        let mut f = std::fs::File::create(&tmp)?;
-        f.write_all(bytes)?;
-        f.sync_all()?;
-        drop(f);
-        std::fs::rename(&tmp, path)
-    })();
-    result.map_err(|source| {
-        // The temporary file may not exist (creation failed); nothing else can be done about it.
-        let _ = std::fs::remove_file(&tmp);
-        io_err(source)
-    })
+    let mut f = AtomicFile::create(path)?;
+    f.write_all(bytes).map_err(|e| f.error(e))?;
+    f.commit()
+}
+
+/// A file written atomically piece by piece: [`std::io::Write`] goes to a temporary file
+/// `.NAME.tmp-PID-N` in the destination's folder (buffered), [`AtomicFile::commit`] flushes it, syncs
+/// it to disk and renames it over the destination. Dropped without a commit (an error, a panic), the
+/// temporary file is removed and the destination is left as it was. [`write_atomic`] is the
+/// one-piece case.
+///
+/// ```
+/// use std::io::Write;
+/// let dir = std::env::temp_dir().join(format!("sim-atomic-doctest-{}", std::process::id()));
+/// std::fs::create_dir_all(&dir).unwrap();
+/// let path = dir.join("rows.txt");
+/// let mut f = sim::io::AtomicFile::create(&path).unwrap();
+/// f.write_all(b"row 1\n").unwrap();
+/// f.write_all(b"row 2\n").unwrap();
+/// assert!(!path.exists()); // nothing is visible before the commit
+/// f.commit().unwrap();
+/// assert_eq!(std::fs::read_to_string(&path).unwrap(), "row 1\nrow 2\n");
+/// assert_eq!(std::fs::read_dir(&dir).unwrap().count(), 1);
+/// std::fs::remove_dir_all(&dir).unwrap();
+/// ```
+#[derive(Debug)]
+pub struct AtomicFile {
+    /// The destination.
+    path: PathBuf,
+    /// The temporary file beside it.
+    tmp: PathBuf,
+    /// The open temporary file; `None` once committed.
+    file: Option<std::io::BufWriter<std::fs::File>>,
+}
+
+impl AtomicFile {
+    /// Creates the temporary file for the destination `path`.
+    ///
+    /// # Errors
+    /// [`SimError::Io`] naming `path` when it has no file name, or its folder does not exist or is not
+    /// writable.
+    pub fn create(path: &Path) -> Result<AtomicFile> {
+        let io_err = |source: std::io::Error| SimError::Io {
+            path: path.to_path_buf(),
+            source,
+        };
+        let name = path.file_name().ok_or_else(|| {
+            io_err(std::io::Error::new(
+                std::io::ErrorKind::InvalidInput,
+                "not a file name",
+            ))
+        })?;
+        let dir = match path.parent() {
+            Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+            _ => PathBuf::from("."),
+        };
+        let tmp = dir.join(temp_name(name));
+        let file = std::fs::File::create(&tmp).map_err(io_err)?;
+        Ok(AtomicFile {
+            path: path.to_path_buf(),
+            tmp,
+            file: Some(std::io::BufWriter::with_capacity(1 << 20, file)),
+        })
+    }
+
+    /// The destination.
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    /// A [`SimError::Io`] naming the destination (for a failed write).
+    pub fn error(&self, source: std::io::Error) -> SimError {
+        SimError::Io {
+            path: self.path.clone(),
+            source,
+        }
+    }
+
+    /// Flushes, syncs and renames the temporary file over the destination.
+    ///
+    /// # Errors
+    /// [`SimError::Io`] naming the destination; the temporary file is removed and the destination left
+    /// as it was.
+    pub fn commit(mut self) -> Result<()> {
+        let Some(buffered) = self.file.take() else {
+            return Ok(());
+        };
+        let result = (|| {
+            let f = buffered.into_inner().map_err(|e| e.into_error())?;
+            f.sync_all()?;
+            drop(f);
+            std::fs::rename(&self.tmp, &self.path)
+        })();
+        result.map_err(|source| {
+            // The temporary file may be gone already; nothing else can be done about it.
+            let _ = std::fs::remove_file(&self.tmp);
+            self.error(source)
+        })
+    }
+}
+
+impl Write for AtomicFile {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        match &mut self.file {
+            Some(f) => f.write(buf),
+            None => Err(std::io::Error::other("the file is committed")),
+        }
+    }
+    fn flush(&mut self) -> std::io::Result<()> {
+        match &mut self.file {
+            Some(f) => f.flush(),
+            None => Ok(()),
+        }
+    }
+}
+
+impl Drop for AtomicFile {
+    fn drop(&mut self) {
+        if self.file.take().is_some() {
+            // Best effort: nothing else can be done about a file that cannot be removed.
+            let _ = std::fs::remove_file(&self.tmp);
+        }
+    }
 }
 
 /// The temporary name `.NAME.tmp-PID-N` of `name` (a file of [`write_atomic`] or a folder of
@@ -269,19 +370,22 @@ impl StagedDir {
         &self.staging
     }
 
-    /// An error about a file of the staging folder, renamed to name the destination instead (what
-    /// the user asked for), e.g. `out/truth.json` rather than `out/../.out.tmp-12-0/truth.json`.
-    pub fn user_error(&self, e: SimError) -> SimError {
-        match e {
-            SimError::Io { path, source } => SimError::Io {
-                path: match path.strip_prefix(&self.staging) {
-                    Ok(rel) => self.target.join(rel),
-                    Err(_) => path,
-                },
-                source,
-            },
-            other => other,
+    /// An error about a file of the staging folder (a write failure, or a table that does not pass
+    /// its checks), renamed to name the destination instead (what the user asked for), e.g.
+    /// `out/truth.json` rather than `out/../.out.tmp-12-0/truth.json`.
+    pub fn user_error(&self, mut e: SimError) -> SimError {
+        let named = |path: PathBuf| match path.strip_prefix(&self.staging) {
+            Ok(rel) => self.target.join(rel),
+            Err(_) => path,
+        };
+        match &mut e {
+            SimError::Io { path, .. } => *path = named(std::mem::take(path)),
+            SimError::Table { file, .. } => {
+                *file = named(PathBuf::from(&*file)).display().to_string();
+            }
+            _ => {}
         }
+        e
     }
 
     /// Moves the staged outputs into the destination. `is_ours(name)` tells which names the command
@@ -466,8 +570,163 @@ pub fn deterministic_writer_properties(max_row_group_rows: usize) -> WriterPrope
         .set_dictionary_enabled(false)
 }
 
+/// Bytes free for an unprivileged user on the file system that holds `path`, or its nearest existing
+/// parent folder (`statvfs`: available blocks × fragment size); `None` where this cannot be told
+/// (another system, a failing call).
+pub fn available_bytes(path: &Path) -> Option<u64> {
+    let absolute = std::path::absolute(path).ok()?;
+    let existing = absolute.ancestors().find(|p| p.exists())?;
+    statvfs_available(existing)
+}
+
+#[cfg(unix)]
+fn statvfs_available(path: &Path) -> Option<u64> {
+    use std::os::unix::ffi::OsStrExt;
+    let c = std::ffi::CString::new(path.as_os_str().as_bytes()).ok()?;
+    let mut s = std::mem::MaybeUninit::<libc::statvfs>::uninit();
+    // SAFETY: `c` is a NUL-terminated path that outlives the call, and `s` points to writable memory
+    // of the struct's size, which the call fills on success (checked before it is read).
+    let r = unsafe { libc::statvfs(c.as_ptr(), s.as_mut_ptr()) };
+    if r != 0 {
+        return None;
+    }
+    // SAFETY: the call succeeded, so it initialised the struct.
+    let s = unsafe { s.assume_init() };
+    // The field types differ between platforms (u32 or u64).
+    #[allow(clippy::unnecessary_cast)]
+    Some((s.f_bavail as u64).saturating_mul(s.f_frsize as u64))
+}
+
+#[cfg(not(unix))]
+fn statvfs_available(_path: &Path) -> Option<u64> {
+    None
+}
+
+/// Rows [`ParquetStream`] hands to the parquet writer at a time: a multiple of the write batch size
+/// of [`deterministic_writer_properties`] (1024), so that the writer's mini-batches, and with them its
+/// pages, fall on the same rows as when a whole row group is written in one call.
+pub const PARQUET_FEED_ROWS: usize = 8192;
+
+/// A Parquet file written as a stream of record batches: rows are buffered and handed to the parquet
+/// writer in pieces of [`PARQUET_FEED_ROWS`] rows (fewer only where a row group ends), row groups of at
+/// most `max_row_group_rows` rows. The bytes therefore depend on the rows and the properties only,
+/// never on how the rows were split into the batches given to [`ParquetStream::write`]. Memory: the
+/// row group being written (encoded) plus at most one feed and one batch.
+///
+/// ```
+/// use arrow_array::{ArrayRef, Float64Array, RecordBatch};
+/// use arrow_schema::{DataType, Field, Schema};
+/// use std::sync::Arc;
+/// let schema = Arc::new(Schema::new(vec![Field::new("x", DataType::Float64, false)]));
+/// let batch = |v: std::ops::Range<u32>| {
+///     let col: ArrayRef = Arc::new(Float64Array::from_iter_values(v.map(f64::from)));
+///     RecordBatch::try_new(schema.clone(), vec![col]).unwrap()
+/// };
+/// let props = || sim::io::deterministic_writer_properties(4096).build();
+/// let mut one = sim::io::ParquetStream::new(Vec::new(), schema.clone(), props(), 4096).unwrap();
+/// one.write(&batch(0..10_000)).unwrap();
+/// let mut parts = sim::io::ParquetStream::new(Vec::new(), schema.clone(), props(), 4096).unwrap();
+/// for r in [0..3, 3..5000, 5000..10_000] {
+///     parts.write(&batch(r)).unwrap();
+/// }
+/// assert_eq!(one.finish().unwrap(), parts.finish().unwrap());
+/// ```
+pub struct ParquetStream<W: Write + Send> {
+    writer: ArrowWriter<W>,
+    schema: arrow_schema::SchemaRef,
+    /// Batches not yet handed to the writer, in order, and their rows.
+    pending: std::collections::VecDeque<RecordBatch>,
+    pending_rows: usize,
+    /// Rows per row group, and rows handed to the writer in the current one.
+    group_rows: usize,
+    in_group: usize,
+}
+
+impl<W: Write + Send> ParquetStream<W> {
+    /// A stream into `sink` with `schema` and `props` (which should set the row group size to
+    /// `max_row_group_rows`, as [`deterministic_writer_properties`] does).
+    ///
+    /// # Errors
+    /// What the parquet writer reports (a schema it cannot encode).
+    pub fn new(
+        sink: W,
+        schema: arrow_schema::SchemaRef,
+        props: WriterProperties,
+        max_row_group_rows: usize,
+    ) -> std::result::Result<Self, ParquetError> {
+        Ok(ParquetStream {
+            writer: ArrowWriter::try_new(sink, schema.clone(), Some(props))?,
+            schema,
+            pending: std::collections::VecDeque::new(),
+            pending_rows: 0,
+            group_rows: max_row_group_rows.max(1),
+            in_group: 0,
+        })
+    }
+
+    /// Appends the rows of `batch` (of the stream's schema).
+    ///
+    /// # Errors
+    /// What the parquet writer or the sink reports.
+    pub fn write(&mut self, batch: &RecordBatch) -> std::result::Result<(), ParquetError> {
+        if batch.num_rows() > 0 {
+            self.pending_rows += batch.num_rows();
+            self.pending.push_back(batch.clone());
+        }
+        while self.pending_rows >= self.next_feed() {
+            self.feed(self.next_feed())?;
+        }
+        Ok(())
+    }
+
+    /// Writes what is buffered and the file footer; returns the sink.
+    ///
+    /// # Errors
+    /// What the parquet writer or the sink reports.
+    pub fn finish(mut self) -> std::result::Result<W, ParquetError> {
+        while self.pending_rows > 0 {
+            self.feed(self.next_feed().min(self.pending_rows))?;
+        }
+        self.writer.into_inner()
+    }
+
+    /// Rows of the next piece: a full feed, or what is left of the row group.
+    fn next_feed(&self) -> usize {
+        PARQUET_FEED_ROWS.min(self.group_rows - self.in_group)
+    }
+
+    /// Hands the first `rows` buffered rows to the writer as one batch.
+    fn feed(&mut self, rows: usize) -> std::result::Result<(), ParquetError> {
+        let mut parts = Vec::new();
+        let mut need = rows;
+        while need > 0 {
+            let Some(front) = self.pending.pop_front() else {
+                break;
+            };
+            let n = front.num_rows();
+            if n <= need {
+                need -= n;
+                parts.push(front);
+            } else {
+                parts.push(front.slice(0, need));
+                self.pending.push_front(front.slice(need, n - need));
+                need = 0;
+            }
+        }
+        let batch = if parts.len() == 1 {
+            parts.swap_remove(0)
+        } else {
+            arrow_select::concat::concat_batches(&self.schema, &parts)?
+        };
+        self.writer.write(&batch)?;
+        self.pending_rows -= rows;
+        self.in_group = (self.in_group + rows) % self.group_rows;
+        Ok(())
+    }
+}
+
 /// The Parquet file bytes of `batch` written with `props`, in row groups of at most
-/// `max_row_group_rows` rows (the batch is sliced, never copied).
+/// `max_row_group_rows` rows ([`ParquetStream`] with one batch).
 ///
 /// # Errors
 /// What the parquet writer reports (a schema it cannot encode).
@@ -476,16 +735,9 @@ pub fn parquet_bytes(
     props: WriterProperties,
     max_row_group_rows: usize,
 ) -> std::result::Result<Vec<u8>, ParquetError> {
-    let mut w = ArrowWriter::try_new(Vec::new(), batch.schema(), Some(props))?;
-    let n = batch.num_rows();
-    let step = max_row_group_rows.max(1);
-    let mut start = 0;
-    while start < n {
-        let len = (n - start).min(step);
-        w.write(&batch.slice(start, len))?;
-        start += len;
-    }
-    w.into_inner()
+    let mut w = ParquetStream::new(Vec::new(), batch.schema(), props, max_row_group_rows)?;
+    w.write(batch)?;
+    w.finish()
 }
 
 #[cfg(test)]
@@ -590,6 +842,20 @@ mod tests {
             e.to_string(),
             format!("{}: cannot write: x", out.join("a").display())
         );
+        let e = st.user_error(SimError::Table {
+            file: st.path().join("t.parquet").display().to_string(),
+            row: Some(3),
+            line: None,
+            column: Some("temp".into()),
+            message: "bad".into(),
+        });
+        assert_eq!(
+            e.to_string(),
+            format!(
+                "{}: row 3, column temp: bad",
+                out.join("t.parquet").display()
+            )
+        );
         // Subfolders of ours (a suite's datasets): swapped, or merged when they hold a file of the
         // user's, which is kept.
         let suite = dir.join("suite");
@@ -644,6 +910,95 @@ mod tests {
             }
         });
         assert_eq!(names(&dir), vec!["same.txt".to_string()]);
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    /// A stream gives the bytes of the parquet writer fed one whole row group at a time (how the
+    /// project wrote Parquet before it streamed), however the rows come: in one batch, in batches of
+    /// one row, or of sizes that straddle feeds and row groups; with a row group that is not a
+    /// multiple of the feed, a dictionary column and a boolean.
+    #[test]
+    fn streams_give_the_bytes_of_whole_row_groups_however_the_rows_are_split() {
+        use arrow_array::{ArrayRef, BooleanArray, Float64Array, Int64Array};
+        use arrow_schema::{DataType, Field, Schema};
+        use parquet::schema::types::ColumnPath;
+        use std::sync::Arc;
+        let schema = Arc::new(Schema::new(vec![
+            Field::new("pose", DataType::Int64, false),
+            Field::new("x", DataType::Float64, false),
+            Field::new("flag", DataType::Boolean, false),
+        ]));
+        let n = 3 * PARQUET_FEED_ROWS + 20_000 + 17;
+        let batch = |r: std::ops::Range<usize>| {
+            let cols: Vec<ArrayRef> = vec![
+                Arc::new(Int64Array::from_iter_values(
+                    r.clone().map(|i| (i / 3) as i64),
+                )),
+                Arc::new(Float64Array::from_iter_values(
+                    r.clone().map(|i| (i as f64 * 0.7).sin() * 1e3),
+                )),
+                Arc::new(BooleanArray::from_iter(r.map(|i| Some(i % 7 == 0)))),
+            ];
+            RecordBatch::try_new(schema.clone(), cols).unwrap()
+        };
+        let group = 20_000;
+        let props = || {
+            deterministic_writer_properties(group)
+                .set_column_dictionary_enabled(ColumnPath::from("pose"), true)
+                .build()
+        };
+        let old = {
+            let mut w = ArrowWriter::try_new(Vec::new(), schema.clone(), Some(props())).unwrap();
+            let mut start = 0;
+            while start < n {
+                let end = (start + group).min(n);
+                w.write(&batch(start..end)).unwrap();
+                start = end;
+            }
+            w.into_inner().unwrap()
+        };
+        let streamed = |cuts: &[usize]| {
+            let mut w = ParquetStream::new(Vec::new(), schema.clone(), props(), group).unwrap();
+            let mut start = 0;
+            for &c in cuts.iter().chain([n].iter()) {
+                w.write(&batch(start..c)).unwrap();
+                start = c;
+            }
+            w.finish().unwrap()
+        };
+        assert!(streamed(&[]) == old, "one batch");
+        assert!(streamed(&[1, 2, 8191, 8193, 19_999, 20_001, 40_000]) == old);
+        let ones: Vec<usize> = (1..3000).collect();
+        assert!(streamed(&ones) == old, "single rows");
+        let odd: Vec<usize> = (1..n / 997).map(|k| k * 997).collect();
+        assert!(streamed(&odd) == old, "997-row batches");
+        assert!(parquet_bytes(&batch(0..n), props(), group).unwrap() == old);
+    }
+
+    #[test]
+    fn an_atomic_file_appears_only_when_committed() {
+        let dir = temp_dir("atomic_file");
+        let p = dir.join("f.bin");
+        std::fs::write(&p, "old").unwrap();
+        let mut f = AtomicFile::create(&p).unwrap();
+        f.write_all(b"new ").unwrap();
+        f.write_all(b"bytes").unwrap();
+        assert_eq!(std::fs::read_to_string(&p).unwrap(), "old");
+        drop(f);
+        // Dropped without a commit: the old file, and no temporary file.
+        assert_eq!(std::fs::read_to_string(&p).unwrap(), "old");
+        assert_eq!(names(&dir), vec!["f.bin".to_string()]);
+        let mut f = AtomicFile::create(&p).unwrap();
+        f.write_all(b"new").unwrap();
+        f.commit().unwrap();
+        assert_eq!(std::fs::read_to_string(&p).unwrap(), "new");
+        assert_eq!(names(&dir), vec!["f.bin".to_string()]);
+        // Free space: known on this system for an existing folder and for one still to be made.
+        if cfg!(unix) {
+            let here = available_bytes(&dir).unwrap();
+            assert!(here > 0);
+            assert!(available_bytes(&dir.join("not/yet")).is_some());
+        }
         std::fs::remove_dir_all(&dir).unwrap();
     }
 

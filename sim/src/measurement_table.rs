@@ -7,7 +7,7 @@
 //! # Files
 //! [`read`] and [`write`] choose the format from the extension (`.csv` or `.parquet`, any letter case).
 //! Column order on write: `pose, q1..qN, x, y, z, [qw, qx, qy, qz], [t], [temp], [dir1..dirN], [payload],
-//! [sigma]`. On read, columns may come in any order, and columns the contract does not name are ignored.
+//! [sigma], [campaign]`. On read, columns may come in any order, and columns the contract does not name are ignored.
 //! The number of joints N is the number of `q1..qN` columns, which must run from `q1` without a gap;
 //! `dir1..dirN`, when present, must match N. Writes are atomic: a temporary file in the same folder is
 //! renamed over the target once complete.
@@ -16,7 +16,7 @@
 //!   blanks around cells trimmed, RFC 4180 quotes understood. Floats are written as the shortest decimal
 //!   that reads back to the same `f64` (Rust's `{:?}`: always with a `.` or an exponent, so that every
 //!   reader infers a float column), so CSV round-trips bit-exactly, `-0.0` and subnormals included.
-//! * Parquet: `pose` Int64, `dir*` Int8, every other column Float64, none nullable; SNAPPY compression;
+//! * Parquet: `pose` and `campaign` Int64, `dir*` Int8, every other column Float64, none nullable; SNAPPY compression;
 //!   at most [`PARQUET_MAX_ROW_GROUP_ROWS`] rows per row group; the same table always gives the same
 //!   bytes (no timestamps; writer properties set explicitly). On read any integer or float Arrow type is
 //!   accepted when its values convert exactly (Int32 pose, Float32 positions, …); nulls are errors.
@@ -30,7 +30,7 @@
 //! Errors on read (and on write, which refuses to store such a table): a missing required column
 //! (`pose`, `q1`, `x`, `y`, `z`), a gap in `q1..qN` or `dir1..dirN`, part of `qw, qx, qy, qz`, a duplicate
 //! column name, no data rows, a cell that is empty, not a number or not finite, a `pose` that is not an
-//! integer, a `dir` that is not −1, 0 or +1, negative `payload` or `sigma`, and an orientation quaternion
+//! integer, a `campaign` that is not an integer, a `dir` that is not −1, 0 or +1, negative `payload` or `sigma`, and an orientation quaternion
 //! whose norm differs from 1 by more than [`QUATERNION_NORM_ERROR`] (not a unit quaternion at all).
 //! Quaternions closer to unit than that are kept exactly as stored (so files round-trip);
 //! [`check_against_model`] warns beyond [`QUATERNION_NORM_WARNING`] and users of orientations should
@@ -61,7 +61,7 @@ mod parquet;
 pub use check::{LIMIT_TOLERANCE, check_against_model, reach_bound};
 pub use columns::{Column, ColumnValues, configurations_from_columns, from_columns};
 pub use csv::{read_csv_str, write_csv_string};
-pub use parquet::{PARQUET_MAX_ROW_GROUP_ROWS, write_parquet_bytes};
+pub use parquet::{PARQUET_MAX_ROW_GROUP_ROWS, ParquetTableWriter, write_parquet_bytes};
 
 use crate::error::{Result, SimError, fragment};
 use std::collections::HashMap;
@@ -77,6 +77,9 @@ pub const MAX_POSITION_M: f64 = 1000.0;
 pub const MAX_PAYLOAD_KG: f64 = 1000.0;
 /// A `sigma` above this (m) is rejected: a tracker's uncertainty is micrometres to millimetres.
 pub const MAX_SIGMA_M: f64 = 1.0;
+/// A `temp` outside this range (°C) is rejected: below absolute zero, or hotter than any robot runs
+/// (found by the fuzzing suite: 1e15 °C was read without a word).
+pub const TEMP_RANGE_C: (f64, f64) = (-273.15, 1000.0);
 /// Rows that share a pose id are repeated measurements of one pose: their joint values must agree
 /// with the pose's first row to within this (rad; m for prismatic joints). Encoder noise is
 /// micro-radians; a milliradian is a millimetre at a metre's reach, another configuration.
@@ -111,6 +114,9 @@ pub struct MeasurementTable {
     pub payload: Option<Vec<f64>>,
     /// 1-sigma position uncertainty of the row (m).
     pub sigma: Option<Vec<f64>>,
+    /// Measurement campaign per row (an integer id): each campaign has its own tracker placement.
+    /// Pose ids are per campaign: a pose is identified by `(campaign, pose)`.
+    pub campaign: Option<Vec<i64>>,
 }
 
 /// Which optional columns a table has (the required ones, `pose, q1..qN, x, y, z`, it always has).
@@ -128,6 +134,8 @@ pub struct OptionalColumns {
     pub payload: bool,
     /// `sigma`: 1-sigma position uncertainty (m).
     pub sigma: bool,
+    /// `campaign`: measurement campaign id (integer).
+    pub campaign: bool,
 }
 
 impl OptionalColumns {
@@ -139,6 +147,7 @@ impl OptionalColumns {
         dir: false,
         payload: false,
         sigma: false,
+        campaign: false,
     };
     /// Every optional column.
     pub const ALL: Self = Self {
@@ -148,6 +157,7 @@ impl OptionalColumns {
         dir: true,
         payload: true,
         sigma: true,
+        campaign: true,
     };
 }
 
@@ -174,6 +184,8 @@ pub struct Row<'a> {
     pub payload: Option<f64>,
     /// 1-sigma position uncertainty (m).
     pub sigma: Option<f64>,
+    /// Measurement campaign id.
+    pub campaign: Option<i64>,
 }
 
 /// File format of a measurement table.
@@ -299,6 +311,7 @@ impl MeasurementTable {
             dir: columns.dir.then(|| Vec::with_capacity(rows * n_joints)),
             payload: v(columns.payload),
             sigma: v(columns.sigma),
+            campaign: columns.campaign.then(|| Vec::with_capacity(rows)),
         }
     }
 
@@ -311,6 +324,7 @@ impl MeasurementTable {
             dir: self.dir.is_some(),
             payload: self.payload.is_some(),
             sigma: self.sigma.is_some(),
+            campaign: self.campaign.is_some(),
         }
     }
 
@@ -369,6 +383,7 @@ impl MeasurementTable {
             dir: self.dir_row(r),
             payload: self.payload.as_ref().map(|v| v[r]),
             sigma: self.sigma.as_ref().map(|v| v[r]),
+            campaign: self.campaign.as_ref().map(|v| v[r]),
         }
     }
 
@@ -408,6 +423,7 @@ impl MeasurementTable {
             ("dir", has.dir, row.dir.is_some()),
             ("payload", has.payload, row.payload.is_some()),
             ("sigma", has.sigma, row.sigma.is_some()),
+            ("campaign", has.campaign, row.campaign.is_some()),
         ];
         for (name, col, val) in given {
             if col != val {
@@ -438,6 +454,9 @@ impl MeasurementTable {
         if let (Some(v), Some(x)) = (self.dir.as_mut(), row.dir) {
             v.extend_from_slice(x);
         }
+        if let (Some(v), Some(x)) = (self.campaign.as_mut(), row.campaign) {
+            v.push(x);
+        }
         Ok(())
     }
 
@@ -466,6 +485,9 @@ impl MeasurementTable {
         if c.sigma {
             names.push("sigma".into());
         }
+        if c.campaign {
+            names.push("campaign".into());
+        }
         names
     }
 
@@ -474,18 +496,42 @@ impl MeasurementTable {
         self.rows_by_pose().into_iter().map(|(p, _)| p).collect()
     }
 
-    /// Number of distinct pose ids.
+    /// Number of distinct poses (pose ids, per campaign when the table has a `campaign` column).
     pub fn n_poses(&self) -> usize {
         let mut seen = std::collections::HashSet::with_capacity(self.len());
-        self.pose.iter().filter(|p| seen.insert(**p)).count()
+        (0..self.len())
+            .filter(|&r| seen.insert(self.pose_key(r)))
+            .count()
     }
 
-    /// The rows of each pose id, pose ids in order of first appearance, rows ascending.
+    /// Campaign id of row `r`, or `None` without a `campaign` column. Panics if `r >= len()`.
+    #[inline]
+    pub fn campaign_of(&self, r: usize) -> Option<i64> {
+        self.campaign.as_ref().map(|c| c[r])
+    }
+
+    /// Distinct campaign ids, ascending (empty without a `campaign` column).
+    pub fn campaign_ids(&self) -> Vec<i64> {
+        let mut ids = self.campaign.clone().unwrap_or_default();
+        ids.sort_unstable();
+        ids.dedup();
+        ids
+    }
+
+    /// What identifies the pose of row `r`: `(campaign, pose)`, the campaign 0 without the column.
+    #[inline]
+    pub fn pose_key(&self, r: usize) -> (i64, i64) {
+        (self.campaign_of(r).unwrap_or(0), self.pose[r])
+    }
+
+    /// The rows of each pose (pose id, per campaign when the table has a `campaign` column), poses in
+    /// order of first appearance, rows ascending. The `i64` is the pose id.
     pub fn rows_by_pose(&self) -> Vec<(i64, Vec<usize>)> {
-        let mut index: HashMap<i64, usize> = HashMap::with_capacity(self.len());
+        let mut index: HashMap<(i64, i64), usize> = HashMap::with_capacity(self.len());
         let mut groups: Vec<(i64, Vec<usize>)> = Vec::new();
-        for (r, &p) in self.pose.iter().enumerate() {
-            let g = *index.entry(p).or_insert_with(|| {
+        for r in 0..self.len() {
+            let p = self.pose[r];
+            let g = *index.entry(self.pose_key(r)).or_insert_with(|| {
                 groups.push((p, Vec::new()));
                 groups.len() - 1
             });
@@ -523,6 +569,7 @@ impl MeasurementTable {
             ("dir", self.dir.as_ref().map_or(n * nq, Vec::len), n * nq),
             ("payload", self.payload.as_ref().map_or(n, Vec::len), n),
             ("sigma", self.sigma.as_ref().map_or(n, Vec::len), n),
+            ("campaign", self.campaign.as_ref().map_or(n, Vec::len), n),
         ];
         for (col, got, want) in lens {
             if got != want {
@@ -548,7 +595,7 @@ impl MeasurementTable {
     /// least one joint and one row, every float finite, `dir` in {−1, 0, +1}, `payload` and `sigma` not
     /// negative, quaternion norms within [`QUATERNION_NORM_ERROR`] of 1, physically possible magnitudes
     /// (positions within [`MAX_POSITION_M`] of the tracker, `payload` up to [`MAX_PAYLOAD_KG`], `sigma`
-    /// up to [`MAX_SIGMA_M`]), and the rows of each pose id at one configuration (joint values within
+    /// up to [`MAX_SIGMA_M`], `temp` within [`TEMP_RANGE_C`]), and the rows of each pose id at one configuration (joint values within
     /// [`POSE_REPEAT_TOLERANCE`]; the error names both rows). Reports the first bad cell in reading
     /// order (row by row, columns in file order); errors name `file`.
     pub fn validate(&self, file: &Path) -> Result<()> {
@@ -575,11 +622,12 @@ impl MeasurementTable {
         self.check_pose_repeats(file)
     }
 
-    /// Every row of a pose id at the joint values of its first row, within [`POSE_REPEAT_TOLERANCE`].
+    /// Every row of a pose (id, per campaign) at the joint values of its first row, within
+    /// [`POSE_REPEAT_TOLERANCE`].
     fn check_pose_repeats(&self, file: &str) -> Result<()> {
-        let mut first: HashMap<i64, usize> = HashMap::with_capacity(self.len());
+        let mut first: HashMap<(i64, i64), usize> = HashMap::with_capacity(self.len());
         for r in 0..self.len() {
-            let f = *first.entry(self.pose[r]).or_insert(r);
+            let f = *first.entry(self.pose_key(r)).or_insert(r);
             if f == r {
                 continue;
             }
@@ -665,7 +713,17 @@ impl MeasurementTable {
             finite("t", t[r])?;
         }
         if let Some(temp) = &self.temp {
-            finite("temp", temp[r])?;
+            let v = temp[r];
+            finite("temp", v)?;
+            let (low, high) = TEMP_RANGE_C;
+            if !(low..=high).contains(&v) {
+                return bad(
+                    "temp",
+                    format!(
+                        "{v:e} °C is outside [{low}, {high}] °C: not a robot's temperature (degrees Celsius are expected)"
+                    ),
+                );
+            }
         }
         if let Some(d) = self.dir_row(r) {
             for (j, &v) in d.iter().enumerate() {
@@ -729,6 +787,7 @@ enum Role {
     Dir(usize),
     Payload,
     Sigma,
+    Campaign,
 }
 
 /// The columns of a file resolved against the contract.
@@ -798,6 +857,7 @@ fn resolve_columns(names: &[String], file: &str, positions: Positions) -> Result
             "temp" => Role::Temp,
             "payload" => Role::Payload,
             "sigma" => Role::Sigma,
+            "campaign" => Role::Campaign,
             _ => {
                 if let Some(k) = numbered(name, "q") {
                     let k = k.map_err(|_| {
@@ -913,6 +973,7 @@ fn resolve_columns(names: &[String], file: &str, positions: Positions) -> Result
             dir,
             payload: roles.contains(&Role::Payload),
             sigma: roles.contains(&Role::Sigma),
+            campaign: roles.contains(&Role::Campaign),
         },
         roles,
     })

@@ -326,7 +326,23 @@ impl<'a> Builder<'a> {
     fn joint_origin(&self, j: &urdf_rs::Joint) -> Result<Pose> {
         self.finite("joint", &j.name, "origin xyz", &j.origin.xyz[..])?;
         self.finite("joint", &j.name, "origin rpy", &j.origin.rpy[..])?;
+        self.length("joint", &j.name, "origin xyz", &j.origin.xyz[..])?;
         Ok(urdf_pose(&j.origin))
+    }
+
+    /// Refuses a length beyond [`MAX_LENGTH_M`]: no robot arm has one (and the fuzzing suite found
+    /// joint origins of 9e18 m loaded without a word).
+    fn length(&self, el: &'static str, name: &str, field: &'static str, v: &[f64]) -> Result<()> {
+        match v.iter().find(|x| x.abs() > MAX_LENGTH_M) {
+            Some(x) => Err(self.bad(
+                el,
+                name,
+                field,
+                *x,
+                "beyond 1000 m: not a robot arm's dimension (metres are expected)",
+            )),
+            None => Ok(()),
+        }
     }
 
     fn roots(&self) -> Vec<&'a str> {
@@ -647,6 +663,7 @@ impl<'a> Builder<'a> {
             }
             self.finite("link", name, "inertial origin xyz", &i.origin.xyz[..])?;
             self.finite("link", name, "inertial origin rpy", &i.origin.rpy[..])?;
+            self.length("link", name, "inertial origin xyz", &i.origin.xyz[..])?;
             let it = &i.inertia;
             self.finite(
                 "link",
@@ -662,6 +679,23 @@ impl<'a> Builder<'a> {
             let i_local = Matrix3::new(
                 it.ixx, it.ixy, it.ixz, it.ixy, it.iyy, it.iyz, it.ixz, it.iyz, it.izz,
             );
+            // A rotational inertia has no negative principal moment (to rounding: 1e-9 of the
+            // largest). Only that is checked: CAD exports often miss the triangle inequality by a
+            // little, and MuJoCo refuses them, but nothing here depends on it.
+            let moments = i_local.symmetric_eigenvalues();
+            let largest = moments.amax();
+            if let Some(&low) = moments
+                .iter()
+                .find(|&&v| v < -1e-9 * largest.max(f64::MIN_POSITIVE))
+            {
+                return Err(self.bad(
+                    "link",
+                    name,
+                    "inertia",
+                    low,
+                    "a negative principal moment: not a rotational inertia",
+                ));
+            }
             let i_body = r * i_local * r.transpose();
             let c = t_body_com.translation.vector;
             mass += m;
@@ -720,6 +754,9 @@ impl<'a> Builder<'a> {
         }
     }
 }
+
+/// The largest joint or centre-of-mass offset a URDF may give (m).
+pub const MAX_LENGTH_M: f64 = 1000.0;
 
 /// Where one chain of movable joints ends ([`Builder::chain_ends`]).
 struct ChainEnd<'a> {

@@ -754,3 +754,228 @@ fn six_dof_probe_adds_orientation_close_to_the_truth() {
     );
     let _ = std::fs::remove_dir_all(dir);
 }
+
+/// Streaming (issue 15): the files do not depend on how the rows are chunked, on the number of
+/// threads, or on how the summary's median is selected (in memory, or by the radix selection that
+/// reads `truth.parquet` back); and they are those of the in-memory path, row for row. A campaign
+/// with repeats that straddle chunks (the `move` direction state and the payload draw carry over),
+/// outliers and a 6-DoF probe; every effect of the simulator, those of issue 12 (transmission error,
+/// coupling, coupled transmission, link deflection settled with the joint springs) included.
+#[test]
+fn streamed_files_do_not_depend_on_chunks_threads_or_the_median_method() {
+    use generate::StreamOptions;
+    let text = std::fs::read_to_string(scenario_path("iiwa7_all.toml"))
+        .unwrap()
+        .replace("repeats = 1\n", "repeats = 3\n")
+        .replace("outlier_rate = 0.0", "outlier_rate = 0.1\nsix_dof = true")
+        + "[effects.transmission]\nharmonics = [1, 2]\n\
+           amplitude_rad = { normal = [0.0, 8e-5] }\nphase_rad = { uniform = [-3.0, 3.0] }\n\
+           [effects.coupling]\npairs = [[6, 4], [2, 2]]\nratio_rad_per_rad = [2e-4, -1e-4]\n\
+           [effects.coupled_transmission]\npairs = [[6, 5]]\namplitude_rad = 5e-5\n\
+           [effects.deflection]\ncompliance_rad_per_nm = [[0, 0], [3e-6, 3e-6], [0, 0], \
+           [4e-6, 4e-6], [0, 0], [5e-6, 5e-6], [0, 0]]\n";
+    let res = Scenario::parse(
+        &text,
+        "streamed.toml",
+        &common::repo_root().join("scenarios"),
+    )
+    .unwrap()
+    .resolve(&Overrides {
+        poses: Some(157),
+        ..Overrides::default()
+    })
+    .unwrap();
+    let dir = temp_dir("streamed");
+    let run = |threads: usize, options: StreamOptions, name: &str| {
+        let out = dir.join(name);
+        let ticks = std::sync::atomic::AtomicU64::new(0);
+        let tick = |k: u64| {
+            ticks.fetch_add(k, std::sync::atomic::Ordering::Relaxed);
+        };
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap()
+            .install(|| {
+                let planner = generate::planner_of(&res).unwrap();
+                generate::write_dataset_with(&res, &out, planner, Some(&tick), &options).unwrap()
+            });
+        // The progress callbacks count every row once.
+        assert_eq!(ticks.into_inner(), 471, "{name}");
+        files(&out)
+    };
+    let reference = run(2, StreamOptions::default(), "default");
+    for (threads, chunk_rows, median_in_memory_rows) in [
+        (1, 1, 0),
+        (2, 2, usize::MAX),
+        (2, 5, 0),
+        (1, 64, 100),
+        (2, 470, 0),
+    ] {
+        let options = StreamOptions {
+            chunk_rows,
+            median_in_memory_rows,
+        };
+        let name = format!("t{threads}_c{chunk_rows}_m{median_in_memory_rows}");
+        assert!(
+            run(threads, options, &name) == reference,
+            "{name}: other bytes than the default run"
+        );
+    }
+    // The in-memory path (plan, simulate, table) gives the same measurement rows.
+    let plan = generate::plan_of(&res).unwrap();
+    assert_eq!(plan.len(), 471);
+    let truth = sim::effects::Truth::new(&res.model, &res.effects).unwrap();
+    let sim_rows =
+        generate::simulate(&truth, &res.tracker, &res.gravity, &plan, res.seed, None).unwrap();
+    let table = generate::measurement_table(&plan, &sim_rows, &res.tracker);
+    let in_memory = dir.join("in_memory.parquet");
+    sim::measurement_table::write(&in_memory, &table).unwrap();
+    assert!(std::fs::read(&in_memory).unwrap() == reference[0]);
+    // The summary's median is the middle of the sorted target distances, computed here from the
+    // truth file's p_tracker columns.
+    let doc: serde_json::Value = serde_json::from_slice(&reference[2]).unwrap();
+    let f = std::fs::File::open(dir.join("default/truth.parquet")).unwrap();
+    let batch = parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(f)
+        .unwrap()
+        .build()
+        .unwrap()
+        .next()
+        .unwrap()
+        .unwrap();
+    let col = |n: &str| -> Vec<f64> {
+        use arrow_array::cast::AsArray;
+        batch
+            .column_by_name(n)
+            .unwrap()
+            .as_primitive::<arrow_array::types::Float64Type>()
+            .values()
+            .to_vec()
+    };
+    // Every effect of the scenario moved the target (so each went through the chunks above).
+    for key in [
+        "thermal",
+        "kinematic",
+        "transmission",
+        "coupling",
+        "coupled_transmission",
+        "backlash",
+        "compliance",
+        "deflection",
+    ] {
+        let moved = col(&format!("{key}_x"))
+            .iter()
+            .filter(|v| v.abs() > 1e-7)
+            .count();
+        assert!(
+            moved > 400,
+            "{key}: {moved} of 471 rows moved by over 0.1 µm in x"
+        );
+    }
+    let (x, y, z) = (col("p_tracker_x"), col("p_tracker_y"), col("p_tracker_z"));
+    let mut d: Vec<f64> = (0..x.len())
+        .map(|i| Vector3::new(x[i], y[i], z[i]).norm())
+        .collect();
+    d.sort_by(f64::total_cmp);
+    let median = doc["summary"]["median_distance_m"].as_f64().unwrap();
+    assert!(
+        (median - d[d.len() / 2]).abs() < 1e-15,
+        "{median} {}",
+        d[d.len() / 2]
+    );
+    assert_eq!(doc["summary"]["rows"], 471);
+    assert_eq!(doc["campaign"]["repeats"], 3);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// Found while extending the fuzzing suite: a scenario whose temperature profile or payload gives
+/// values the measurement table refuses (1e15 °C, 5,000 kg) failed only when the table was written,
+/// with an error naming the hidden staging folder (`.out.tmp-PID-N/measurements.parquet`). They are
+/// scenario errors naming the file and the key, before anything is written; an error about a staged
+/// table names the user's folder.
+#[test]
+fn impossible_temperatures_and_payloads_are_scenario_errors() {
+    let dir = temp_dir("impossible");
+    let text = std::fs::read_to_string(scenario_path("ur5_kinematic.toml")).unwrap();
+    assert!(!text.contains("[campaign.temperature]") && !text.contains("[campaign.payload]"));
+    for (extra, key, value) in [
+        (
+            "[campaign.temperature]\nconstant = 1e15\n",
+            "campaign.temperature",
+            "1e15 °C at pose 0",
+        ),
+        (
+            "[campaign.temperature]\nschedule = [[0.0, 20.0], [100.0, -300.0]]\n",
+            "campaign.temperature",
+            // T(t) = 20 − 3.2 t °C falls below −273.15 °C after t = 91.6 s; poses come every 15 s.
+            "-3e2 °C at pose 7 (t = 105 s)",
+        ),
+        (
+            "[campaign.payload]\nmass_kg = 5000.0\n",
+            "campaign.payload",
+            "5000 kg",
+        ),
+    ] {
+        let path = dir.join("hot.toml");
+        std::fs::write(&path, format!("{text}\n{extra}")).unwrap();
+        let res = Scenario::load(&path).and_then(|s| {
+            s.resolve(&Overrides {
+                poses: Some(20),
+                ..Overrides::default()
+            })
+        });
+        let out = dir.join("out");
+        let e = res
+            .and_then(|r| generate::generate(&r, &out, None))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("hot.toml") && e.contains(key) && e.contains(value),
+            "{e}"
+        );
+        assert!(!e.contains(".tmp-"), "{e}");
+        assert!(!out.exists());
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// Fuzzing case 8805 (seed 15): `seconds_per_pose = 1e308` made the third pose's time infinite, and
+/// the run failed when the table was written, naming the output file instead of the scenario key.
+/// It is a scenario error naming the key, before any work; huge but finite times still generate.
+#[test]
+fn fuzz_case_8805_a_campaign_too_long_to_time_is_a_scenario_error() {
+    let dir = temp_dir("case_8805");
+    let text = std::fs::read_to_string(scenario_path("ur5_kinematic.toml")).unwrap();
+    assert!(text.contains("seconds_per_pose = 15.0"));
+    let run = |spp: &str, poses: usize| {
+        let path = dir.join("long.toml");
+        std::fs::write(
+            &path,
+            text.replace(
+                "seconds_per_pose = 15.0",
+                &format!("seconds_per_pose = {spp}"),
+            ),
+        )
+        .unwrap();
+        Scenario::load(&path)
+            .and_then(|s| {
+                s.resolve(&Overrides {
+                    poses: Some(poses),
+                    ..Overrides::default()
+                })
+            })
+            .and_then(|r| generate::generate(&r, &dir.join("out"), None))
+    };
+    let e = run("1e308", 12).unwrap_err().to_string();
+    assert!(
+        e.contains("long.toml")
+            && e.contains("campaign.seconds_per_pose")
+            && e.contains("t = inf s"),
+        "{e}"
+    );
+    assert!(!dir.join("out").exists());
+    // One pose is measured at t = 0 whatever the spacing; 1e300 s apart, twelve poses are finite.
+    assert!(run("1e308", 1).is_ok());
+    assert!(run("1e300", 12).is_ok());
+    let _ = std::fs::remove_dir_all(&dir);
+}

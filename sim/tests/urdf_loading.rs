@@ -328,6 +328,116 @@ fn deeply_nested_xml_is_refused_in_bounded_time() {
     assert_eq!(load(&text).unwrap().nq(), 1);
 }
 
+/// Fuzzing case 16900 (seed 15, the suite's first version): joints that form a cycle apart from the root's tree (two lines of
+/// the iiwa 7 swapped, so that link 6 hangs below link 7 and link 7 below link 6) were dropped
+/// without a word, and `info` showed a 6-joint arm. They are a structure error naming the links of
+/// the loop in joint order (main's loop check, which found the same case independently).
+#[test]
+fn fuzz_case_16900_a_cycle_apart_from_the_root_is_refused() {
+    let text = format!(
+        r#"<robot name="r">{}{}{}{}{}{}{}</robot>"#,
+        link("base"),
+        link("a"),
+        link("b"),
+        link("c"),
+        revolute("j1", "base", "a", "0 0 1"),
+        revolute("j2", "b", "c", "0 0 1"),
+        revolute("j3", "c", "b", "0 0 1"),
+    );
+    assert_eq!(
+        msg(load(&text)),
+        "test.urdf: the joints form a loop: links 'c' -> 'b' -> 'c'; a URDF must be a tree"
+    );
+    // A longer one: d -> e -> f -> d.
+    let text = format!(
+        r#"<robot name="r">{}{}{}{}{}{}{}{}{}</robot>"#,
+        link("base"),
+        link("a"),
+        link("d"),
+        link("e"),
+        link("f"),
+        revolute("j1", "base", "a", "0 0 1"),
+        revolute("k1", "d", "e", "0 0 1"),
+        revolute("k2", "e", "f", "0 0 1"),
+        revolute("k3", "f", "d", "0 0 1"),
+    );
+    let m = msg(load(&text));
+    assert!(
+        m.contains("the joints form a loop: links ")
+            && [
+                "'d' -> 'e' -> 'f' -> 'd'",
+                "'e' -> 'f' -> 'd' -> 'e'",
+                "'f' -> 'd' -> 'e' -> 'f'"
+            ]
+            .iter()
+            .any(|c| m.contains(c)),
+        "{m}"
+    );
+    // The shipped robots and a long chain still load (the walk visits each link once).
+    let mut chain = link("l0");
+    for i in 1..=3000 {
+        chain.push_str(&link(&format!("l{i}")));
+        chain.push_str(&revolute(
+            &format!("j{i}"),
+            &format!("l{}", i - 1),
+            &format!("l{i}"),
+            "0 0 0.001",
+        ));
+    }
+    let started = std::time::Instant::now();
+    assert_eq!(
+        load(&format!(r#"<robot name="r">{chain}</robot>"#))
+            .unwrap()
+            .nq(),
+        3000
+    );
+    assert!(started.elapsed().as_secs() < 20);
+}
+
+/// Fuzzing cases 284 and 2117 (seed 15, the suite's version with value mutations): URDF offsets of 1e15 m or 1e22 m loaded, and `fk` put the
+/// flange 1e21 m from the base. A joint origin or a centre of mass beyond 1 km is refused, naming the
+/// joint or link; so is an inertia with a negative principal moment (found in the suite's exit-0
+/// listing: an `izz` of −1e15), which no body has. Values at the bounds still load.
+#[test]
+fn fuzz_cases_284_and_2117_offsets_beyond_a_kilometre_and_negative_inertia_are_refused() {
+    let with_origin = |xyz: &str| {
+        format!(
+            r#"<robot name="r">{}{}{}</robot>"#,
+            link("base"),
+            link("a"),
+            revolute("j1", "base", "a", xyz)
+        )
+    };
+    assert_eq!(
+        msg(load(&with_origin("0 0 -1e15"))),
+        "test.urdf: joint 'j1': origin xyz = -1000000000000000 is beyond 1000 m: not a robot arm's dimension (metres are expected)"
+    );
+    assert!(load(&with_origin("0 0 1000")).is_ok());
+    let with_inertial = |origin: &str, izz: &str| {
+        format!(
+            r#"<robot name="r"><link name="base"/><link name="a"><inertial><origin xyz="{origin}"/><mass value="1"/>
+            <inertia ixx="0.01" ixy="0" ixz="0" iyy="0.01" iyz="0" izz="{izz}"/></inertial></link>{}</robot>"#,
+            revolute("j1", "base", "a", "0 0 0.1")
+        )
+    };
+    let m = msg(load(&with_inertial("1e6 0 0", "0.01")));
+    assert!(
+        m.contains("link 'a': inertial origin xyz") && m.contains("beyond 1000 m"),
+        "{m}"
+    );
+    let m = msg(load(&with_inertial("0 0 0", "-1e15")));
+    assert!(
+        m.contains("link 'a': inertia") && m.contains("negative principal moment"),
+        "{m}"
+    );
+    // Products of inertia can make a moment negative with positive diagonals too: ixy beyond √(ixx iyy).
+    let text = with_inertial("0 0 0", "0.01").replace(r#"ixy="0""#, r#"ixy="0.02""#);
+    assert!(msg(load(&text)).contains("negative principal moment"));
+    // Zero moments (a point mass) and a small triangle-inequality miss still load.
+    assert!(load(&with_inertial("0 0 0", "0")).is_ok());
+    assert!(load(&with_inertial("0 0 0", "0.021")).is_ok());
+}
+
 fn fixed(name: &str, parent: &str, child: &str, xyz: &str) -> String {
     format!(
         r#"<joint name="{name}" type="fixed"><parent link="{parent}"/><child link="{child}"/><origin xyz="{xyz}"/></joint>"#

@@ -4,11 +4,14 @@ use super::paths::{Inputs, check_distinct};
 use super::robot_arg::RobotArgs;
 use super::shared::{CliError, CliResult, print_json, read_table};
 use calib::CalibError;
-use calib::calibrate::{Calibration, CalibrationOptions, Dataset, RobustLoss, calibrate_model};
+use calib::calibrate::auto::{self, AUTO_LEARNED_KINDS, AutoChoice};
+use calib::calibrate::validation::{
+    DEFAULT_FOLDS, Validation, ValidationPlan, calibrate_validated,
+};
+use calib::calibrate::{Calibration, CalibrationOptions, Dataset, RobustLoss};
 use calib::extensions::{ModelChoice, ModelSpec};
 use calib::model_file::CalibratedModel;
 use calib::robot::Robot;
-use calib::stats::split_by_pose;
 use serde_json::json;
 use sim::ChainSpec;
 use sim::measurement_table::MeasurementTable;
@@ -27,7 +30,8 @@ pub struct Args {
     /// Where to write the calibrated model (JSON, with the robot embedded).
     #[arg(long, value_name = "MODEL.json")]
     out: PathBuf,
-    /// Held-out measurements for validation (instead of splitting --data).
+    /// Held-out measurements for validation, predicted by the saved model (instead of
+    /// cross-validation).
     #[arg(long, value_name = "FILE")]
     test_data: Option<PathBuf>,
     /// Also write the calibrated URDF: the --robot URDF with the chain's joint origins moved to the
@@ -46,16 +50,27 @@ pub struct Args {
 pub struct Options {
     /// Error model: `kinematic` (joint error twists, zero offsets, base and target), a `+`-joined
     /// extension such as `kinematic+joint_compliance+thermal_drift` (also `gear_backlash`,
-    /// `learned:poly|poly1|poly2|poly3|kernel`), or `auto` (what diagnose chooses).
+    /// `learned:poly|poly1|poly2|poly3|kernel|adjoint`), or `auto` (what diagnose chooses, then the
+    /// learned residual when it pays).
     #[arg(long, value_name = "MODEL", default_value = "kinematic")]
     pub model: String,
-    /// Fraction of the poses of --data held out for validation (0 = calibrate on everything).
-    /// Repeated measurements of a pose stay together.
-    #[arg(long, value_name = "F", default_value_t = 0.3)]
+    /// Validate by k-fold cross-validation by pose: each fold predicted by a model fitted on the
+    /// others, folds fitted in parallel (0 = no validation). The saved model is fitted on every pose
+    /// either way. Default 5.
+    #[arg(long, value_name = "K")]
+    pub folds: Option<usize>,
+    /// Validate by one split instead: this fraction of the poses held out and predicted by a model
+    /// fitted on the others (repeats of a pose stay together). The saved model is still fitted on
+    /// every pose.
+    #[arg(long, value_name = "F", default_value_t = 0.0)]
     pub test_fraction: f64,
-    /// Seed of the train/test split.
+    /// Seed of the folds or the split.
     #[arg(long, value_name = "N", default_value_t = 0)]
     pub seed: u64,
+    /// With several campaigns (a `campaign` column), give each its own target offset (a re-seated
+    /// reflector) instead of one shared target.
+    #[arg(long)]
+    pub per_campaign_target: bool,
     /// Robust loss against outliers (iteratively reweighted).
     #[arg(long, value_name = "LOSS", value_enum)]
     robust: Option<Robust>,
@@ -90,8 +105,12 @@ impl Options {
     }
 
     /// The model to fit (`None` for `auto`) and calib's calibration options; bad values are input
-    /// errors naming the flag.
-    fn resolve(&self) -> Result<(Option<ModelSpec>, CalibrationOptions), CliError> {
+    /// errors naming the flag. `test_data`: whether held-out measurements are given (`--test-data`,
+    /// the `test` table), an alternative to `--folds` and `--test-fraction`.
+    fn resolve(
+        &self,
+        test_data: bool,
+    ) -> Result<(Option<ModelSpec>, CalibrationOptions), CliError> {
         let model_spec = self.model_spec()?;
         if !(0.0..1.0).contains(&self.test_fraction) {
             return Err(CliError::Input(format!(
@@ -99,11 +118,50 @@ impl Options {
                 self.test_fraction
             )));
         }
+        let chosen = [test_data, self.test_fraction > 0.0, self.folds.is_some()];
+        if chosen.iter().filter(|&&b| b).count() > 1 {
+            return Err(CliError::Input(
+                "--test-data, --test-fraction and --folds are alternative validations: give one"
+                    .into(),
+            ));
+        }
+        if self.folds == Some(1) {
+            return Err(CliError::Input(
+                "--folds 1: cross-validation needs at least 2 folds (0 for no validation)".into(),
+            ));
+        }
         let options = CalibrationOptions {
             robust: self.robust.map(Robust::loss),
+            per_campaign_target: self.per_campaign_target,
             ..CalibrationOptions::default()
         };
         Ok((model_spec, options))
+    }
+
+    /// How to validate (`test`: the `--test-data` table) and the report's `split` object.
+    fn plan<'a>(&self, test: Option<Named<'a>>) -> (ValidationPlan<'a>, serde_json::Value) {
+        let folds = self.folds.unwrap_or(DEFAULT_FOLDS);
+        match test {
+            Some(t) => (
+                ValidationPlan::TestData(Dataset::all(t.table, t.name)),
+                json!({"kind": "test_file", "test_data": t.name}),
+            ),
+            None if self.test_fraction > 0.0 => (
+                ValidationPlan::Split {
+                    fraction: self.test_fraction,
+                    seed: self.seed,
+                },
+                json!({"kind": "by_pose", "test_fraction": self.test_fraction, "seed": self.seed}),
+            ),
+            None if folds == 0 => (ValidationPlan::None, json!({"kind": "none"})),
+            None => (
+                ValidationPlan::Folds {
+                    k: folds,
+                    seed: self.seed,
+                },
+                json!({"kind": "cross_validation", "folds": folds, "seed": self.seed}),
+            ),
+        }
     }
 }
 
@@ -122,10 +180,12 @@ pub struct Outcome {
     pub model_spec: ModelSpec,
     /// The calibration.
     pub cal: Calibration,
-    /// How the poses were split: the report's `split` object.
+    /// How the model was validated: the report's `split` object.
     pub split: serde_json::Value,
-    /// The rows of the data the model was fitted on.
-    pub train_rows: Vec<usize>,
+    /// The validation (`None` with `--folds 0`).
+    pub validation: Option<Validation>,
+    /// What `--model auto` chose and why (`None` for a named model).
+    pub auto: Option<AutoChoice>,
 }
 
 impl Outcome {
@@ -138,6 +198,23 @@ impl Outcome {
                 report.after.solver.termination, report.after.solver.iterations
             )
         })
+    }
+
+    /// The model file: the calibration, with the validation's held-out RMS in its fit summary.
+    pub fn model_file(&self, robot: &Robot) -> CalibratedModel {
+        let mut file = CalibratedModel::new(robot, &self.cal);
+        if let (Some(f), Some(v)) = (file.fit.as_mut(), &self.validation) {
+            f.held_out_rms_m = Some(v.final_stats().rms_m);
+        }
+        file
+    }
+
+    /// The validation's text (empty without one).
+    pub fn validation_text(&self) -> String {
+        self.validation
+            .as_ref()
+            .map(|v| v.text(&self.model_spec.name()))
+            .unwrap_or_default()
     }
 
     /// The `calibrate --json` document: `out` and `urdf_out` name the files written (null when none).
@@ -156,14 +233,16 @@ impl Outcome {
             "urdf_out": urdf_out.map(|p| p.display().to_string()),
             "split": self.split,
             "report": self.cal.report,
+            "validation": self.validation,
+            "auto": self.auto,
         })
     }
 }
 
-/// Calibrates `robot` on `data` (held out: `test`, or the `--test-fraction` of `data`'s poses) as
-/// `robocal calibrate` does with `options`; `progress` hears which model `--model auto`'s diagnosis
-/// fits, `note` what it chose. A calibration that does not converge is an [`Outcome`] too (see
-/// [`Outcome::failure`]).
+/// Calibrates `robot` on every pose of `data` as `robocal calibrate` does with `options`, and
+/// validates the model (on `test`, by cross-validation or by one split, as `options` say); `progress`
+/// hears which model `--model auto`'s diagnosis fits, `note` what it chose. A calibration that does not
+/// converge is an [`Outcome`] too (see [`Outcome::failure`]).
 pub fn calibrate(
     robot: &Robot,
     data: Named<'_>,
@@ -172,69 +251,75 @@ pub fn calibrate(
     progress: &mut dyn FnMut(&str),
     note: &mut dyn FnMut(&str),
 ) -> Result<Outcome, CliError> {
-    let (model_spec, calibration) = options.resolve()?;
+    let (model_spec, calibration) = options.resolve(test.is_some())?;
     let model = &robot.model;
     let table = data.table;
-    let (train, test_set, split) = match test {
-        Some(t) => (
-            Dataset::all(table, data.name),
-            Some(Dataset::all(t.table, t.name)),
-            json!({"kind": "test_file", "test_data": t.name}),
-        ),
-        None => {
-            let (tr, te) = split_by_pose(table, options.test_fraction, options.seed);
-            let split = json!({"kind": "by_pose", "test_fraction": options.test_fraction, "seed": options.seed});
-            let train = Dataset {
-                table,
-                rows: tr,
-                name: if te.is_empty() {
-                    data.name.to_string()
-                } else {
-                    format!("{} (training set)", data.name)
-                },
-            };
-            let test = (!te.is_empty()).then(|| Dataset {
-                table,
-                rows: te,
-                name: format!("{} (test set)", data.name),
-            });
-            (train, test, split)
-        }
-    };
+    let (plan, split) = options.plan(test);
+    let all = Dataset::all(table, data.name);
+    let mut auto = None;
     let model_spec = match model_spec {
         Some(s) => s,
         None => {
+            let diagnose_options = super::diagnose::options(1.0 / 3.0, options.seed, 1e-3)?;
             let d = super::diagnose::run_diagnosis_with(
                 model,
                 table,
                 data.name,
-                &super::diagnose::options(1.0 / 3.0, options.seed, 1e-3)?,
+                &diagnose_options,
                 progress,
             )?;
             note(&format!("--model auto: diagnose chose {}", d.model));
-            d.model
+            progress("--model auto: testing the learned residual on diagnose's held-out poses");
+            let choice = auto::choose(
+                model,
+                table,
+                data.name,
+                &d,
+                &diagnose_options,
+                &AUTO_LEARNED_KINDS,
+            )?;
+            note(&format!("--model auto: {}", choice.note));
+            let spec = choice.spec.clone();
+            auto = Some(choice);
+            spec
         }
     };
-    let cal = calibrate_model(model, &train, test_set.as_ref(), &model_spec, &calibration)
+    let (cal, validation) = calibrate_validated(model, &all, &model_spec, &calibration, &plan)
         .map_err(|e| {
-            let split_hint = matches!(e, CalibError::TooFewPoses { .. })
-                && test.is_none()
-                && options.test_fraction > 0.0;
+            // Only a validation fit (a fold, or the split's training part) gets the hint: the model
+            // on every pose had enough.
+            let hint = match (&e, &plan) {
+                (CalibError::TooFewPoses { context, .. }, ValidationPlan::Split { fraction, .. })
+                    if context.ends_with("(training set)") =>
+                {
+                    Some(format!(
+                        " (--test-fraction {fraction} held out part of the poses for the validation fit; \
+                         --folds 0 validates nothing)"
+                    ))
+                }
+                (CalibError::TooFewPoses { context, .. }, ValidationPlan::Folds { k, .. })
+                    if context.contains("(fold ") =>
+                {
+                    Some(format!(
+                        " (--folds {k} fits each fold on {}/{k} of the poses; fewer folds, or --folds 0 \
+                         for no validation)",
+                        k - 1
+                    ))
+                }
+                _ => None,
+            };
             let e = CliError::from(e);
-            if split_hint {
-                e.with_hint(&format!(
-                    " (--test-fraction {} held out part of the poses; --test-fraction 0 uses all)",
-                    options.test_fraction
-                ))
-            } else {
-                e
+            match hint {
+                Some(h) => e.with_hint(&h),
+                None => e,
             }
         })?;
     Ok(Outcome {
         model_spec,
         cal,
         split,
-        train_rows: train.rows,
+        validation,
+        auto,
     })
 }
 
@@ -253,7 +338,7 @@ pub fn run(args: Args) -> CliResult {
         inputs.check("--urdf-out", u)?;
         check_distinct(("--out", &args.out), ("--urdf-out", u))?;
     }
-    args.options.resolve()?;
+    args.options.resolve(args.test_data.is_some())?;
     let spec = ChainSpec {
         base_link: args.robot.base_link.clone(),
         tip_link: args.robot.tip_link.clone(),
@@ -299,7 +384,7 @@ pub fn run(args: Args) -> CliResult {
         }
         return Err(CliError::Runtime(msg));
     }
-    let file = CalibratedModel::new(&robot, cal);
+    let file = outcome.model_file(&robot);
     sim::io::write_atomic(&args.out, file.to_json().as_bytes())?;
     if let Some(path) = &args.urdf_out {
         super::urdf_out::write(path, &file, &table, &data_name)?;
@@ -313,6 +398,7 @@ pub fn run(args: Args) -> CliResult {
         ))
     } else {
         eprint!("{}", report.text());
+        eprint!("{}", outcome.validation_text());
         eprintln!("wrote {}", args.out.display());
         if let Some(p) = &args.urdf_out {
             eprintln!("wrote {}", p.display());

@@ -12,7 +12,6 @@ use sim::effects::gear_backlash::BacklashMode;
 use sim::effects::thermal_drift::{TemperatureProfile, WarmUp};
 use sim::effects::transmission_error::{TransmissionError, TransmissionSection};
 use sim::scenario::{Magnitude, Overrides, PayloadSection, Scenario, ScenarioBuilder};
-use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
 
 /// The scenario every demo starts from: the iiwa 7 with drawn geometric errors.
@@ -400,16 +399,14 @@ pub fn run(args: Args) -> CliResult {
             args.poses
         );
     }
-    let plan = sim::generate::plan_of(&resolved)?;
-    let bar = std::io::stderr()
-        .is_terminal()
-        .then(|| indicatif::ProgressBar::new(plan.len() as u64));
+    let planner = sim::generate::planner_of(&resolved)?;
+    let bar = super::generate::progress_bar(planner.rows() as u64, "simulating");
     let tick = |k: u64| {
         if let Some(b) = &bar {
             b.inc(k);
         }
     };
-    let summary = sim::generate::write_dataset(&resolved, &args.out, &plan, Some(&tick));
+    let summary = sim::generate::write_dataset(&resolved, &args.out, planner, Some(&tick));
     if let Some(b) = &bar {
         b.finish_and_clear();
     }

@@ -134,6 +134,21 @@ pub(crate) fn text(d: &Diagnosis, data: &str) -> String {
     for n in &d.not_tried {
         s.push_str(&format!("not tried: {}: {}\n", n.cause, n.reason));
     }
+    if let Some(c) = &d.campaigns {
+        s.push_str("held-out residual per campaign:\n");
+        for r in &c.campaigns {
+            s.push_str(&format!(
+                "  campaign {}: {} poses, RMS {:.1} µm (others {:.1} µm, z = {:.1}){}\n",
+                r.campaign,
+                r.n_test_poses,
+                r.test_rms_m * 1e6,
+                r.others_rms_m * 1e6,
+                r.z,
+                if r.differs { "  <- differs" } else { "" }
+            ));
+        }
+        s.push_str(&format!("  {}\n", c.note));
+    }
     s.push_str(&format!(
         "unexplained: {}: {}\nmodel for `calibrate --model auto`: {}\n",
         if d.unexplained.present {

@@ -37,9 +37,12 @@ fn parse_q(text: &str) -> Result<Vec<f64>, CliError> {
 pub fn run(args: Args) -> CliResult {
     let model = args.robot.load()?;
     let q = parse_q(&args.q)?;
-    model
-        .check_q(&q)
-        .map_err(|e| CliError::Input(format!("--q: {e} (robot '{}')", model.name)))?;
+    model.check_q(&q).map_err(|e| {
+        CliError::Input(format!(
+            "--q: {e} (robot '{}' of --robot {})",
+            model.name, args.robot.robot
+        ))
+    })?;
     for (i, (j, v)) in model.joints.iter().zip(&q).enumerate() {
         if let Some(l) = j.limits
             && (*v < l.lower || *v > l.upper)

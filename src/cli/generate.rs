@@ -50,9 +50,13 @@ impl Options {
         if self.poses == Some(0) {
             return Err(CliError::Input("--poses: 0: must be ≥ 1".into()));
         }
-        if let Some(p) = self.poses {
-            sim::campaign::check_row_count(Some(p), &format!("--poses {p}"))
-                .map_err(CliError::Input)?;
+        if let Some(p) = self.poses
+            && p as u64 > sim::campaign::MAX_FORMAT_ROWS
+        {
+            return Err(CliError::Input(format!(
+                "--poses {p}: more than the {} rows a Parquet file can count (signed 64-bit)",
+                sim::campaign::MAX_FORMAT_ROWS
+            )));
         }
         if let Some(m) = self.noise
             && !(m.is_finite() && m >= 0.0)
@@ -84,13 +88,13 @@ pub fn generate(
         .add_scenario("--scenario", scenario, &loaded)
         .check_dir("--out", out, &sim::generate::OUTPUT_FILES)?;
     let resolved = loaded.resolve(&overrides)?;
-    let plan = sim::generate::plan_of(&resolved)?;
-    progress(Rows::Total(plan.len() as u64));
+    let planner = sim::generate::planner_of(&resolved)?;
+    progress(Rows::Total(planner.rows() as u64));
     let tick = |k: u64| progress(Rows::Done(k));
     Ok(sim::generate::write_dataset(
         &resolved,
         out,
-        &plan,
+        planner,
         Some(&tick),
     )?)
 }
@@ -106,21 +110,14 @@ pub enum Rows {
 
 /// Runs `robocal generate`.
 pub fn run(args: Args) -> CliResult {
-    // Made once the campaign's size is known, on a terminal only.
+    // Made once the campaign's size is known, on a terminal outside CI only.
     let bar = std::sync::OnceLock::new();
     let progress = |r: Rows| match r {
-        Rows::Total(n) if std::io::stderr().is_terminal() => {
-            bar.get_or_init(|| {
-                let b = indicatif::ProgressBar::new(n);
-                if let Ok(style) = indicatif::ProgressStyle::with_template(
-                    "{spinner} simulating {pos}/{len} measurements [{bar:40}] {eta}",
-                ) {
-                    b.set_style(style.progress_chars("=> "));
-                }
-                b
-            });
+        Rows::Total(n) => {
+            if let Some(b) = progress_bar(n, "simulating") {
+                bar.get_or_init(|| b);
+            }
         }
-        Rows::Total(_) => {}
         Rows::Done(k) => {
             if let Some(b) = bar.get() {
                 b.inc(k);
@@ -145,4 +142,19 @@ pub fn summary_json(summary: &Summary) -> Result<serde_json::Value, CliError> {
         .map_err(|e| CliError::Runtime(format!("cannot write JSON: {e}")))?;
     v["files"] = serde_json::json!(summary.files);
     Ok(v)
+}
+
+/// A progress bar of `len` measurements on stderr, only when stderr is a terminal and not in CI (the
+/// `CI` variable set): never in logs or pipes.
+pub(super) fn progress_bar(len: u64, what: &str) -> Option<indicatif::ProgressBar> {
+    let show = std::io::stderr().is_terminal() && std::env::var_os("CI").is_none();
+    show.then(|| {
+        let b = indicatif::ProgressBar::new(len);
+        if let Ok(style) = indicatif::ProgressStyle::with_template(&format!(
+            "{{spinner}} {what} {{human_pos}}/{{human_len}} measurements [{{bar:24}}] {{percent}} %, {{eta}} left"
+        )) {
+            b.set_style(style.progress_chars("=> "));
+        }
+        b
+    })
 }

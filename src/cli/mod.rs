@@ -14,6 +14,7 @@ mod info;
 mod paths;
 mod plan_poses;
 pub mod predict;
+pub mod register;
 mod robot_arg;
 pub mod shared;
 mod sweep;
@@ -42,6 +43,8 @@ enum Command {
     Calibrate(calibrate::Args),
     /// Predict target positions with a calibrated model.
     Predict(predict::Args),
+    /// Register a new measurement campaign (the tracker was moved) for a calibrated model.
+    Register(register::Args),
     /// Choose the poses that determine the parameters best.
     PlanPoses(plan_poses::Args),
     /// Find what the kinematic model misses, name the cause, extend the model, measure the gain.
@@ -64,6 +67,7 @@ pub fn run(cli: Cli) -> CliResult {
         Command::Generate(a) => generate::run(a),
         Command::Calibrate(a) => calibrate::run(a),
         Command::Predict(a) => predict::run(a),
+        Command::Register(a) => register::run(a),
         Command::PlanPoses(a) => plan_poses::run(a),
         Command::Diagnose(a) => diagnose::run(a),
         Command::Demo(a) => demo::run(a),

@@ -13,8 +13,8 @@
 //! Each run ([`run_one`]):
 //! 1. resolves the scenario with the run's seed, pose count and noise multiplier and simulates the
 //!    campaign in memory (`sim::generate`, the same code as `robocal generate`);
-//! 2. splits the poses into training and held-out ones (`calib::stats::split_by_pose`, as `robocal
-//!    calibrate --test-fraction F --seed S`; with planned selection the training poses are the planned
+//! 2. splits the poses into training and held-out ones (`calib::stats::split_by_pose`, as the validation
+//!    split of `robocal calibrate --test-fraction F --seed S`; with planned selection the training poses are the planned
 //!    ones and the held-out ones random, see [`split_counts`]) and calibrates the kinematic model on the training rows
 //!    (`calib::calibrate`, default options);
 //! 3. scores the result against the truth: the held-out prediction error against the noise-free true

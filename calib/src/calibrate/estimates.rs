@@ -61,53 +61,80 @@ pub(super) fn estimates(
             unit_vec(k),
         );
     }
-    // Base: t ← exp(β) t moves the origin by ω × t + v; φ = log R moves by J_l⁻¹(φ) ω.
-    let kb = layout.base();
-    let t = params.t_tracker_base.translation.vector;
-    let mut lt = Matrix3x6::zeros();
-    lt.fixed_view_mut::<3, 3>(0, 0).copy_from(&(-skew(&t)));
-    lt.fixed_view_mut::<3, 3>(0, 3)
-        .copy_from(&Matrix3::identity());
-    for (a, axis) in ["x", "y", "z"].iter().enumerate() {
-        let mut f = DVector::zeros(p);
-        for c in 0..6 {
-            f[kb + c] = lt[(a, c)];
+    for c in 0..layout.n_campaigns() {
+        // ` (campaign ID)` with several campaigns; the shared target has none.
+        let suffix = if layout.n_campaigns() > 1 {
+            format!(" (campaign {})", layout.campaign_ids[c])
+        } else {
+            String::new()
+        };
+        // Base: t ← exp(β) t moves the origin by ω × t + v; φ = log R moves by J_l⁻¹(φ) ω.
+        let kb = layout.campaign_base(c);
+        let base = params.t_tracker_base_of(c);
+        let t = base.translation.vector;
+        let mut lt = Matrix3x6::zeros();
+        lt.fixed_view_mut::<3, 3>(0, 0).copy_from(&(-skew(&t)));
+        lt.fixed_view_mut::<3, 3>(0, 3)
+            .copy_from(&Matrix3::identity());
+        for (a, axis) in ["x", "y", "z"].iter().enumerate() {
+            let mut f = DVector::zeros(p);
+            for c in 0..6 {
+                f[kb + c] = lt[(a, c)];
+            }
+            push(
+                format!("T_tracker_base {axis}{suffix}"),
+                Unit::Metre,
+                t[a],
+                f,
+            );
         }
-        push(format!("T_tracker_base {axis}"), Unit::Metre, t[a], f);
-    }
-    let phi = log_rotation(params.t_tracker_base.rotation.matrix());
-    let jl = left_jacobian_inverse(&phi);
-    for (a, axis) in ["x", "y", "z"].iter().enumerate() {
-        let mut f = DVector::zeros(p);
-        for c in 0..3 {
-            f[kb + c] = jl[(a, c)];
-        }
-        push(
-            format!("T_tracker_base rotation φ_{axis}"),
-            Unit::Radian,
-            phi[a],
-            f,
-        );
-    }
-    let kt = layout.target_position();
-    for a in 0..3 {
-        push(
-            layout.name(kt + a),
-            Unit::Metre,
-            params.p_flange_target[a],
-            unit_vec(kt + a),
-        );
-    }
-    if let (Some(ko), Some(r)) = (layout.target_orientation(), &params.r_flange_target) {
-        // R ← R exp(ρ): φ moves by J_r⁻¹(φ) ρ = J_l⁻¹(−φ) ρ.
-        let phi = log_rotation(r);
-        let jr = left_jacobian_inverse(&-phi);
+        let phi = log_rotation(base.rotation.matrix());
+        let jl = left_jacobian_inverse(&phi);
         for (a, axis) in ["x", "y", "z"].iter().enumerate() {
             let mut f = DVector::zeros(p);
             for c in 0..3 {
-                f[ko + c] = jr[(a, c)];
+                f[kb + c] = jl[(a, c)];
             }
-            push(format!("target rotation φ_{axis}"), Unit::Radian, phi[a], f);
+            push(
+                format!("T_tracker_base rotation φ_{axis}{suffix}"),
+                Unit::Radian,
+                phi[a],
+                f,
+            );
+        }
+        if c > 0 && !layout.campaign_targets {
+            continue;
+        }
+        let kt = layout.campaign_target_position(c);
+        let target = params.p_flange_target_of(c);
+        for a in 0..3 {
+            push(
+                layout.name(kt + a),
+                Unit::Metre,
+                target[a],
+                unit_vec(kt + a),
+            );
+        }
+        if let (Some(ko), Some(r)) = (
+            layout.campaign_target_orientation(c),
+            params.r_flange_target_of(c),
+        ) {
+            // R ← R exp(ρ): φ moves by J_r⁻¹(φ) ρ = J_l⁻¹(−φ) ρ.
+            let phi = log_rotation(r);
+            let jr = left_jacobian_inverse(&-phi);
+            let tsuffix = if c > 0 { suffix.as_str() } else { "" };
+            for (a, axis) in ["x", "y", "z"].iter().enumerate() {
+                let mut f = DVector::zeros(p);
+                for c in 0..3 {
+                    f[ko + c] = jr[(a, c)];
+                }
+                push(
+                    format!("target rotation φ_{axis}{tsuffix}"),
+                    Unit::Radian,
+                    phi[a],
+                    f,
+                );
+            }
         }
     }
     for (e, x) in params.extension.iter().enumerate() {

@@ -21,10 +21,25 @@ pub(super) fn add_learned(
 ) -> Result<()> {
     let at = cal.params.extension.clone();
     let obs = observations(model, train, options, cal.extensions.as_ref(), &at)?;
-    let physical = Prediction::new(model, &cal.params);
-    let residual: Vec<Vector3<f64>> = physical.errors(&obs).iter().map(|e| -e).collect();
-    let learned = crate::learned::fit(kind, &obs.q, model.nq(), &residual, options.learned_seed)?;
-    let corrected = physical.clone().with_learned(Some(&learned));
+    // In the first campaign's tracker frame, where the correction lives.
+    let learned = match kind {
+        LearnedKind::Adjoint => {
+            // Identified through the chain, with the registrations refitted alongside.
+            let (l, params) =
+                crate::learned::fit_adjoint(model, &cal.params, &obs, options.learned_seed)?;
+            cal.physical = Some(std::mem::replace(&mut cal.params, params));
+            l
+        }
+        _ => {
+            let residual: Vec<Vector3<f64>> = Prediction::new(model, &cal.params)
+                .reference_errors(&obs)
+                .iter()
+                .map(|e| -e)
+                .collect();
+            crate::learned::fit(kind, &obs.q, model.nq(), &residual, options.learned_seed)?
+        }
+    };
+    let corrected = Prediction::new(model, &cal.params).with_learned(Some(&learned));
     let stats_with = |o: &Observations| stats_of_errors(&corrected.errors(o), o);
     let test_stats = match test {
         Some(t) if !t.rows.is_empty() => Some(stats_with(&observations(

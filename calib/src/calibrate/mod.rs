@@ -14,8 +14,10 @@
 //!
 //! One module per job: [`start`] (the closed-form start and the generic rank), [`robust`] (losses and
 //! IRLS), [`outliers`], [`extended`] (refits of extended models), [`learned_stage`], [`estimates`]
-//! (parameters in reporting form) and [`report`] (what it all says).
+//! (parameters in reporting form), [`report`] (what it all says) and [`validation`] (held-out
+//! errors: k-fold cross-validation by pose, a split, a test file).
 
+pub mod auto;
 mod estimates;
 mod extended;
 mod learned_stage;
@@ -23,6 +25,7 @@ mod outliers;
 pub mod report;
 pub mod robust;
 pub mod start;
+pub mod validation;
 
 pub use crate::predict::prediction_and_jacobian;
 pub use extended::EQUILIBRIUM_REFITS;
@@ -75,6 +78,10 @@ pub struct CalibrationOptions {
     pub gross_error_threshold: f64,
     /// Seed of the learned models' cross-validation folds.
     pub learned_seed: u64,
+    /// With several campaigns, give each its own target offset (a re-seated reflector) instead of
+    /// one shared target. Default false.
+    #[serde(default)]
+    pub per_campaign_target: bool,
 }
 
 /// Most rounds of [`CalibrationOptions::gross_error_threshold`]'s exclusion.
@@ -94,6 +101,7 @@ impl Default for CalibrationOptions {
             outlier_threshold: 5.0,
             gross_error_threshold: default_gross_error_threshold(),
             learned_seed: 0,
+            per_campaign_target: false,
         }
     }
 }
@@ -139,6 +147,9 @@ pub struct Calibration {
     pub extensions: Option<ExtensionSettings>,
     /// The learned residual correction fitted after the physical model, if asked for.
     pub learned: Option<LearnedResidual>,
+    /// The physical fit's parameters, when the learned stage changed `params` (`learned:adjoint`
+    /// refits the registrations with its coefficients): what the physical model alone predicts.
+    pub physical: Option<KinematicParams>,
 }
 
 /// Calibrates the kinematic model of `model` on `train`, validating on `test` when given.
@@ -207,6 +218,38 @@ pub fn observations(
     Ok(obs)
 }
 
+/// Fewest distinct configurations a campaign needs in the training rows: three points fix a rigid
+/// transform.
+pub const MIN_CAMPAIGN_POSES: usize = 3;
+
+/// Every campaign of `obs` has at least [`MIN_CAMPAIGN_POSES`] distinct configurations.
+fn check_campaign_poses(obs: &Observations, name: &str) -> Result<()> {
+    let Some(campaign) = &obs.campaign else {
+        return Ok(());
+    };
+    for id in obs.campaign_ids() {
+        let mut configs: Vec<Vec<u64>> = (0..obs.len())
+            .filter(|&r| campaign[r] == id)
+            .map(|r| obs.q_row(r).iter().map(|v| v.to_bits()).collect())
+            .collect();
+        configs.sort_unstable();
+        configs.dedup();
+        if configs.len() < MIN_CAMPAIGN_POSES {
+            return Err(CalibError::BadValue {
+                context: name.to_string(),
+                field: "campaign".into(),
+                value: id.to_string(),
+                problem: format!(
+                    "campaign {id} has {} distinct poses here: at least {MIN_CAMPAIGN_POSES} are needed to \
+                     register its tracker",
+                    configs.len()
+                ),
+            });
+        }
+    }
+    Ok(())
+}
+
 fn calibrate_with(
     model: &Model,
     train: &Dataset<'_>,
@@ -252,7 +295,17 @@ fn calibrate_with(
                     .into(),
         });
     }
-    let layout = ParamLayout::new(model, orientation).with_extensions(obs.ext.params.clone());
+    // The start: closed-form registration of every campaign.
+    let mut start = initial_params(model, &obs);
+    if options.per_campaign_target {
+        start = start.with_own_targets();
+    }
+    start.extension = vec![0.0; obs.ext.len()];
+    if let (Some(t), Some(d)) = (&test_obs, test) {
+        t.campaign_indices_or_error(&start, &d.name)?;
+    }
+    check_campaign_poses(&obs, &train.name)?;
+    let layout = ParamLayout::for_params(model, &start, obs.ext.params.clone());
     let p = layout.len();
     let dim = obs.dim();
     let n_poses = obs.n_poses();
@@ -260,7 +313,9 @@ fn calibrate_with(
     let n_configurations = obs.n_configurations();
     let equations = n_configurations * dim;
     if equations <= p {
-        let r = generic_rank(model, orientation, options);
+        // Each campaign after the first adds its registration (and target) to the generic rank.
+        let r = generic_rank(model, orientation, options) + layout.kinematic_len()
+            - ParamLayout::new(model, orientation).kinematic_len();
         if equations < r + 1 {
             return Err(CalibError::TooFewPoses {
                 context: train.name.clone(),
@@ -277,8 +332,6 @@ fn calibrate_with(
     let mut warnings = Vec::new();
 
     // Before: base and target only.
-    let mut start = initial_params(model, &obs);
-    start.extension = vec![0.0; obs.ext.len()];
     let bt = layout.base_and_target();
     let bt_scales: Vec<f64> = bt.iter().map(|&k| scales[k]).collect();
     let mut ws = LmWorkspace::new(obs.len() * dim, bt.len());
@@ -307,15 +360,20 @@ fn calibrate_with(
     let mut params = before_params.clone();
     let mut robust_summary = None;
     let mut excluded: Vec<Outlier> = Vec::new();
+    // The rows' residual norms at the final parameters and weights, when the last gross-error
+    // search had them (the outlier search below needs the same).
+    let mut final_norms: Option<Vec<f64>> = None;
     let (report, sub) = match options.robust {
         None => {
             let mut prob = KinematicProblem::new(model, &obs, params.clone(), all.clone());
             let mut out = minimize(&mut prob, scales.as_slice(), &options.lm, &mut ws);
             params = prob.into_params();
             for _ in 0..GROSS_ERROR_ROUNDS {
+                let norms = outliers::row_norms(model, &obs, &params, &all);
                 let gross =
-                    outliers::find(model, &obs, &params, &all, options.gross_error_threshold);
+                    outliers::find_in(model, &obs, &params, &norms, options.gross_error_threshold);
                 if gross.is_empty() {
+                    final_norms = Some(norms);
                     break;
                 }
                 for o in &gross {
@@ -340,10 +398,12 @@ fn calibrate_with(
             }
             // Each excluded row's error against the final fit, and its warning.
             let prediction = crate::predict::Prediction::new(model, &params);
+            let campaign = prediction.campaigns_of(&obs);
             let mut scratch = prediction.scratch();
             for o in &mut excluded {
                 if let Some(r) = obs.source_row.iter().position(|&s| s + 1 == o.row) {
-                    let p = prediction.row(&obs.ext, r, obs.q_row(r), &mut scratch);
+                    let c = campaign.get(r).copied().unwrap_or(0);
+                    let p = prediction.row_in(&obs.ext, r, obs.q_row(r), c, &mut scratch);
                     o.error_m = (p - obs.position[r]).norm();
                 }
                 warnings.push(format!(
@@ -421,7 +481,10 @@ fn calibrate_with(
     }
 
     crate::cancel::checkpoint()?;
-    let outliers = outliers::find(model, &obs, &params, &all, options.outlier_threshold);
+    let outliers = match &final_norms {
+        Some(norms) => outliers::find_in(model, &obs, &params, norms, options.outlier_threshold),
+        None => outliers::find(model, &obs, &params, &all, options.outlier_threshold),
+    };
 
     let sigma_rms = (obs.sigma.iter().map(|s| s * s).sum::<f64>() / obs.len() as f64).sqrt();
     let parameters = estimates(&layout, &params, &covariance, &sub);
@@ -468,5 +531,6 @@ fn calibrate_with(
         report,
         extensions: extensions.cloned(),
         learned: None,
+        physical: None,
     })
 }

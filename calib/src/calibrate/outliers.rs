@@ -47,16 +47,38 @@ pub(super) fn find(
     active: &[usize],
     threshold: f64,
 ) -> Vec<Outlier> {
-    let mut prob = KinematicProblem::new(model, obs, params.clone(), active.to_vec());
-    let norms = prob.row_norms();
-    let t = normalised_norms(&norms, &obs.weight, obs.dim());
+    let norms = row_norms(model, obs, params, active);
+    find_in(model, obs, params, &norms, threshold)
+}
+
+/// The weighted residual norm of every row of `obs` at `params` (noise units).
+pub(super) fn row_norms(
+    model: &Model,
+    obs: &Observations,
+    params: &KinematicParams,
+    active: &[usize],
+) -> Vec<f64> {
+    KinematicProblem::new(model, obs, params.clone(), active.to_vec()).row_norms()
+}
+
+/// [`find`] from the rows' weighted residual norms `norms` at `params` ([`row_norms`]).
+pub(super) fn find_in(
+    model: &Model,
+    obs: &Observations,
+    params: &KinematicParams,
+    norms: &[f64],
+    threshold: f64,
+) -> Vec<Outlier> {
+    let t = normalised_norms(norms, &obs.weight, obs.dim());
     let prediction = Prediction::new(model, params);
+    let campaign = prediction.campaigns_of(obs);
     let mut s = prediction.scratch();
     let mut outliers = Vec::new();
     for (r, &tv) in t.iter().enumerate() {
         let raw = norms[r] / obs.weight[r].max(f64::MIN_POSITIVE).sqrt();
         if tv > threshold && raw > threshold / 10.0 {
-            let p = prediction.row(&obs.ext, r, obs.q_row(r), &mut s);
+            let c = campaign.get(r).copied().unwrap_or(0);
+            let p = prediction.row_in(&obs.ext, r, obs.q_row(r), c, &mut s);
             outliers.push(Outlier {
                 row: obs.source_row[r] + 1,
                 pose: obs.pose[r],

@@ -12,7 +12,7 @@ use sim::Model;
 use sim::lie::{Pose, pose_from};
 
 /// Rigid transform `T` with `dst ≈ T src` in the least-squares sense (Kabsch / Horn).
-fn kabsch(src: &[Vector3<f64>], dst: &[Vector3<f64>]) -> Pose {
+pub(crate) fn kabsch(src: &[Vector3<f64>], dst: &[Vector3<f64>]) -> Pose {
     let n = src.len() as f64;
     let cs = src.iter().sum::<Vector3<f64>>() / n;
     let cd = dst.iter().sum::<Vector3<f64>>() / n;
@@ -42,6 +42,8 @@ fn nearest_rotation(m: &Matrix3<f64>) -> Matrix3<f64> {
 }
 
 /// The start: nominal joints, closed-form base transform, target at the flange (see module docs).
+/// With several campaigns (the rows' `campaign` ids, ascending), each gets its own closed-form
+/// `T_tracker_base` from its rows; the target is shared.
 pub fn initial_params(model: &Model, obs: &Observations) -> KinematicParams {
     let orientation = obs.orientation.is_some();
     let mut params = KinematicParams::nominal(model.nq(), orientation);
@@ -54,11 +56,29 @@ pub fn initial_params(model: &Model, obs: &Observations) -> KinematicParams {
         src.push(s.p_tracker);
         rots.push(*s.t_tracker_flange.rotation.matrix());
     }
-    params.t_tracker_base = kabsch(&src, &obs.position);
+    let ids = obs.campaign_ids();
+    let bases: Vec<Pose> = match &obs.campaign {
+        None => vec![kabsch(&src, &obs.position)],
+        Some(_) if ids.len() == 1 => vec![kabsch(&src, &obs.position)],
+        Some(campaign) => ids
+            .iter()
+            .map(|&id| {
+                let rows: Vec<usize> = (0..obs.len()).filter(|&r| campaign[r] == id).collect();
+                let a: Vec<Vector3<f64>> = rows.iter().map(|&r| src[r]).collect();
+                let b: Vec<Vector3<f64>> = rows.iter().map(|&r| obs.position[r]).collect();
+                kabsch(&a, &b)
+            })
+            .collect(),
+    };
+    params.t_tracker_base = bases[0];
+    params = params.with_campaigns(&ids, &bases[1..], false);
     if let Some(meas) = &obs.orientation {
-        let rb = params.t_tracker_base.rotation.matrix();
+        let index = obs
+            .campaign_indices(&params)
+            .expect("the start registers every campaign of its rows");
         let mut sum = Matrix3::zeros();
-        for (rf, rm) in rots.iter().zip(meas) {
+        for (r, (rf, rm)) in rots.iter().zip(meas).enumerate() {
+            let rb = params.t_tracker_base_of(index[r]).rotation.matrix();
             sum += (rb * rf).transpose() * rm;
         }
         params.r_flange_target = Some(nearest_rotation(&sum));
@@ -104,6 +124,7 @@ pub fn generic_rank(model: &Model, orientation: bool, options: &CalibrationOptio
         pose: (0..poses as i64).collect(),
         source_row: (0..poses).collect(),
         ext: Regressors::none(),
+        campaign: None,
     };
     let all: Vec<usize> = (0..layout.len()).collect();
     let mut prob = KinematicProblem::new(model, &obs, params, all);

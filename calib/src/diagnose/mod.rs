@@ -23,6 +23,7 @@
 //! The noise floor ([`noise_floor`]) comes from repeated poses when the data have enough of them, else
 //! from the `sigma` column or the tracker noise model.
 
+pub mod campaigns;
 pub mod noise_floor;
 pub mod report;
 pub mod significance;
@@ -265,6 +266,9 @@ pub struct Diagnosis {
     /// thermal drift.
     #[serde(default)]
     pub not_tried: Vec<NotTried>,
+    /// The held-out residual per measurement campaign, with several campaigns.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub campaigns: Option<campaigns::CampaignReport>,
     /// What `--report` draws (not part of the JSON).
     #[serde(skip)]
     pub plots: report::PlotData,
@@ -360,8 +364,9 @@ pub(crate) fn evaluate(
     let train_obs = observations(model, &split.train, &options.calibration, ext, at)?;
     let test_obs = observations(model, &split.test, &options.calibration, ext, at)?;
     let prediction = Prediction::new(model, &cal.params);
-    let train_err = prediction.errors(&train_obs);
-    let test_err = prediction.errors(&test_obs);
+    // With several campaigns, in the first one's tracker frame (the robot's, for the probes).
+    let train_err = prediction.reference_errors(&train_obs);
+    let test_err = prediction.reference_errors(&test_obs);
     let pose_sq = per_pose(&split.test_pose, test_err.iter().map(|e| e.norm_squared()));
     let step = Step {
         model: spec.clone(),
@@ -1111,7 +1116,7 @@ pub fn diagnose_with_progress(
         });
     }
     let split = Split {
-        test_pose: test_rows.iter().map(|&r| table.pose[r]).collect(),
+        test_pose: campaigns::pose_ids(table, &test_rows),
         train: Dataset {
             table,
             rows: train_rows,
@@ -1307,7 +1312,7 @@ pub fn diagnose_with_progress(
             .train
             .rows
             .iter()
-            .map(|&r| table.pose[r])
+            .map(|&r| table.pose_key(r))
             .collect::<std::collections::BTreeSet<_>>()
             .len(),
         n_test: split
@@ -1323,6 +1328,7 @@ pub fn diagnose_with_progress(
         model: current.spec.clone(),
         trials,
         not_tried,
+        campaigns: campaigns::report(&split, &current, options.alpha),
         alpha: options.alpha,
         seed: options.seed,
         health,

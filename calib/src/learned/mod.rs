@@ -9,7 +9,10 @@
 //!   up to that total degree ([`polynomial`]); `"poly"` chooses the degree from 1 to 3 by
 //!   cross-validation;
 //! - `"kernel"`: kernel ridge regression (Gaussian-process posterior mean) with first- and second-order
-//!   additive plus full RBF kernels on the standardised joint angles ([`kernel`]).
+//!   additive plus full RBF kernels on the standardised joint angles ([`kernel`]);
+//! - `"adjoint"`: the seed paper's own formulation, each joint's error twist and zero offset as a
+//!   polynomial in the joint values, identified through the product-of-exponentials chain, degree
+//!   cross-validated ([`adjoint`]; fitted with [`fit_adjoint`], evaluated by [`crate::predict`]).
 //!
 //! Hyperparameters (degree, ridge `λ`, length scale) are chosen by 5-fold cross-validation over the pose
 //! rows, folds drawn from the seed ([`cross_validation`]); among candidates within 0.5 % of the best
@@ -18,6 +21,7 @@
 //! from memorising noise. The reported cross-validated RMS is that of the selected candidate, so it is
 //! slightly optimistic (the selection itself is not cross-validated); held-out data tell the truth.
 
+pub mod adjoint;
 pub mod cross_validation;
 pub mod kernel;
 pub mod polynomial;
@@ -44,19 +48,22 @@ pub enum LearnedKind {
     Poly3,
     /// Kernel ridge regression (`kernel`).
     Kernel,
+    /// The adjoint error model with polynomial parameters, through the chain (`adjoint`).
+    Adjoint,
 }
 
 impl LearnedKind {
     /// Every kind, in the order of [`KINDS`].
-    pub const ALL: [LearnedKind; 5] = [
+    pub const ALL: [LearnedKind; 6] = [
         LearnedKind::Poly,
         LearnedKind::Poly1,
         LearnedKind::Poly2,
         LearnedKind::Poly3,
         LearnedKind::Kernel,
+        LearnedKind::Adjoint,
     ];
 
-    /// The kind's word (`poly`, `poly1`, `poly2`, `poly3`, `kernel`).
+    /// The kind's word (`poly`, `poly1`, `poly2`, `poly3`, `kernel`, `adjoint`).
     pub fn name(self) -> &'static str {
         match self {
             LearnedKind::Poly => "poly",
@@ -64,6 +71,7 @@ impl LearnedKind {
             LearnedKind::Poly2 => "poly2",
             LearnedKind::Poly3 => "poly3",
             LearnedKind::Kernel => "kernel",
+            LearnedKind::Adjoint => "adjoint",
         }
     }
 
@@ -79,7 +87,7 @@ impl LearnedKind {
             LearnedKind::Poly1 => &[1],
             LearnedKind::Poly2 => &[2],
             LearnedKind::Poly3 => &[3],
-            LearnedKind::Kernel => &[],
+            LearnedKind::Kernel | LearnedKind::Adjoint => &[],
         }
     }
 }
@@ -91,8 +99,8 @@ impl std::fmt::Display for LearnedKind {
 }
 
 /// Valid kind words: `"poly"` (polynomial, degree chosen by CV from 1..=3), `"poly1"`, `"poly2"`,
-/// `"poly3"`, `"kernel"` ([`LearnedKind::name`]).
-pub const KINDS: &[&str] = &["poly", "poly1", "poly2", "poly3", "kernel"];
+/// `"poly3"`, `"kernel"`, `"adjoint"` ([`LearnedKind::name`]).
+pub const KINDS: &[&str] = &["poly", "poly1", "poly2", "poly3", "kernel", "adjoint"];
 
 /// Fewest pose rows [`fit`] accepts: two per cross-validation fold.
 pub const MIN_ROWS: usize = 2 * K_FOLDS;
@@ -106,6 +114,8 @@ enum Correction {
     Polynomial(PolynomialModel),
     /// Kernel ridge regression.
     Kernel(KernelModel),
+    /// The adjoint error model with polynomial parameters (evaluated through the chain).
+    Adjoint(adjoint::AdjointModel),
 }
 
 /// A learned correction of the tracker-frame residual as a function of the joint angles, with its
@@ -194,11 +204,57 @@ pub fn fit(
             }
         }
     }
-    if kind == LearnedKind::Kernel {
-        fit_kernel(q, n_joints, residual_m, seed)
-    } else {
-        Ok(fit_polynomial(kind, q, n_joints, residual_m, seed))
+    match kind {
+        LearnedKind::Kernel => fit_kernel(q, n_joints, residual_m, seed),
+        LearnedKind::Adjoint => Err(CalibError::Misuse(
+            "learned:adjoint is identified through the chain: use learned::fit_adjoint".into(),
+        )),
+        _ => Ok(fit_polynomial(kind, q, n_joints, residual_m, seed)),
     }
+}
+
+/// Fits `learned:adjoint` ([`adjoint`]) to the training rows `obs` of the physical model `params` of
+/// `model` (folds from `seed`): the correction, and the parameters with the registrations refitted
+/// with it. Errors as [`fit`] for too few rows.
+pub fn fit_adjoint(
+    model: &sim::Model,
+    params: &crate::params::KinematicParams,
+    obs: &crate::observations::Observations,
+    seed: u64,
+) -> Result<(LearnedResidual, crate::params::KinematicParams), CalibError> {
+    let n = obs.len();
+    if n < MIN_ROWS {
+        return Err(bad(
+            "rows".into(),
+            n.to_string(),
+            &format!(
+                "at least {MIN_ROWS} pose rows are needed for {K_FOLDS}-fold cross-validation"
+            ),
+        ));
+    }
+    let f = adjoint::fit(model, params, obs, seed)?;
+    let p = f.model.n_coefficients();
+    let selected = format!(
+        "adjoint error model, each joint's error twist and zero offset a polynomial of degree {} in q \
+         ({} coefficients, ridge λ = {:.0e})",
+        f.model.degree, p, f.model.lambda
+    );
+    let residual = LearnedResidual {
+        kind: LearnedKind::Adjoint,
+        n_joints: obs.n_joints,
+        n_rows: n,
+        n_fit_rows: n,
+        selected,
+        correction: if f.active {
+            Correction::Adjoint(f.model)
+        } else {
+            Correction::Zero
+        },
+        cv_rms_m: f.cv_rms_m,
+        cv_rms_before_m: f.cv_rms_before_m,
+        n_parameters: if f.active { p } else { 0 },
+    };
+    Ok((residual, f.params))
 }
 
 fn fit_polynomial(
@@ -309,7 +365,9 @@ fn fit_kernel(
 
 impl LearnedResidual {
     /// Correction to add to the physical prediction (m, tracker frame) at joint angles `q` (rad, one per
-    /// joint). A `q` of the wrong length gives a NaN vector (never a panic).
+    /// joint). A `q` of the wrong length gives a NaN vector (never a panic), and so does an adjoint
+    /// model, which is no additive correction: [`crate::predict::Prediction`] evaluates it through
+    /// the chain ([`LearnedResidual::adjoint`]).
     pub fn predict(&self, q: &[f64]) -> Vector3<f64> {
         if q.len() != self.n_joints {
             return Vector3::repeat(f64::NAN);
@@ -318,6 +376,15 @@ impl LearnedResidual {
             Correction::Zero => Vector3::zeros(),
             Correction::Polynomial(p) => p.predict(q),
             Correction::Kernel(k) => k.predict(q),
+            Correction::Adjoint(_) => Vector3::repeat(f64::NAN),
+        }
+    }
+
+    /// The adjoint model, for a kept `learned:adjoint` correction.
+    pub fn adjoint(&self) -> Option<&adjoint::AdjointModel> {
+        match &self.correction {
+            Correction::Adjoint(a) => Some(a),
+            _ => None,
         }
     }
 
@@ -380,6 +447,13 @@ impl LearnedResidual {
                 mm(self.cv_rms_m),
                 mm(self.cv_rms_before_m),
                 self.n_fit_rows
+            ),
+            Correction::Adjoint(_) => format!(
+                "{}; CV RMS {:.4} mm vs {:.4} mm without ({} poses)",
+                self.selected,
+                mm(self.cv_rms_m),
+                mm(self.cv_rms_before_m),
+                self.n_rows
             ),
         }
     }

@@ -174,3 +174,48 @@ pub fn rng(seed: u64) -> StdRng {
     eprintln!("seed {seed}");
     StdRng::seed_from_u64(seed)
 }
+
+/// A seed drawn for this run (from the clock), or `ROBOCAL_TEST_SEED` when set; printed with `what`
+/// so that a failure can be reproduced (`ROBOCAL_TEST_SEED=N cargo test …`).
+pub fn run_seed(what: &str) -> u64 {
+    let seed = std::env::var("ROBOCAL_TEST_SEED")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or_else(|| {
+            let t = std::time::SystemTime::now()
+                .duration_since(std::time::UNIX_EPOCH)
+                .map_or(0, |d| d.as_nanos() as u64);
+            // Mix the clock so that tests started in the same instant differ.
+            t ^ (what.len() as u64).wrapping_mul(0x9e37_79b9_7f4a_7c15)
+        });
+    eprintln!("{what}: seed {seed} (ROBOCAL_TEST_SEED={seed} reproduces it)");
+    seed
+}
+
+/// The same hidden robot seen from another tracker placement: a new `T_tracker_base` 2–4 m away at
+/// an arbitrary rotation, every robot parameter and the target unchanged.
+pub fn moved_tracker(truth: &Truth, rng: &mut StdRng) -> Truth {
+    let rot = unit(rng) * (3.0 * rng.random::<f64>());
+    let trans = unit(rng) * (2.0 + 2.0 * rng.random::<f64>());
+    Truth {
+        t_tracker_base: exp_twist(&Vector6::new(rot.x, rot.y, rot.z, 0.0, 0.0, 0.0))
+            * Pose::from_parts(trans.into(), nalgebra::Rotation3::identity()),
+        ..truth.clone()
+    }
+}
+
+/// `table` with a `campaign` column of value `id` on every row.
+pub fn with_campaign(table: &MeasurementTable, id: i64) -> MeasurementTable {
+    let mut t = table.clone();
+    t.campaign = Some(vec![id; t.len()]);
+    t
+}
+
+/// The rows of `b` appended to those of `a` (same columns).
+pub fn concat(a: &MeasurementTable, b: &MeasurementTable) -> MeasurementTable {
+    let mut t = a.clone();
+    for r in 0..b.len() {
+        t.push_row(&b.row(r)).unwrap();
+    }
+    t
+}

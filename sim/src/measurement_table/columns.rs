@@ -247,6 +247,7 @@ fn unsupported(type_name: &str) -> ColumnProblem {
 pub(super) struct ColumnsBuilder {
     columns: super::OptionalColumns,
     pose: Vec<i64>,
+    campaign: Vec<i64>,
     q: Vec<Vec<f64>>,
     dir: Vec<Vec<i8>>,
     position: [Vec<f64>; 3],
@@ -264,6 +265,7 @@ impl ColumnsBuilder {
         ColumnsBuilder {
             columns: layout.columns,
             pose: Vec::with_capacity(rows),
+            campaign: Vec::new(),
             q: vec![Vec::with_capacity(rows); nq],
             dir: vec![Vec::new(); if layout.columns.dir { nq } else { 0 }],
             position: Default::default(),
@@ -289,6 +291,7 @@ impl ColumnsBuilder {
         match role {
             Role::Ignore => {}
             Role::Pose => self.pose.extend(integers(values)?),
+            Role::Campaign => self.campaign.extend(integers(values)?),
             Role::Dir(j) => self.dir[j].extend(directions(values)?),
             _ => {
                 let v = floats(values)?;
@@ -300,7 +303,7 @@ impl ColumnsBuilder {
                     Role::Temp => self.temp.extend(v),
                     Role::Payload => self.payload.extend(v),
                     Role::Sigma => self.sigma.extend(v),
-                    Role::Ignore | Role::Pose | Role::Dir(_) => {}
+                    Role::Ignore | Role::Pose | Role::Campaign | Role::Dir(_) => {}
                 }
             }
         }
@@ -335,6 +338,7 @@ impl ColumnsBuilder {
         table.temp = c.temp.then_some(self.temp);
         table.payload = c.payload.then_some(self.payload);
         table.sigma = c.sigma.then_some(self.sigma);
+        table.campaign = c.campaign.then_some(self.campaign);
         table
     }
 }

@@ -399,6 +399,7 @@ fn append(table: &mut MeasurementTable, part: MeasurementTable) {
     ext(&mut table.dir, part.dir);
     ext(&mut table.payload, part.payload);
     ext(&mut table.sigma, part.sigma);
+    ext(&mut table.campaign, part.campaign);
 }
 
 /// Parses whole data lines (`text`: the same bytes as text, when valid UTF-8).
@@ -425,6 +426,7 @@ fn parse_chunk(
     let mut pos = [0.0; 3];
     let mut quat = [0.0; 4];
     let (mut pose, mut t, mut temp, mut payload, mut sigma) = (0i64, 0.0, 0.0, 0.0, 0.0);
+    let mut campaign = 0i64;
     let mut row = 0usize;
     loop {
         let line = match rec.next_record(&mut cells) {
@@ -471,6 +473,7 @@ fn parse_chunk(
                 Role::Dir(j) => parse_dir(s).map(|v| dir[j] = v),
                 Role::Payload => parse_f64(s).map(|v| payload = v),
                 Role::Sigma => parse_f64(s).map(|v| sigma = v),
+                Role::Campaign => parse_i64(s).map(|v| campaign = v),
             });
             if let Err(message) = res {
                 return Err(ChunkError {
@@ -501,6 +504,9 @@ fn parse_chunk(
         }
         if let Some(v) = table.sigma.as_mut() {
             v.push(sigma);
+        }
+        if let Some(v) = table.campaign.as_mut() {
+            v.push(campaign);
         }
     }
     Ok(Chunk {
@@ -568,6 +574,9 @@ fn write_rows(table: &MeasurementTable, rows: std::ops::Range<usize>) -> Vec<u8>
         for c in [&table.payload, &table.sigma].into_iter().flatten() {
             out.push(b',');
             put_f64(&mut out, c[r]);
+        }
+        if let Some(c) = &table.campaign {
+            write!(out, ",{}", c[r]).expect("writing to a Vec cannot fail");
         }
         out.push(b'\n');
     }

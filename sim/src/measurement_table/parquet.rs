@@ -1,7 +1,9 @@
 //! Parquet reading and writing of the measurement table (see the parent module for the format).
 
 use super::columns::{ColumnValues, ColumnsBuilder};
-use super::{IN_MEMORY, MeasurementTable, Positions, Role, resolve_columns, table_err};
+use super::{
+    IN_MEMORY, MeasurementTable, OptionalColumns, Positions, Role, resolve_columns, table_err,
+};
 use crate::error::{Result, SimError};
 use arrow_array::cast::AsArray;
 use arrow_array::types::{
@@ -10,7 +12,6 @@ use arrow_array::types::{
 };
 use arrow_array::{Array, ArrayRef, Float64Array, Int8Array, Int64Array, RecordBatch};
 use arrow_schema::{DataType, Field, Schema};
-use parquet::arrow::ArrowWriter;
 use parquet::arrow::ProjectionMask;
 use parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder;
 use parquet::file::properties::WriterProperties;
@@ -29,26 +30,30 @@ pub fn write_parquet_bytes(table: &MeasurementTable) -> Result<Vec<u8>> {
     write_parquet_unchecked(table, IN_MEMORY)
 }
 
-/// Writer properties of a measurement table, all set explicitly so that the bytes depend on the table
-/// only.
-fn writer_properties(table: &MeasurementTable) -> WriterProperties {
+/// Writer properties of a measurement table with `n_joints` joints and the optional `columns`, all set
+/// explicitly so that the bytes depend on the rows only.
+fn writer_properties(n_joints: usize, columns: OptionalColumns) -> WriterProperties {
     let mut b = crate::io::deterministic_writer_properties(PARQUET_MAX_ROW_GROUP_ROWS)
         .set_column_dictionary_enabled(ColumnPath::from("pose"), true);
-    if table.dir.is_some() {
-        for j in 1..=table.n_joints {
+    if columns.campaign {
+        b = b.set_column_dictionary_enabled(ColumnPath::from("campaign"), true);
+    }
+    if columns.dir {
+        for j in 1..=n_joints {
             b = b.set_column_dictionary_enabled(ColumnPath::from(format!("dir{j}")), true);
         }
     }
     b.build()
 }
 
-/// The Arrow schema of a table's file: `pose` Int64, `dir*` Int8, every other column Float64.
-fn schema(table: &MeasurementTable) -> Arc<Schema> {
-    let fields: Vec<Field> = table
+/// The Arrow schema of a table's file: `pose` and `campaign` Int64, `dir*` Int8, every other column
+/// Float64.
+fn schema(n_joints: usize, columns: OptionalColumns) -> Arc<Schema> {
+    let fields: Vec<Field> = MeasurementTable::new(n_joints, columns)
         .column_names()
         .into_iter()
         .map(|name| {
-            let dt = if name == "pose" {
+            let dt = if name == "pose" || name == "campaign" {
                 DataType::Int64
             } else if name.starts_with("dir") {
                 DataType::Int8
@@ -89,28 +94,117 @@ fn arrays(table: &MeasurementTable, rows: std::ops::Range<usize>) -> Vec<ArrayRe
     for c in [&table.payload, &table.sigma].into_iter().flatten() {
         out.push(f(c[rows.clone()].to_vec()));
     }
+    if let Some(c) = &table.campaign {
+        out.push(Arc::new(Int64Array::from(c[rows.clone()].to_vec())));
+    }
     out
 }
 
 /// The Parquet bytes of a table assumed valid; `file` names it in errors.
 pub(super) fn write_parquet_unchecked(table: &MeasurementTable, file: &str) -> Result<Vec<u8>> {
-    let fail = |e: &dyn std::fmt::Display| {
-        table_err(file, None, None, format!("cannot write Parquet: {e}"))
-    };
-    let schema = schema(table);
-    let mut writer =
-        ArrowWriter::try_new(Vec::new(), schema.clone(), Some(writer_properties(table)))
-            .map_err(|e| fail(&e))?;
-    let n = table.len();
-    let mut start = 0;
-    while start < n {
-        let end = (start + PARQUET_MAX_ROW_GROUP_ROWS).min(n);
-        let batch = RecordBatch::try_new(schema.clone(), arrays(table, start..end))
-            .map_err(|e| fail(&e))?;
-        writer.write(&batch).map_err(|e| fail(&e))?;
-        start = end;
+    let mut w = ParquetTableWriter::new(Vec::new(), table.n_joints, table.columns(), file)?;
+    w.append_unchecked(table)?;
+    w.finish()
+}
+
+/// A measurement table written to Parquet part by part, rows appended in order: the file is the one
+/// [`super::write`] gives for the whole table, byte for byte, however the rows are split into parts
+/// ([`crate::io::ParquetStream`]). Memory is one row group, whatever the number of rows. Used by
+/// `robocal generate`, which streams campaigns of any size.
+pub struct ParquetTableWriter<W: std::io::Write + Send> {
+    stream: crate::io::ParquetStream<W>,
+    schema: Arc<Schema>,
+    n_joints: usize,
+    columns: OptionalColumns,
+    /// Rows written so far (to number the rows of a part in errors).
+    rows: usize,
+    /// The file, for errors.
+    file: String,
+}
+
+impl<W: std::io::Write + Send> ParquetTableWriter<W> {
+    /// A writer into `sink` of a table with `n_joints` joint columns and the optional `columns`;
+    /// `file` names it in errors.
+    ///
+    /// # Errors
+    /// [`SimError::Io`] naming `file` when the parquet writer cannot be made.
+    pub fn new(sink: W, n_joints: usize, columns: OptionalColumns, file: &str) -> Result<Self> {
+        let schema = schema(n_joints, columns);
+        let stream = crate::io::ParquetStream::new(
+            sink,
+            schema.clone(),
+            writer_properties(n_joints, columns),
+            PARQUET_MAX_ROW_GROUP_ROWS,
+        )
+        .map_err(|e| write_err(file, &e))?;
+        Ok(ParquetTableWriter {
+            stream,
+            schema,
+            n_joints,
+            columns,
+            rows: 0,
+            file: file.to_string(),
+        })
     }
-    writer.into_inner().map_err(|e| fail(&e))
+
+    /// Appends the rows of `part`, which must have the writer's columns and be valid
+    /// ([`MeasurementTable::validate`]; errors name the file and the row in the whole table; pose
+    /// ids are checked for reuse within the part).
+    ///
+    /// # Errors
+    /// [`SimError::Table`] for an invalid part, [`SimError::Io`] for a failed write.
+    pub fn append(&mut self, part: &MeasurementTable) -> Result<()> {
+        if part.n_joints != self.n_joints || part.columns() != self.columns {
+            return Err(table_err(
+                &self.file,
+                None,
+                None,
+                "a part with other columns than the table's".into(),
+            ));
+        }
+        let offset = self.rows;
+        part.validate_named(&self.file).map_err(|mut e| {
+            if let SimError::Table { row: Some(r), .. } = &mut e {
+                *r += offset;
+            }
+            e
+        })?;
+        self.append_unchecked(part)
+    }
+
+    fn append_unchecked(&mut self, part: &MeasurementTable) -> Result<()> {
+        let n = part.len();
+        let batch = RecordBatch::try_new(self.schema.clone(), arrays(part, 0..n))
+            .map_err(|e| write_err(&self.file, &e))?;
+        self.stream
+            .write(&batch)
+            .map_err(|e| write_err(&self.file, &e))?;
+        self.rows += n;
+        Ok(())
+    }
+
+    /// Rows written so far.
+    pub fn rows(&self) -> usize {
+        self.rows
+    }
+
+    /// Writes the rest and the footer; returns the sink.
+    ///
+    /// # Errors
+    /// [`SimError::Io`] for a failed write.
+    pub fn finish(self) -> Result<W> {
+        let file = self.file;
+        self.stream.finish().map_err(|e| write_err(&file, &e))
+    }
+}
+
+/// A write failure of the table `file` (the sink failed, or the encoder): [`SimError::Io`], a runtime
+/// failure, not a bad table.
+fn write_err(file: &str, e: &dyn std::fmt::Display) -> SimError {
+    SimError::Io {
+        path: std::path::PathBuf::from(file),
+        source: std::io::Error::other(format!("Parquet: {e}")),
+    }
 }
 
 /// A problem in one column: the 0-based index within the array (if one value is at fault) and what.
