@@ -33,7 +33,13 @@ fn regressor_svg(p: &RegressorPlot) -> String {
             style: Style::Markers,
         },
     ];
-    if lo.is_finite() && hi > lo {
+    if !p.curve.is_empty() {
+        series.push(Series {
+            label: "identified".into(),
+            points: p.curve.clone(),
+            style: Style::Dashed,
+        });
+    } else if lo.is_finite() && hi > lo {
         series.push(Series {
             label: "identified".into(),
             points: vec![(lo, p.slope * lo), (hi, p.slope * hi)],
@@ -105,18 +111,45 @@ pub fn summary_markdown(d: &Diagnosis, data_name: &str) -> String {
             f.test_z
         ));
     }
+    if d.findings.iter().any(|f| f.rival.is_some()) {
+        s.push_str(
+            "\n## Rivals\n\nThe cause or probe that came closest when each finding was adopted.\n\n\
+             | finding | nearest rival | its gain | finding's gain | why not the rival |\n|---|---|---|---|---|\n",
+        );
+        for f in &d.findings {
+            if let Some(r) = &f.rival {
+                s.push_str(&format!(
+                    "| {} | {} | {:.1} % | {:.1} % | {} |\n",
+                    f.cause,
+                    r.name,
+                    100.0 * r.gain,
+                    100.0 * f.gain,
+                    r.why_not
+                ));
+            }
+        }
+    }
+    if !d.unexplained.rejected.is_empty() {
+        s.push_str("\n## Rejected for impossible physics\n\n");
+        for r in &d.unexplained.rejected {
+            s.push_str(&format!("- **{}**: {}.\n", r.cause, r.evidence));
+        }
+    }
     if !d.trials.is_empty() {
         s.push_str(
             "\n## Candidates tried\n\nA cause passes when its training z and held-out z both pass \
-             (Bonferroni over the round's candidates), it gains at least 2 % and no periodic joint-angle \
-             error explains the residual as well; of those passing, the one with the largest held-out z \
-             is adopted.\n\n\
-             | round | cause | test RMS | gain | held-out z | training z | passes | explained as well by |\n\
-             |---|---|---|---|---|---|---|---|\n",
+             (Bonferroni over the round's candidates), it gains at least 2 % and no probe for an error \
+             outside the known causes (an angle error of one joint periodic in its angle or linear in the \
+             joint angles; not the harmonics a transmission error models) explains the residual as well; \
+             of those passing, the one with the largest held-out z is adopted. The adopted causes are \
+             then checked in their joint fit: one whose named parameters are physically impossible is \
+             rejected and the rounds run again without it.\n\n\
+             | round | cause | test RMS | gain | held-out z | training z | passes | explained as well by | impossible physics |\n\
+             |---|---|---|---|---|---|---|---|---|\n",
         );
         for t in &d.trials {
             s.push_str(&format!(
-                "| {} | {} | {} | {:.1} % | {:.1} | {:.1} | {} | {} |\n",
+                "| {} | {} | {} | {:.1} % | {:.1} | {:.1} | {} | {} | {} |\n",
                 t.round,
                 t.cause,
                 um(t.test_rms_m),
@@ -124,7 +157,8 @@ pub fn summary_markdown(d: &Diagnosis, data_name: &str) -> String {
                 t.test_z,
                 t.train_z,
                 if t.significant { "yes" } else { "no" },
-                t.beaten_by.as_deref().unwrap_or("")
+                t.beaten_by.as_deref().unwrap_or(""),
+                t.impossible.as_deref().unwrap_or("")
             ));
         }
     }

@@ -25,6 +25,7 @@
 //! base twist `β` by `[−[p], I]`, the target position by `R_tracker_flange`, and the target rotation
 //! `ρ` (target frame) turns the target by `R_tracker_target ρ`.
 
+use crate::lie3::{exp_rotation, left_jacobian};
 use crate::params::{KinematicParams, ParamLayout};
 use nalgebra::{Matrix3, Vector3};
 use sim::lie::{Pose, pose_from};
@@ -69,6 +70,11 @@ pub struct ChainScratch {
     pub p_tracker: Vector3<f64>,
     /// Predicted target orientation, tracker frame (identity without orientation parameters).
     pub r_tracker_target: Matrix3<f64>,
+    /// Whether the last evaluation bent the chain ([`Chain::forward_bent`]).
+    pub bent: bool,
+    /// With a bent chain: each joint's axis, tracker frame, before its bend (the frames then carry
+    /// the bend after the joint's rotation).
+    pub axes: Vec<Vector3<f64>>,
     /// Campaign (index) of the last configuration: whose tracker frame the above are in.
     pub campaign: usize,
 }
@@ -81,6 +87,8 @@ impl ChainScratch {
             t_tracker_flange: Pose::identity(),
             p_tracker: Vector3::zeros(),
             r_tracker_target: Matrix3::identity(),
+            bent: false,
+            axes: vec![Vector3::zeros(); n],
             campaign: 0,
         }
     }
@@ -180,7 +188,41 @@ impl Chain {
     ///
     /// # Panics
     /// If `q.len()` differs from the joint count or the campaign is out of range.
+    #[inline]
     pub fn forward_in(&self, s: &mut ChainScratch, q: &[f64], campaign: usize) {
+        self.evaluate(s, q, campaign, None);
+    }
+
+    /// [`Chain::forward_in`] with everything beyond joint `i` turned about the joint's origin by the
+    /// rotation vector `bend[i]` (rad, joint frame `i`: the child link's frame, turning with the
+    /// joint), after the joint's own motion: `Fᵢ = Fᵢ₋₁ Oᵢ exp([Aᵢ] θᵢ) exp([φᵢ])` (link deflection).
+    /// The bend is the robot's, the same in every campaign; `campaign` only selects the tracker frame
+    /// (`F₀ = T_tracker_base` of the campaign) and the target.
+    /// The joint-twist columns of the Jacobian keep their form (they depend on `Fᵢ` only through
+    /// `Pᵢ = Fᵢ H'ᵢ⁻¹`); the zero-offset column turns about the axis before the bend, which
+    /// [`ChainScratch::axes`] keeps; [`Chain::bend_axis`] gives the bend's own column.
+    ///
+    /// # Panics
+    /// If `q.len()` or `bend.len()` differs from the joint count or the campaign is out of range.
+    pub fn forward_bent(
+        &self,
+        s: &mut ChainScratch,
+        q: &[f64],
+        campaign: usize,
+        bend: &[Vector3<f64>],
+    ) {
+        assert_eq!(bend.len(), self.nq(), "one bend per joint");
+        self.evaluate(s, q, campaign, Some(bend));
+    }
+
+    #[inline(always)]
+    fn evaluate(
+        &self,
+        s: &mut ChainScratch,
+        q: &[f64],
+        campaign: usize,
+        bend: Option<&[Vector3<f64>]>,
+    ) {
         assert_eq!(q.len(), self.nq(), "joint vector length");
         let base = &self.bases[campaign];
         s.campaign = campaign;
@@ -201,8 +243,15 @@ impl Chain {
                     p += r * (self.axis[i] * theta);
                 }
             }
+            if let Some(b) = bend {
+                s.axes[i] = r * self.axis[i];
+                if b[i] != Vector3::zeros() {
+                    r *= exp_rotation(&b[i]);
+                }
+            }
             s.frames[i] = pose_from(r, p);
         }
+        s.bent = bend.is_some();
         s.t_tracker_flange = s.frames[self.nq() - 1] * self.flange_offset;
         s.p_tracker = (s.t_tracker_flange * nalgebra::Point3::from(self.targets[campaign])).coords;
         s.r_tracker_target = match &self.target_rotations[campaign] {
@@ -211,13 +260,43 @@ impl Chain {
         };
     }
 
+    /// The tracker-frame rotation `ω` (rad per unit) by which a unit step of the bend of joint `i` along
+    /// `local` (joint frame) turns everything beyond the joint, and the point `oᵢ` (tracker frame, m) it
+    /// turns about, at the last [`Chain::forward_bent`] evaluation with bend `phi` at that joint:
+    /// `exp([φ + δ]) = exp([φ]) exp([J_r(φ) δ])` with the right Jacobian `J_r(φ) = J_l(φ)ᵀ`, so
+    /// `ω = R(Fᵢ) J_l(φ)ᵀ local`. A point `p` beyond the joint moves by `ω × (p − oᵢ)`.
+    pub fn bend_axis(
+        &self,
+        s: &ChainScratch,
+        i: usize,
+        local: &Vector3<f64>,
+        phi: &Vector3<f64>,
+    ) -> (Vector3<f64>, Vector3<f64>) {
+        let f = &s.frames[i];
+        (
+            f.rotation * (left_jacobian(phi).tr_mul(local)),
+            f.translation.vector,
+        )
+    }
+
+    /// Joint `i`'s axis (tracker frame) at the last evaluation: the frame's axis, or with a bent chain
+    /// the axis before the bend.
+    #[inline]
+    fn axis_now(&self, s: &ChainScratch, i: usize) -> Vector3<f64> {
+        if s.bent {
+            s.axes[i]
+        } else {
+            s.frames[i].rotation.matrix() * self.axis[i]
+        }
+    }
+
     /// `∂p_tracker/∂qᵢ` (tracker frame; m/rad, or m/m for a prismatic joint) at the last
     /// [`Chain::forward`] configuration: how the target moves per unit of joint `i` (0-based), the
     /// zero-offset column of [`Chain::position_jacobian`].
     #[inline]
     pub fn joint_direction(&self, s: &ChainScratch, i: usize) -> Vector3<f64> {
         let f = &s.frames[i];
-        let w = f.rotation.matrix() * self.axis[i];
+        let w = self.axis_now(s, i);
         if self.kind[i].is_rotational() {
             w.cross(&(s.p_tracker - f.translation.vector))
         } else {
@@ -336,7 +415,7 @@ impl Chain {
                 }
             }
             if self.kind[i].is_rotational() {
-                let w = fr * self.axis[i];
+                let w = self.axis_now(s, i);
                 let kz = layout.zero_offset(i);
                 for row in 0..3 {
                     out[row * np + kz] = w[row];

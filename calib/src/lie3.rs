@@ -43,6 +43,21 @@ pub fn left_jacobian_inverse(phi: &Vector3<f64>) -> Matrix3<f64> {
     Matrix3::identity() - k * 0.5 + k * k * c
 }
 
+/// Left Jacobian of SO(3) at `φ`: `exp([φ + δ]) ≈ exp([J_l(φ) δ]) exp([φ])` for small `δ`.
+///
+/// `J_l(φ) = I + (1 − cos θ)/θ² [φ] + (θ − sin θ)/θ³ [φ]²`, `θ = |φ|` (series below 1e-4 rad).
+pub fn left_jacobian(phi: &Vector3<f64>) -> Matrix3<f64> {
+    let th2 = phi.norm_squared();
+    let k = skew(phi);
+    let (a, b) = if th2 < 1e-8 {
+        (0.5 - th2 / 24.0, 1.0 / 6.0 - th2 / 120.0)
+    } else {
+        let th = th2.sqrt();
+        ((1.0 - th.cos()) / th2, (th - th.sin()) / (th2 * th))
+    };
+    Matrix3::identity() + k * a + k * k * b
+}
+
 /// Left Jacobian of SE(3) at the twist `ξ = [ω; v]` (rad, m; the convention of
 /// [`sim::lie::exp_twist`]): `exp([ξ + δ]) ≈ exp([J_l(ξ) δ]) exp([ξ])` for small `δ`.
 ///
@@ -150,6 +165,26 @@ mod tests {
                 "{r} {p} {y}: {}",
                 (back - m).amax()
             );
+        }
+    }
+
+    #[test]
+    fn left_jacobian_matches_finite_differences_and_inverts() {
+        for phi in [
+            Vector3::new(0.4, -0.3, 0.9),
+            Vector3::new(2e-5, 1e-5, -3e-5),
+        ] {
+            let j = left_jacobian(&phi);
+            let h = 1e-6;
+            for k in 0..3 {
+                let mut d = Vector3::zeros();
+                d[k] = h;
+                // exp([φ ± h eₖ]) exp([−φ]) = exp([±h J_l eₖ]) to first order.
+                let lp = log_rotation(&(exp_rotation(&(phi + d)) * exp_rotation(&-phi)));
+                let lm = log_rotation(&(exp_rotation(&(phi - d)) * exp_rotation(&-phi)));
+                assert!(((lp - lm) / (2.0 * h) - j.column(k)).amax() < 1e-9);
+            }
+            assert!((j * left_jacobian_inverse(&phi) - Matrix3::identity()).amax() < 1e-14);
         }
     }
 

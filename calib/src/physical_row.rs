@@ -4,15 +4,19 @@
 //!
 //! ```text
 //! θ = q + Σₑ xₑ gₑ(row)                    (joint-angle terms of the extensions)
-//! p_kin = T_tracker_base(c) · T_base_flange(θ) · p_flange
+//! φᵢ = Σₑ xₑ gₑ(row) e_about               (bending terms, turning the chain at joint i)
+//! p_kin = T_tracker_base(c) · T_base_flange(θ, φ) · p_flange
 //! p = t_base + (1 + γ) (p_kin − t_base),  γ = Σₑ xₑ gₑ(row)   (growth terms)
 //! ```
+//!
+//! The bend is the robot's (the same in every campaign); the campaign `c` only selects the tracker
+//! frame and the target.
 //!
 //! A leaf: it uses the chain, the parameters and the extensions' regressors only, so that the
 //! modules above it can use each other's results without importing each other.
 
 use crate::chain::{Chain, ChainScratch};
-use crate::extensions::{Regressors, apply};
+use crate::extensions::{Regressors, apply, bends};
 use crate::params::KinematicParams;
 use nalgebra::Vector3;
 
@@ -35,6 +39,8 @@ pub struct PredictScratch {
     pub chain: ChainScratch,
     /// Effective joint values `θ` of the last row (rad or m).
     pub theta: Vec<f64>,
+    /// Bending rotation vector of each joint at the last row (rad, joint frame; link deflection).
+    pub bend: Vec<Vector3<f64>>,
     /// The chain of a `learned:adjoint` model, re-prepared for each row.
     pub adjoint: Option<AdjointScratch>,
 }
@@ -45,6 +51,7 @@ impl PredictScratch {
         PredictScratch {
             chain: ChainScratch::new(n),
             theta: vec![0.0; n],
+            bend: vec![Vector3::zeros(); n],
             adjoint: None,
         }
     }
@@ -88,7 +95,11 @@ pub fn physical_row(
     s: &mut PredictScratch,
 ) -> RowPrediction {
     let growth = apply(regs, &params.extension, r, q, &mut s.theta);
-    chain.forward_in(&mut s.chain, &s.theta, campaign);
+    if bends(regs, &params.extension, r, &mut s.bend) {
+        chain.forward_bent(&mut s.chain, &s.theta, campaign, &s.bend);
+    } else {
+        chain.forward_in(&mut s.chain, &s.theta, campaign);
+    }
     let lever = s.chain.p_tracker - chain.t_tracker_base(campaign).translation.vector;
     RowPrediction {
         p_tracker: s.chain.p_tracker + growth * lever,

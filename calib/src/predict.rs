@@ -3,7 +3,8 @@
 //!
 //! ```text
 //! θ = q + Σₑ xₑ gₑ(row)                    (joint-angle terms of the extensions)
-//! p_kin = T_tracker_base · T_base_flange(θ) · p_flange
+//! φᵢ = Σₑ xₑ gₑ(row) e_about               (bending terms, turning the chain at joint i)
+//! p_kin = T_tracker_base · T_base_flange(θ, φ) · p_flange
 //! p = t_base + (1 + γ) (p_kin − t_base),  γ = Σₑ xₑ gₑ(row)   (growth terms)
 //! p_tracker = p + R_c R_0ᵀ r̂(q)            (learned correction, when the model has one)
 //! ```

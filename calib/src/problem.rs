@@ -50,24 +50,63 @@ fn grow_columns(
     }
 }
 
+/// How a bending term moves the target of one row: the chain and its evaluation, the row's bends.
+struct BendColumns<'c> {
+    chain: &'c Chain,
+    scratch: &'c PredictScratch,
+    /// `1 + γ`: the growth multiplies every displacement of `p_kin`.
+    grown: f64,
+    /// `true` for the position rows (`ω × (p_kin − oᵢ)`), `false` for the orientation rows (`ω`).
+    position: bool,
+}
+
+impl BendColumns<'_> {
+    /// The column of a unit bend of joint `joint` about axis `about` of its frame (3 rows).
+    fn column(&self, joint: usize, about: usize) -> Vector3<f64> {
+        let local = Vector3::ith(about, 1.0);
+        let s = self.scratch;
+        let (w, o) = self
+            .chain
+            .bend_axis(&s.chain, joint, &local, &s.bend[joint]);
+        if self.position {
+            w.cross(&(s.chain.p_tracker - o)) * self.grown
+        } else {
+            w
+        }
+    }
+}
+
 /// Fills the extension columns of a 3-row Jacobian block (row-major, `layout.len()` columns) whose
 /// kinematic columns are set: a joint-angle term is the joint's zero-offset column times its regressor,
-/// the growth term `lever` times its regressor.
+/// the growth term `lever` times its regressor, a bending term the bend's own column
+/// ([`Chain::bend_axis`]) times its regressor.
 fn extension_columns(
     layout: &ParamLayout,
     coef: &[f64],
     lever: &Vector3<f64>,
-    rows: usize,
+    bend: &BendColumns<'_>,
     block: &mut [f64],
 ) {
     let np = layout.len();
     for (e, (p, &g)) in layout.extensions.iter().zip(coef).enumerate() {
         let ke = layout.extension(e);
-        for row in 0..rows {
-            block[row * np + ke] = match p.term {
-                Term::JointAngle { joint } => block[row * np + layout.zero_offset(joint)] * g,
-                Term::Growth => lever[row] * g,
-            };
+        match p.term {
+            Term::JointAngle { joint } => {
+                for row in 0..3 {
+                    block[row * np + ke] = block[row * np + layout.zero_offset(joint)] * g;
+                }
+            }
+            Term::Growth => {
+                for row in 0..3 {
+                    block[row * np + ke] = lever[row] * g;
+                }
+            }
+            Term::Bend { joint, about } => {
+                let c = bend.column(joint, about);
+                for row in 0..3 {
+                    block[row * np + ke] = c[row] * g;
+                }
+            }
         }
     }
 }
@@ -285,11 +324,17 @@ impl<'a> KinematicProblem<'a> {
             if growth != 0.0 {
                 grow_columns(&self.layout, campaign, growth, &p, &mut ws.block[..3 * np]);
             }
+            let bend = BendColumns {
+                chain: &self.chain,
+                scratch: &ws.predict,
+                grown: 1.0 + growth,
+                position: true,
+            };
             extension_columns(
                 &self.layout,
                 obs.ext.row(r),
                 &lever,
-                3,
+                &bend,
                 &mut ws.block[..3 * np],
             );
             for v in &mut ws.block[..3 * np] {
@@ -305,11 +350,17 @@ impl<'a> KinematicProblem<'a> {
             if with_jacobian {
                 self.chain
                     .orientation_jacobian(&ws.predict.chain, &self.layout, &mut ws.rot);
+                let bend = BendColumns {
+                    chain: &self.chain,
+                    scratch: &ws.predict,
+                    grown: 1.0,
+                    position: false,
+                };
                 extension_columns(
                     &self.layout,
                     obs.ext.row(r),
                     &Vector3::zeros(),
-                    3,
+                    &bend,
                     &mut ws.rot,
                 );
                 let jl = left_jacobian_inverse(&e);

@@ -383,3 +383,156 @@ fn compliance_is_recovered_from_the_physics_engine_truth() {
     }
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// Recovers `spec` from a campaign the simulator made with `effects`; `truth(name)` is the value of
+/// each named extension parameter (0 where the simulator put nothing). Every parameter determined on
+/// its own must lie within 4 of its standard deviations of the truth; returns their z².
+fn recovered_z2(effects: &str, spec: &str, seed: u64, truth: &dyn Fn(&str) -> f64) -> Vec<f64> {
+    let model = robots::load_builtin("iiwa7").unwrap();
+    let dir = std::env::temp_dir().join(format!("robocal_ext_new_{}_{seed}", std::process::id()));
+    let t = simulate(effects, seed, &dir);
+    let cal = calibrate_model(
+        &model,
+        &Dataset::all(&t, "sim"),
+        None,
+        &ModelSpec::parse(spec).unwrap(),
+        &CalibrationOptions::default(),
+    )
+    .unwrap();
+    assert!(
+        cal.report.health.is_clean(),
+        "seed {seed}: {}",
+        cal.report.health
+    );
+    let sub = &cal.subspace;
+    let mut z2 = Vec::new();
+    let mut checked = 0;
+    for (e, p) in cal.layout.extensions.iter().enumerate() {
+        let kk = cal.layout.extension(e);
+        let null_share = sub
+            .v
+            .row(kk)
+            .columns(sub.rank, sub.n_params() - sub.rank)
+            .norm();
+        if null_share > 0.1 {
+            continue;
+        }
+        let sigma = cal.covariance[(kk, kk)].sqrt();
+        let z = (cal.params.extension[e] - truth(&p.name())) / sigma;
+        assert!(
+            z.abs() < 4.0,
+            "seed {seed}: {} = {:.4e} ± {sigma:.1e}, truth {:.4e} (z = {z:.2})",
+            p.name(),
+            cal.params.extension[e],
+            truth(&p.name())
+        );
+        checked += 1;
+        z2.push(z * z);
+    }
+    assert!(
+        checked >= 6,
+        "seed {seed}: only {checked} parameters determined"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+    z2
+}
+
+/// Transmission error (harmonics 1-3 of three joints' angles, drawn amplitudes and phases) and link
+/// deflection with joint compliance and a payload (one equilibrium in the simulator) are recovered
+/// within their predicted standard deviations. The simulator writes `A sin(k q + φ)`; the estimator's
+/// sine and cosine amplitudes are `A cos φ` and `A sin φ`. Its deflection compliances `(c_u, c_v)`
+/// are about x and about the joint frame's other axis (y for joints about z, z for joints about y).
+#[test]
+fn transmission_error_and_link_deflection_are_recovered_within_their_standard_deviations() {
+    let mut z2 = Vec::new();
+    for seed in [11u64, 12] {
+        let mut g = StdRng::seed_from_u64(seed ^ 0x7e);
+        // Transmission error on joints 1, 3 and 5 (turning ±170°), 30-150 µrad per harmonic.
+        let amp: Vec<[f64; 3]> = (0..3)
+            .map(|_| [0; 3].map(|_| g.random_range(3e-5..1.5e-4)))
+            .collect();
+        let phase: Vec<[f64; 3]> = (0..3)
+            .map(|_| [0; 3].map(|_| g.random_range(-3.1..3.1)))
+            .collect();
+        let row = |v: Option<&[f64; 3]>| match v {
+            Some(a) => format!("[{:e}, {:e}, {:e}]", a[0], a[1], a[2]),
+            None => "[0.0, 0.0, 0.0]".into(),
+        };
+        let rows = |v: &[[f64; 3]]| {
+            (1..=7)
+                .map(|j| row([1, 3, 5].iter().position(|x| *x == j).map(|k| &v[k])))
+                .collect::<Vec<_>>()
+                .join(", ")
+        };
+        let effects = format!(
+            "[effects.transmission]\nharmonics = [1, 2, 3]\namplitude_rad = [{}]\nphase_rad = [{}]\n",
+            rows(&amp),
+            rows(&phase)
+        );
+        let truth = |name: &str| -> f64 {
+            for (k, j) in [1, 3, 5].iter().enumerate() {
+                for h in 0..3 {
+                    let (a, f) = (amp[k][h], phase[k][h]);
+                    let q = if h == 0 {
+                        "q".to_string()
+                    } else {
+                        format!("{}q", h + 1)
+                    };
+                    if name == format!("joint {j} transmission error sin {q}") {
+                        return a * f.cos();
+                    }
+                    if name == format!("joint {j} transmission error cos {q}") {
+                        return a * f.sin();
+                    }
+                }
+            }
+            0.0
+        };
+        z2.extend(recovered_z2(
+            &effects,
+            "kinematic+transmission_error",
+            seed,
+            &truth,
+        ));
+
+        // Deflection across joints 2, 3 and 4 (1-5e-6 rad/(N m) per axis), compliance at joints 2
+        // and 4 (5e3-2e4 N m/rad), a payload of up to 6 kg. Joints 2 and 4 bend about x only: their
+        // z axes are the axes of joints 3 and 5, where bending is those joints' compliance.
+        let c: Vec<[f64; 2]> = (0..3)
+            .map(|_| [0; 2].map(|_| g.random_range(1e-6..5e-6)))
+            .collect();
+        let k: Vec<f64> = (0..2).map(|_| g.random_range(5e3..2e4)).collect();
+        let effects = format!(
+            "[effects.deflection]\ncompliance_rad_per_nm = [[0.0, 0.0], [{:e}, 0.0], [{:e}, {:e}], \
+             [{:e}, 0.0], [0.0, 0.0], [0.0, 0.0], [0.0, 0.0]]\n\
+             [effects.compliance]\nstiffness_nm_per_rad = [inf, {:e}, inf, {:e}, inf, inf, inf]\n\
+             [campaign.payload]\nchoice_kg = [0.0, 3.0, 6.0]\ncom_m = [0.0, 0.0, 0.06]\n",
+            c[0][0], c[1][0], c[1][1], c[2][0], k[0], k[1]
+        );
+        let truth = |name: &str| -> f64 {
+            match name {
+                "joint 2 bending compliance about x" => c[0][0],
+                "joint 3 bending compliance about x" => c[1][0],
+                "joint 3 bending compliance about y" => c[1][1],
+                "joint 4 bending compliance about x" => c[2][0],
+                "joint 2 compliance" => 1.0 / k[0],
+                "joint 4 compliance" => 1.0 / k[1],
+                _ => 0.0,
+            }
+        };
+        z2.extend(recovered_z2(
+            &effects,
+            "kinematic+joint_compliance+link_deflection",
+            seed,
+            &truth,
+        ));
+    }
+    let mean = z2.iter().sum::<f64>() / z2.len() as f64;
+    eprintln!("mean z² = {mean:.2} over {} parameters", z2.len());
+    // For n standard normal z the mean of z² has standard deviation √(2/n).
+    assert!(
+        (0.4..1.8).contains(&mean),
+        "mean z² = {mean:.2} over {} parameters: the standard deviations do not describe the errors",
+        z2.len()
+    );
+}

@@ -139,3 +139,195 @@ fn normal_equations_equal_the_jacobian_products() {
     assert!((nalgebra::DVector::from_vec(grad) - &gr2).amax() <= 1e-12 * gr2.amax());
     assert!((cost - rv.norm_squared()).abs() <= 1e-12 * cost);
 }
+
+/// Every column of an extended model, with every cause at once (the bending and transmission-error
+/// terms among them) and at a linearisation point where every extension value is non-zero (bends of
+/// up to 0.02 rad, so that the left Jacobian of the bend matters), against central differences:
+/// positions alone and with orientation, and with two campaigns (the rows alternate between two tracker
+/// placements, each with its own target: the bends are the robot's, the registration the row's).
+#[test]
+fn extended_jacobian_matches_central_differences() {
+    use calib::calibrate::{CalibrationOptions, Dataset, observations};
+    use calib::extensions::{ExtensionSettings, ModelSpec};
+    use rand::RngExt;
+    use sim::measurement_table::{MeasurementTable, OptionalColumns, Row};
+    for (name, orientation, seed, two_campaigns) in [
+        ("iiwa7", false, 41, false),
+        ("iiwa7", true, 42, false),
+        ("ur5", true, 43, false),
+        ("iiwa7", true, 44, true),
+    ] {
+        let model = robots::load_builtin(name).unwrap();
+        let mut g = rng(seed);
+        let truth = Truth::random(&model, orientation, &mut g);
+        let configs = random_configs(&model, 12, &mut g);
+        let cols = OptionalColumns {
+            orientation,
+            temp: true,
+            dir: true,
+            payload: true,
+            campaign: two_campaigns,
+            ..OptionalColumns::NONE
+        };
+        let mut t = MeasurementTable::new(model.nq(), cols);
+        for (k, q) in configs.iter().enumerate() {
+            let (p, r) = truth.target(&model, q);
+            let uq = nalgebra::UnitQuaternion::from_rotation_matrix(
+                &nalgebra::Rotation3::from_matrix_unchecked(r),
+            );
+            let dir: Vec<i8> = (0..model.nq())
+                .map(|_| if g.random::<bool>() { 1 } else { -1 })
+                .collect();
+            t.push_row(&Row {
+                pose: k as i64,
+                q,
+                position: [p.x, p.y, p.z],
+                orientation: orientation.then_some([uq.w, uq.i, uq.j, uq.k]),
+                temp: Some(20.0 + g.random_range(0.0..10.0)),
+                dir: Some(&dir),
+                payload: Some([0.0, 2.0, 5.0][k % 3]),
+                campaign: two_campaigns.then_some(3 * (k % 2) as i64),
+                ..Row::default()
+            })
+            .unwrap();
+        }
+        let rows: Vec<usize> = (0..t.len()).collect();
+        let spec = ModelSpec::parse(
+            "kinematic+joint_compliance+gear_backlash+thermal_drift+transmission_error+link_deflection",
+        )
+        .unwrap();
+        let mut settings =
+            ExtensionSettings::for_data(&model, &spec.causes, &t, &rows, "t").unwrap();
+        settings.payload_com_m = [0.01, -0.02, 0.06];
+        let n_ext = settings.params(&model).len();
+        let at: Vec<f64> = settings
+            .params(&model)
+            .iter()
+            .enumerate()
+            .map(|(e, p)| p.scale * (3.0 + 0.1 * e as f64) * if e % 2 == 0 { 1.0 } else { -1.0 })
+            .collect();
+        let obs = observations(
+            &model,
+            &Dataset::all(&t, "t"),
+            &CalibrationOptions::default(),
+            Some(&settings),
+            &at,
+        )
+        .unwrap();
+        let mut params = truth_params(&truth).with_extension(at.clone());
+        params.t_tracker_base =
+            sim::lie::exp_twist(&nalgebra::Vector6::new(0.1, -0.2, 0.2, 0.03, -0.04, 0.0))
+                * params.t_tracker_base;
+        if two_campaigns {
+            let moved =
+                sim::lie::exp_twist(&nalgebra::Vector6::new(-0.3, 0.1, 0.6, 0.5, 0.2, -0.1))
+                    * params.t_tracker_base;
+            params = params.with_campaigns(&[0, 3], &[moved], true);
+            params.campaigns[0].p_flange_target =
+                Some(params.p_flange_target + nalgebra::Vector3::new(0.01, -0.02, 0.005));
+        }
+        let layout = ParamLayout::for_params(&model, &params, obs.ext.params.clone());
+        assert_eq!(layout.n_campaigns(), if two_campaigns { 2 } else { 1 });
+        assert_eq!(
+            layout.len(),
+            layout.kinematic_len() + n_ext,
+            "{name}: parameters"
+        );
+        let all: Vec<usize> = (0..layout.len()).collect();
+        let mut prob = KinematicProblem::new(&model, &obs, params, all);
+        let (m, p) = (prob.n_residuals(), prob.n_params());
+        let mut j = DMatrix::zeros(m, p);
+        prob.set_params(&vec![0.0; p]);
+        prob.jacobian(&mut j);
+        let coord_max = (0..obs.len())
+            .map(|r| obs.position[r].amax() / obs.sigma[r])
+            .fold(0.0, f64::max);
+        let (mut rp, mut rm) = (vec![0.0; m], vec![0.0; m]);
+        let mut bends_seen = 0;
+        for k in 0..p {
+            // A step of 1e-2 of the parameter's scale: small against its curvature, large against
+            // rounding (extension scales are 1e-6 to 1e-4, kinematic ones 1e-4 to 1).
+            let h = if k >= layout.kinematic_len() {
+                1e-2 * layout.extensions[k - layout.kinematic_len()].scale
+            } else {
+                1e-6
+            };
+            let mut step = vec![0.0; p];
+            step[k] = h;
+            prob.set_params(&step);
+            prob.residuals(&mut rp);
+            step[k] = -h;
+            prob.set_params(&step);
+            prob.residuals(&mut rm);
+            let col = j.column(k);
+            let scale = col.amax().max(1.0);
+            let worst = (0..m)
+                .map(|i| ((rp[i] - rm[i]) / (2.0 * h) - col[i]).abs())
+                .fold(0.0, f64::max);
+            assert!(
+                worst < 1e-6 * scale + 4.0 * f64::EPSILON * coord_max / (2.0 * h),
+                "{name} orientation={orientation} column {k} ({}): error {worst:e} of {scale:e}",
+                if k >= layout.kinematic_len() {
+                    layout.extensions[k - layout.kinematic_len()].name()
+                } else {
+                    layout.name(k)
+                }
+            );
+            if k >= layout.kinematic_len()
+                && matches!(
+                    layout.extensions[k - layout.kinematic_len()].term,
+                    calib::extensions::Term::Bend { .. }
+                )
+                && col.amax() > 1.0
+            {
+                bends_seen += 1;
+            }
+        }
+        assert!(
+            bends_seen >= 2 * (model.nq() - 2),
+            "{name}: only {bends_seen} bend columns moved the target"
+        );
+    }
+}
+
+/// A bent chain is the robot whose links are turned by the bends: `Chain::forward_bent` with nominal
+/// parameters against `sim`'s forward kinematics of a model in which each link's frame is turned by
+/// its joint's bend after the joint's rotation: the next joint's origin (or the flange offset)
+/// becomes `exp([φᵢ]) Oᵢ₊₁`.
+#[test]
+fn bent_chain_equals_the_robot_with_turned_links() {
+    use calib::lie3::exp_rotation;
+    use nalgebra::Vector3;
+    use sim::lie::{Pose, pose_from};
+    for name in ["iiwa7", "ur5", "wam"] {
+        let model = robots::load_builtin(name).unwrap();
+        let mut g = rng(51);
+        let params = KinematicParams::nominal(model.nq(), false);
+        let chain = Chain::new(&model, &params);
+        let mut s = ChainScratch::new(model.nq());
+        let n = model.nq();
+        for q in random_configs(&model, 20, &mut g) {
+            let bend: Vec<Vector3<f64>> = (0..n)
+                .map(|i| Vector3::new(1e-3 * (i as f64 - 2.0), -2e-3, 5e-4 * i as f64) * q[0].cos())
+                .collect();
+            let turn = |b: &Vector3<f64>| -> Pose { pose_from(exp_rotation(b), Vector3::zeros()) };
+            let mut bent = model.clone();
+            for i in 1..n {
+                bent.joints[i].origin = turn(&bend[i - 1]) * model.joints[i].origin;
+                bent.joints[i].refresh_derived();
+            }
+            bent.flange_offset = turn(&bend[n - 1]) * model.flange_offset;
+            let mut data = sim::Data::new(&bent);
+            let flange = sim::flange_pose(&bent, &mut data, &q);
+            chain.forward_bent(&mut s, &q, 0, &bend);
+            assert!(
+                (s.p_tracker - flange.translation.vector).amax() < 1e-14,
+                "{name}: {}",
+                (s.p_tracker - flange.translation.vector).amax()
+            );
+            assert!(
+                (s.t_tracker_flange.rotation.matrix() - flange.rotation.matrix()).amax() < 1e-14
+            );
+        }
+    }
+}

@@ -128,6 +128,9 @@ pub(crate) fn text(d: &Diagnosis, data: &str) -> String {
             f.evidence
         ));
     }
+    for r in &d.unexplained.rejected {
+        s.push_str(&format!("rejected: {}\n", r.evidence));
+    }
     for n in &d.not_tried {
         s.push_str(&format!("not tried: {}: {}\n", n.cause, n.reason));
     }

@@ -141,6 +141,42 @@ pub struct Finding {
     pub train_z: f64,
     /// The cause's identified parameters.
     pub parameters: Vec<FoundParameter>,
+    /// The nearest rival when it was adopted: the other candidate cause, or the probe for structure no
+    /// cause explains, that gained most on the held-out poses in that round.
+    #[serde(default)]
+    pub rival: Option<Rival>,
+}
+
+/// The nearest rival of a finding.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Rival {
+    /// A cause's word (`link_deflection`) or a probe's name (`harmonics 1-3 of joint 3`).
+    pub name: String,
+    /// Its relative test-RMS reduction in that round.
+    pub gain: f64,
+    /// Why it lost, in words.
+    pub why_not: String,
+}
+
+/// A cause that would have gained on the held-out poses but whose identified physics is impossible:
+/// not adopted, and reported as evidence of an error no known cause explains.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Rejected {
+    /// The cause.
+    pub cause: Cause,
+    /// 1-based joints whose identified parameter is impossible.
+    pub joints: Vec<usize>,
+    /// What is impossible.
+    pub reason: String,
+    /// Relative test-RMS reduction it would have brought.
+    pub gain: f64,
+    /// Paired test `z` on the test poses.
+    pub test_z: f64,
+    /// The impossible parameters (value at least [`DiagnoseOptions::joint_z`] standard deviations on the
+    /// impossible side).
+    pub parameters: Vec<FoundParameter>,
+    /// One sentence for people.
+    pub evidence: String,
 }
 
 impl Finding {
@@ -174,6 +210,15 @@ pub struct Trial {
     /// The unexplained-structure probe that predicts the test poses at least as well, if any: then the
     /// residual is not this cause's, whatever its significance.
     pub beaten_by: Option<String>,
+    /// Why its identified physics is impossible, if it is (a negative stiffness or lost motion): then
+    /// it is not adopted whatever its significance.
+    #[serde(default)]
+    pub impossible: Option<String>,
+    /// True when no parameter of it is determined on its own and differs from zero by
+    /// [`DiagnoseOptions::joint_z`] standard deviations: there is no joint (or growth) to name, so it
+    /// is not adopted whatever its gain.
+    #[serde(default)]
+    pub names_nothing: bool,
 }
 
 /// A candidate cause diagnose could not try.
@@ -230,6 +275,7 @@ pub struct Diagnosis {
 }
 
 /// A fitted model with its held-out errors.
+#[derive(Clone)]
 pub(crate) struct Evaluated {
     pub spec: ModelSpec,
     pub cal: Calibration,
@@ -371,8 +417,10 @@ fn as_joint_angle_urad(
 }
 
 /// Plots of a finding: per named joint (and the growth), against the parameter's regressor, the
-/// partial residual (the adopted model's residual plus this parameter's own contribution: what the
-/// data show of the term) and the adopted model's residual.
+/// partial residual (the adopted model's residual plus this term's own contribution: what the data
+/// show of the term) and the adopted model's residual. A joint with several joint-angle parameters of
+/// the cause (the harmonics of a transmission error) is drawn against its angle, with the identified
+/// curve; a bending parameter as the residual's rotation about its axis, against the bending moment.
 fn finding_plots(
     model: &Model,
     split: &Split<'_>,
@@ -382,33 +430,130 @@ fn finding_plots(
     growth: bool,
 ) -> Vec<report::RegressorPlot> {
     let layout = &after.cal.layout;
+    let n_test = split.test.rows.len();
+    let regressor =
+        |e: usize| -> Vec<f64> { (0..n_test).map(|r| after.test_regs.row(r)[e]).collect() };
     let mut out = Vec::new();
+    for &j in joints {
+        let angle_params: Vec<usize> = (0..layout.extensions.len())
+            .filter(|&e| {
+                let p = &layout.extensions[e];
+                p.cause == cause && p.term == Term::JointAngle { joint: j - 1 }
+            })
+            .collect();
+        if angle_params.is_empty() {
+            continue;
+        }
+        let resid = as_joint_angle_urad(model, split, after, &after.test_err, j - 1);
+        // This joint's angle change by the cause per test row (µrad).
+        let contribution: Vec<f64> = (0..n_test)
+            .map(|r| {
+                angle_params
+                    .iter()
+                    .map(|&e| after.cal.params.extension[e] * after.test_regs.row(r)[e] * 1e6)
+                    .sum()
+            })
+            .collect();
+        let before: Vec<f64> = resid
+            .iter()
+            .zip(&contribution)
+            .map(|(r, c)| r + c)
+            .collect();
+        let base = report::RegressorPlot {
+            file: format!("{}_joint{j}", cause.name()),
+            title: format!("{}: joint {j}", cause.name()),
+            y_label: format!("residual as joint {j} angle (µrad)"),
+            before,
+            after: resid,
+            ..Default::default()
+        };
+        if let [e] = angle_params[..] {
+            let axis = cause.model().plot_axis(layout.extensions[e].term);
+            out.push(report::RegressorPlot {
+                x_label: axis.label,
+                x: regressor(e).iter().map(|v| axis.sign * v).collect(),
+                slope: axis.sign * after.cal.params.extension[e] * 1e6,
+                ..base
+            });
+        } else {
+            let q: Vec<f64> = split
+                .test
+                .rows
+                .iter()
+                .map(|&r| split.test.table.q_row(r)[j - 1])
+                .collect();
+            let mut curve: Vec<(f64, f64)> = q.iter().copied().zip(contribution).collect();
+            curve.sort_by(|a, b| a.0.total_cmp(&b.0));
+            out.push(report::RegressorPlot {
+                x_label: cause
+                    .model()
+                    .plot_axis(Term::JointAngle { joint: j - 1 })
+                    .label,
+                x: q,
+                curve,
+                ..base
+            });
+        }
+    }
+    let prediction = Prediction::new(model, &after.cal.params);
+    let mut scratch = prediction.scratch();
     for (e, p) in layout.extensions.iter().enumerate() {
         if p.cause != cause {
             continue;
         }
         let value = after.cal.params.extension[e];
-        let g: Vec<f64> = (0..split.test.rows.len())
-            .map(|r| after.test_regs.row(r)[e])
-            .collect();
+        let g = regressor(e);
         match p.term {
-            Term::JointAngle { joint } if joints.contains(&(joint + 1)) => {
+            Term::Bend { joint, about } if joints.contains(&(joint + 1)) => {
+                // The residual as the rotation about this bending axis that would explain it (µrad).
+                let local = Vector3::ith(about, 1.0);
+                let resid: Vec<f64> = (0..n_test)
+                    .map(|r| {
+                        let q = split.test.table.q_row(split.test.rows[r]);
+                        prediction.physical(&after.test_regs, r, q, &mut scratch);
+                        let s = &scratch;
+                        let (w, o) =
+                            prediction
+                                .chain()
+                                .bend_axis(&s.chain, joint, &local, &s.bend[joint]);
+                        let d = w.cross(&(s.chain.p_tracker - o));
+                        let n2 = d.norm_squared();
+                        if n2 >= MIN_PLOT_LEVER_M * MIN_PLOT_LEVER_M {
+                            -after.test_err[r].dot(&d) / n2 * 1e6
+                        } else {
+                            f64::NAN
+                        }
+                    })
+                    .collect();
                 let axis = cause.model().plot_axis(p.term);
-                let (sign, x_label) = (axis.sign, axis.label);
-                let resid = as_joint_angle_urad(model, split, after, &after.test_err, joint);
                 out.push(report::RegressorPlot {
-                    file: format!("{}_joint{}", cause.name(), joint + 1),
-                    title: format!("{}: joint {}", cause.name(), joint + 1),
-                    x_label,
-                    y_label: format!("residual as joint {} angle (µrad)", joint + 1),
-                    x: g.iter().map(|v| sign * v).collect(),
+                    file: format!(
+                        "{}_joint{}_{}",
+                        cause.name(),
+                        joint + 1,
+                        crate::extensions::axis_name(about)
+                    ),
+                    title: format!(
+                        "{}: joint {} about {}",
+                        cause.name(),
+                        joint + 1,
+                        crate::extensions::axis_name(about)
+                    ),
+                    x_label: axis.label,
+                    y_label: format!(
+                        "residual as bending of joint {} about {} (µrad)",
+                        joint + 1,
+                        crate::extensions::axis_name(about)
+                    ),
+                    x: g.iter().map(|v| axis.sign * v).collect(),
                     before: resid
                         .iter()
                         .zip(&g)
                         .map(|(r, g)| r + value * g * 1e6)
                         .collect(),
                     after: resid,
-                    slope: sign * value * 1e6,
+                    slope: axis.sign * value * 1e6,
+                    curve: Vec::new(),
                 });
             }
             Term::Growth if growth => {
@@ -438,6 +583,7 @@ fn finding_plots(
                     after: rel(&after.test_err),
                     x: g,
                     slope: value * 1e6,
+                    curve: Vec::new(),
                 });
             }
             _ => {}
@@ -447,10 +593,19 @@ fn finding_plots(
 }
 
 /// Training `χ²` drop of `big` over `small` as a normal `z`, with the variance factor of `big`.
+///
+/// The degrees of freedom are the identifiable parameters `big` adds. When its rank does not grow
+/// (the models are not nested: adding joint compliance to link deflection hands the bending about the
+/// next joint's axis to the compliance, and weakly determined combinations fall below the rank
+/// threshold differently), they are the parameters it adds, a conservative count.
 fn train_z(small: &Calibration, big: &Calibration) -> f64 {
     let c0 = small.report.after.solver.cost_final;
     let c1 = big.report.after.solver.cost_final;
-    let k = big.subspace.rank.saturating_sub(small.subspace.rank) as f64;
+    let added = big.layout.len().saturating_sub(small.layout.len());
+    let k = match big.subspace.rank.saturating_sub(small.subspace.rank) {
+        0 => added,
+        k => k,
+    } as f64;
     let vf = if big.report.dof > 0 {
         c1 / big.report.dof as f64
     } else {
@@ -521,23 +676,44 @@ fn cause_parameters(cal: &Calibration, cause: Cause) -> Vec<(FoundParameter, Ter
         .collect()
 }
 
-/// The evidence sentence of a finding of `cause` at `joints` (1-based; with `growth` when the link
-/// growth is named too): what the residual correlates with, and the named parameters' values.
-fn evidence(
+/// The parameters of `cause` in `cal` whose value is physically impossible by more than `joint_z`
+/// standard deviations (and determined on their own), with the reason of the first.
+fn impossible_parameters(
+    cal: &Calibration,
     cause: Cause,
-    joints: &[usize],
-    params: &[FoundParameter],
-    r: f64,
-    growth: bool,
-) -> String {
+    joint_z: f64,
+) -> Option<(String, Vec<FoundParameter>)> {
     let model = cause.model();
-    let values: Vec<String> = params
-        .iter()
-        .filter(|p| match p.term {
-            Some(Term::JointAngle { joint }) => joints.contains(&(joint + 1)),
-            Some(Term::Growth) => growth,
-            None => false,
+    let mut reason = None;
+    let bad: Vec<FoundParameter> = cause_parameters(cal, cause)
+        .into_iter()
+        .filter(|(p, _, alone)| {
+            *alone
+                && p.sigma > 0.0
+                && (p.value / p.sigma).abs() > joint_z
+                && model.impossible(p.value).is_some()
         })
+        .map(|(p, _, _)| {
+            reason.get_or_insert(model.impossible(p.value).unwrap_or_default());
+            p
+        })
+        .collect();
+    reason.map(|r| (r.to_string(), bad))
+}
+
+/// 1-based joints of the parameters `params`, ascending, each once.
+fn joints_of(params: &[FoundParameter]) -> Vec<usize> {
+    let set: std::collections::BTreeSet<usize> = params
+        .iter()
+        .filter_map(|p| p.term.and_then(Term::joint).map(|j| j + 1))
+        .collect();
+    set.into_iter().collect()
+}
+
+/// The parameters as `name value ± sigma unit`, joined by `; `.
+fn parameter_values(cause: Cause, params: &[FoundParameter]) -> String {
+    params
+        .iter()
         .map(|p| {
             format!(
                 "{} {:.3e} ± {:.1e} {}{}",
@@ -545,15 +721,367 @@ fn evidence(
                 p.value,
                 p.sigma,
                 p.unit,
-                model.remark(p.value)
+                cause.model().remark(p.value)
             )
         })
+        .collect::<Vec<_>>()
+        .join("; ")
+}
+
+/// The evidence sentence of a finding of `cause` at `joints` (1-based; with `growth` when the link
+/// growth is named too): what the residual correlates with, the values of the parameters that name
+/// them (beyond `joint_z` standard deviations), and why not the nearest rival.
+fn evidence(
+    cause: Cause,
+    joints: &[usize],
+    params: &[FoundParameter],
+    r: f64,
+    growth: bool,
+    rival: Option<&Rival>,
+    joint_z: f64,
+) -> String {
+    let model = cause.model();
+    let named: Vec<FoundParameter> = params
+        .iter()
+        .filter(|p| p.sigma > 0.0 && (p.value / p.sigma).abs() > joint_z)
+        .filter(|p| match p.term {
+            Some(Term::JointAngle { joint } | Term::Bend { joint, .. }) => {
+                joints.contains(&(joint + 1))
+            }
+            Some(Term::Growth) => growth,
+            None => false,
+        })
+        .cloned()
         .collect();
-    format!(
-        "residual correlates with {} (r = {r:.2}); identified {}",
-        model.evidence_subject(&joint_words(joints)),
-        values.join("; ")
-    )
+    let mut s = if named.is_empty() {
+        format!(
+            "residual correlates with {} (r = {r:.2}); no joint's parameter is determined on its own \
+             beyond {joint_z} standard deviations (their effects are not told apart), so no joint is named",
+            model.evidence_subject("its joints"),
+        )
+    } else {
+        format!(
+            "residual correlates with {} (r = {r:.2}); identified {}",
+            model.evidence_subject(&joint_words(joints)),
+            parameter_values(cause, &named)
+        )
+    };
+    if let Some(rv) = rival {
+        s.push_str(&format!("; {}", rv.why_not));
+    }
+    s
+}
+
+/// The probe of `rivals` with the largest held-out gain that `cause` does not model itself.
+fn best_rival_probe(rivals: &[unexplained::Probe], cause: Cause) -> Option<&unexplained::Probe> {
+    rivals
+        .iter()
+        .filter(|p| !p.kind.modelled_by(cause))
+        .max_by(|a, b| a.gain.total_cmp(&b.gain))
+}
+
+/// A larger candidate must predict the held-out poses better than a smaller significant one by this
+/// paired `z` (one-sided 5 %) to be named instead of it.
+pub const TIE_Z: f64 = 1.645;
+
+/// The nearest rival of the candidate `this_round[k]` adopted in a round: the other candidate or the
+/// rival probe with the largest held-out gain, with why it lost in words; `better_than(i)` is the
+/// paired `z` by which candidate `i`'s held-out errors exceed the adopted one's.
+fn nearest_rival(
+    this_round: &[Trial],
+    k: usize,
+    rivals: &[unexplained::Probe],
+    better_than: &dyn Fn(usize) -> f64,
+) -> Option<Rival> {
+    let won = &this_round[k];
+    let pct = |g: f64| format!("{:.0} %", 100.0 * g);
+    let signature = won.cause.model().signature();
+    let other = this_round
+        .iter()
+        .enumerate()
+        .filter(|(i, _)| *i != k)
+        .max_by(|a, b| a.1.gain.total_cmp(&b.1.gain));
+    let probe = best_rival_probe(rivals, won.cause);
+    match (other, probe) {
+        (Some((i, t)), p) if p.is_none_or(|p| t.gain >= p.gain) => {
+            let why = match &t.impossible {
+                _ if t.gain > won.gain => format!(
+                    "not {}, its nearest rival: that gains {} on the held-out poses against {} here, \
+                     no better to a paired test (z = {:.1}) and with more parameters, so the simpler \
+                     is named; the data hardly tell them apart",
+                    t.cause,
+                    pct(t.gain),
+                    pct(won.gain),
+                    better_than(i)
+                ),
+                Some(reason) => format!(
+                    "not {}, its nearest rival: that would gain {} on the held-out poses against {} \
+                     here, but its fit needs {reason}",
+                    t.cause,
+                    pct(t.gain),
+                    pct(won.gain)
+                ),
+                None => format!(
+                    "not {}, its nearest rival: that gains {} on the held-out poses against {} here, \
+                     and this error {signature}",
+                    t.cause,
+                    pct(t.gain),
+                    pct(won.gain)
+                ),
+            };
+            Some(Rival {
+                name: t.cause.name().to_string(),
+                gain: t.gain,
+                why_not: why,
+            })
+        }
+        (_, Some(p)) => Some(Rival {
+            name: p.name.clone(),
+            gain: p.gain,
+            why_not: format!(
+                "not an error outside the known causes: the nearest probe for one ({}) gains {} on \
+                 the held-out poses against {} here",
+                p.name,
+                pct(p.gain),
+                pct(won.gain)
+            ),
+        }),
+        _ => None,
+    }
+}
+
+/// What a forward selection ends with.
+struct Selection {
+    /// The final model.
+    current: Evaluated,
+    /// The models fitted, kinematic first.
+    steps: Vec<Step>,
+    /// The causes adopted, in order (joints and evidence filled later, from the final model).
+    findings: Vec<Finding>,
+    /// Pairs `(cause, its companion)` adopted together ([`companion`]): of the two, one that names no
+    /// joint is not named.
+    companions: Vec<(Cause, Cause)>,
+}
+
+/// The cause fitted alongside `cause` when it is tried and the other is not in the model yet:
+/// joint compliance with link deflection. Bending of a joint about an axis that is the next joint's
+/// axis line is that joint's compliance, so link deflection leaves those axes to the compliance
+/// ([`crate::extensions::link_deflection::modelled_axes`]); fitted without it, a real bending about
+/// such an axis makes the other bending parameters take it up with impossible signs, and the
+/// compliance alone then takes the wrong joints' names.
+fn companion(cause: Cause) -> Option<Cause> {
+    (cause == Cause::LinkDeflection).then_some(Cause::JointCompliance)
+}
+
+/// What a selection adds to across passes.
+struct Bookkeeping<'b> {
+    round: &'b mut usize,
+    trials: &'b mut Vec<Trial>,
+    health: &'b mut Health,
+    progress: &'b mut dyn FnMut(&str),
+    /// Every model fitted so far by its name (`None`: too few poses), so that a selection run again
+    /// after a rejection does not refit what it fitted before (the fits are deterministic).
+    fits: &'b mut std::collections::BTreeMap<String, Option<Evaluated>>,
+    /// The rival probes on each model's residual, by the model's name.
+    rivals: &'b mut std::collections::BTreeMap<String, Vec<unexplained::Probe>>,
+}
+
+/// Forward selection from `start` over `candidates`: each round extends the current model by every
+/// remaining candidate, judges each ([`Trial`]) and adopts the significant one with the largest
+/// held-out `z`, until none is significant. Impossible physics does not stop a candidate here: fitted
+/// alone, a cause often stands in for another one with a wrong sign somewhere, which the joint fit
+/// with that other cause then puts right; [`invalid_finding`] judges the final joint fit.
+fn select(
+    model: &Model,
+    split: &Split<'_>,
+    start: Evaluated,
+    candidates: &[Cause],
+    options: &DiagnoseOptions,
+    book: &mut Bookkeeping<'_>,
+) -> Result<Selection> {
+    let mut current = start;
+    let mut steps = vec![current.step.clone()];
+    let mut findings = Vec::new();
+    let mut companions = Vec::new();
+    loop {
+        *book.round += 1;
+        let round = *book.round;
+        let remaining: Vec<Cause> = candidates
+            .iter()
+            .copied()
+            .filter(|c| !current.spec.causes.contains(c))
+            .collect();
+        if remaining.is_empty() {
+            break;
+        }
+        let z_crit = significance::normal_upper_quantile(options.alpha / remaining.len() as f64);
+        let z_held =
+            significance::normal_upper_quantile(options.held_out_alpha / remaining.len() as f64);
+        // The rivals no known cause names: angle errors of one joint periodic in its angle or linear
+        // in the joint angles. A cause that is really there explains its residual better than such a
+        // generic term, except the one that models it (the transmission error, the harmonics).
+        let rivals = book
+            .rivals
+            .entry(current.spec.name())
+            .or_insert_with(|| unexplained::probes(model, split, &current, &[], options.seed))
+            .clone();
+        let mut tried: Vec<(Cause, Evaluated, f64, f64, f64)> = Vec::new();
+        for cause in remaining {
+            crate::cancel::checkpoint()?;
+            let mut spec = current.spec.with(cause);
+            if let Some(c) = companion(cause).filter(|c| candidates.contains(c)) {
+                spec = spec.with(c);
+            }
+            (book.progress)(&spec.name());
+            let cand = match book.fits.get(&spec.name()) {
+                Some(Some(c)) => c.clone(),
+                Some(None) => continue,
+                None => match evaluate(model, split, &spec, options) {
+                    Ok(c) => {
+                        book.health.merge(&c.cal.report.health);
+                        book.fits.insert(spec.name(), Some(c.clone()));
+                        c
+                    }
+                    Err(CalibError::TooFewPoses { .. }) => {
+                        book.fits.insert(spec.name(), None);
+                        continue;
+                    }
+                    Err(e) => return Err(e),
+                },
+            };
+            let tz = significance::paired(&current.pose_sq, &cand.pose_sq).z;
+            let trz = train_z(&current.cal, &cand.cal);
+            let gain = 1.0 - cand.step.test_rms_m / current.step.test_rms_m;
+            let beaten_by = best_rival_probe(&rivals, cause)
+                .filter(|p| p.gain >= gain)
+                .map(|p| p.name.clone());
+            let significant =
+                tz > z_held && trz > z_crit && gain >= options.min_gain && beaten_by.is_none();
+            book.trials.push(Trial {
+                round,
+                cause,
+                test_rms_m: cand.step.test_rms_m,
+                test_z: tz,
+                train_z: trz,
+                gain,
+                significant,
+                beaten_by,
+                impossible: impossible_parameters(&cand.cal, cause, options.joint_z)
+                    .map(|(reason, _)| reason),
+                names_nothing: names_nothing(&cand.cal, cause, options.joint_z),
+            });
+            tried.push((cause, cand, tz, trz, gain));
+        }
+        let this_round = &book.trials[book.trials.len() - tried.len()..];
+        let best = this_round
+            .iter()
+            .enumerate()
+            .filter(|(_, t)| t.significant)
+            .max_by(|a, b| a.1.test_z.total_cmp(&b.1.test_z))
+            .map(|(k, _)| k);
+        let Some(mut k) = best else { break };
+        // Parsimony: a significant candidate with fewer parameters whose held-out errors are not
+        // significantly worse than the best one's is named instead (the data do not tell the two
+        // apart, and the larger model can mimic the smaller: bending of joint 1 about the horizontal
+        // axis under joint 2 is joint 2's compliance moved 0.19 m down).
+        let added = |i: usize| tried[i].1.cal.layout.len() - current.cal.layout.len();
+        let better_than =
+            |i: usize, j: usize| significance::paired(&tried[i].1.pose_sq, &tried[j].1.pose_sq).z;
+        if let Some(i) = (0..tried.len())
+            .filter(|&i| this_round[i].significant && added(i) < added(k))
+            .filter(|&i| better_than(i, k) < TIE_Z)
+            .min_by(|&a, &b| {
+                added(a)
+                    .cmp(&added(b))
+                    .then(this_round[b].test_z.total_cmp(&this_round[a].test_z))
+            })
+        {
+            k = i;
+        }
+        let rival = nearest_rival(this_round, k, &rivals, &|i| better_than(k, i));
+        let (cause, next, tz, trz, gain) = tried.swap_remove(k);
+        let r = explained_correlation(&current.test_err, &next.test_err);
+        let finding = Finding {
+            cause,
+            evidence: String::new(),
+            joints: Vec::new(),
+            test_rms_m_before: current.step.test_rms_m,
+            test_rms_m_after: next.step.test_rms_m,
+            gain,
+            r,
+            test_z: tz,
+            train_z: trz,
+            parameters: Vec::new(),
+            rival,
+        };
+        let added: Vec<Cause> = next
+            .spec
+            .causes
+            .iter()
+            .copied()
+            .filter(|c| *c != cause && !current.spec.causes.contains(c))
+            .collect();
+        findings.push(finding.clone());
+        for c in added {
+            companions.push((cause, c));
+            findings.push(Finding {
+                cause: c,
+                rival: None,
+                ..finding.clone()
+            });
+        }
+        steps.push(next.step.clone());
+        current = next;
+    }
+    Ok(Selection {
+        current,
+        steps,
+        findings,
+        companions,
+    })
+}
+
+/// True when no parameter of `cause` in `cal` is determined on its own and differs from zero by
+/// more than `joint_z` standard deviations: nothing to name.
+fn names_nothing(cal: &Calibration, cause: Cause, joint_z: f64) -> bool {
+    !cause_parameters(cal, cause)
+        .iter()
+        .any(|(p, _, alone)| *alone && p.sigma > 0.0 && (p.value / p.sigma).abs() > joint_z)
+}
+
+/// The first cause adopted by `sel` that does not hold in the final joint fit, one whose named
+/// parameters are impossible, as a rejection.
+fn invalid_finding(sel: &Selection, options: &DiagnoseOptions) -> Option<Rejected> {
+    let cal = &sel.current.cal;
+    sel.findings.iter().find_map(|f| {
+        let cause = f.cause;
+        let (reason, params) = impossible_parameters(cal, cause, options.joint_z)?;
+        let joints = joints_of(&params);
+        let values = if params.is_empty() {
+            String::new()
+        } else {
+            format!(" ({})", parameter_values(cause, &params))
+        };
+        Some(Rejected {
+            cause,
+            evidence: format!(
+                "{cause}{} would gain {:.0} % on the held-out poses (z = {:.1}), but its fit needs \
+                 {reason}{values}: not adopted, it stands in for an error no known cause explains",
+                if joints.is_empty() {
+                    String::new()
+                } else {
+                    format!(" at {}", joint_words(&joints))
+                },
+                100.0 * f.gain,
+                f.test_z,
+            ),
+            joints,
+            reason,
+            gain: f.gain,
+            test_z: f.test_z,
+            parameters: params,
+        })
+    })
 }
 
 /// Diagnoses `table` (all rows; `name` names it in messages) for `model`.
@@ -609,91 +1137,51 @@ pub fn diagnose_with_progress(
         }
     }
     progress("kinematic");
-    let mut current = evaluate(model, &split, &ModelSpec::kinematic(), options)?;
-    let mut health = current.cal.report.health;
-    let mut steps = vec![current.step.clone()];
-    let mut findings = Vec::new();
+    let kinematic = evaluate(model, &split, &ModelSpec::kinematic(), options)?;
+    let mut health = kinematic.cal.report.health;
     let mut trials = Vec::new();
     let mut plots = report::PlotData {
-        test_errors_kinematic_m: current.test_err.iter().map(|e| e.norm()).collect(),
+        test_errors_kinematic_m: kinematic.test_err.iter().map(|e| e.norm()).collect(),
         ..Default::default()
     };
+    // Forward selection, then the adopted causes checked in their joint fit: one whose named
+    // parameters are impossible there (or that names nothing) is rejected, and the selection runs
+    // again without it (it may have stood in for another cause), until every adopted cause holds.
+    let mut rejected: Vec<Rejected> = Vec::new();
     let mut round = 0;
-    loop {
-        round += 1;
-        let remaining: Vec<Cause> = usable
+    let mut fits = std::collections::BTreeMap::new();
+    let mut rival_probes = std::collections::BTreeMap::new();
+    let Selection {
+        current,
+        steps,
+        mut findings,
+        companions,
+    } = loop {
+        let candidates: Vec<Cause> = usable
             .iter()
             .copied()
-            .filter(|c| !current.spec.causes.contains(c))
+            .filter(|c| rejected.iter().all(|r| r.cause != *c))
             .collect();
-        if remaining.is_empty() {
-            break;
+        let sel = select(
+            model,
+            &split,
+            kinematic.clone(),
+            &candidates,
+            options,
+            &mut Bookkeeping {
+                round: &mut round,
+                trials: &mut trials,
+                health: &mut health,
+                progress,
+                fits: &mut fits,
+                rivals: &mut rival_probes,
+            },
+        )?;
+        match invalid_finding(&sel, options) {
+            None => break sel,
+            Some(r) => rejected.push(r),
         }
-        let z_crit = significance::normal_upper_quantile(options.alpha / remaining.len() as f64);
-        let z_held =
-            significance::normal_upper_quantile(options.held_out_alpha / remaining.len() as f64);
-        // The competitor no known cause names: an error periodic in one joint's angle. A cause that
-        // is really there explains its residual better than such a generic term can.
-        let competitor = unexplained::probes(model, &split, &current, &[], options.seed)
-            .into_iter()
-            .max_by(|a, b| a.gain.total_cmp(&b.gain));
-        let mut best: Option<(Evaluated, f64, f64)> = None;
-        for cause in remaining {
-            crate::cancel::checkpoint()?;
-            let spec = current.spec.with(cause);
-            progress(&spec.name());
-            let cand = match evaluate(model, &split, &spec, options) {
-                Ok(c) => c,
-                Err(CalibError::TooFewPoses { .. }) => continue,
-                Err(e) => return Err(e),
-            };
-            health.merge(&cand.cal.report.health);
-            let tz = significance::paired(&current.pose_sq, &cand.pose_sq).z;
-            let trz = train_z(&current.cal, &cand.cal);
-            let gain = 1.0 - cand.step.test_rms_m / current.step.test_rms_m;
-            let beaten_by = competitor
-                .as_ref()
-                .filter(|p| p.gain >= gain)
-                .map(|p| p.name.clone());
-            let significant =
-                tz > z_held && trz > z_crit && gain >= options.min_gain && beaten_by.is_none();
-            trials.push(Trial {
-                round,
-                cause,
-                test_rms_m: cand.step.test_rms_m,
-                test_z: tz,
-                train_z: trz,
-                gain,
-                significant,
-                beaten_by,
-            });
-            if significant && best.as_ref().is_none_or(|(_, z, _)| tz > *z) {
-                best = Some((cand, tz, trz));
-            }
-        }
-        let Some((next, tz, trz)) = best else { break };
-        let cause = *next
-            .spec
-            .causes
-            .iter()
-            .find(|c| !current.spec.causes.contains(c))
-            .expect("one new cause");
-        let r = explained_correlation(&current.test_err, &next.test_err);
-        findings.push(Finding {
-            cause,
-            evidence: String::new(),
-            joints: Vec::new(),
-            test_rms_m_before: current.step.test_rms_m,
-            test_rms_m_after: next.step.test_rms_m,
-            gain: 1.0 - next.step.test_rms_m / current.step.test_rms_m,
-            r,
-            test_z: tz,
-            train_z: trz,
-            parameters: Vec::new(),
-        });
-        steps.push(next.step.clone());
-        current = next;
-    }
+    };
     // Joints, values and evidence from the final model, where every adopted cause is fitted jointly
     // (a cause adopted early may have taken up part of a later one before that was in the model).
     for f in &mut findings {
@@ -706,31 +1194,99 @@ pub fn diagnose_with_progress(
                 0.0
             }
         };
-        f.joints = params
+        let named: Vec<FoundParameter> = params
             .iter()
-            .filter_map(|(p, term, alone)| match term {
-                Term::JointAngle { joint } if *alone && z_of(p) > options.joint_z => {
-                    Some(joint + 1)
-                }
-                _ => None,
+            .filter(|(p, term, alone)| {
+                matches!(term, Term::JointAngle { .. } | Term::Bend { .. })
+                    && *alone
+                    && z_of(p) > options.joint_z
             })
+            .map(|(p, _, _)| p.clone())
             .collect();
+        f.joints = joints_of(&named);
         let growth = params
             .iter()
             .any(|(p, term, alone)| *term == Term::Growth && *alone && z_of(p) > options.joint_z);
         f.parameters = params.into_iter().map(|(p, _, _)| p).collect();
-        f.evidence = evidence(cause, &f.joints, &f.parameters, f.r, growth);
+        f.evidence = evidence(
+            cause,
+            &f.joints,
+            &f.parameters,
+            f.r,
+            growth,
+            f.rival.as_ref(),
+            options.joint_z,
+        );
         plots.regressors.extend(finding_plots(
             model, &split, &current, cause, &f.joints, growth,
         ));
     }
+    // Of a cause and its companion adopted together, one that names no joint on its own is not named
+    // (the companion first: when both name none, the cause stays as adopted).
+    for &(cause, comp) in &companions {
+        let joints_of_cause = |c: Cause| {
+            findings
+                .iter()
+                .find(|f| f.cause == c)
+                .map(|f| f.joints.is_empty())
+        };
+        if joints_of_cause(comp) == Some(true) {
+            findings.retain(|f| f.cause != comp);
+        } else if joints_of_cause(cause) == Some(true) {
+            // Named without a joint only when the final model without it is worse on both tests.
+            let mut reduced = current.spec.clone();
+            reduced.causes.retain(|c| *c != cause);
+            progress(&reduced.name());
+            let without = match fits.get(&reduced.name()) {
+                Some(Some(c)) => c.clone(),
+                _ => evaluate(model, &split, &reduced, options)?,
+            };
+            let tz = significance::paired(&without.pose_sq, &current.pose_sq).z;
+            let trz = train_z(&without.cal, &current.cal);
+            if tz > significance::normal_upper_quantile(options.held_out_alpha)
+                && trz > significance::normal_upper_quantile(options.alpha)
+            {
+                continue;
+            }
+            let why_not = format!(
+                "not {cause}, fitted with it: none of its parameters differs from zero by more \
+                 than {} standard deviations on its own, and the final model without it predicts \
+                 the held-out poses as well (z = {tz:.1}, training z = {trz:.1}), so only {comp} \
+                 is named",
+                options.joint_z
+            );
+            let gain = findings
+                .iter()
+                .find(|f| f.cause == cause)
+                .map_or(0.0, |f| f.gain);
+            findings.retain(|f| f.cause != cause);
+            if let Some(f) = findings.iter_mut().find(|f| f.cause == comp) {
+                f.rival = Some(Rival {
+                    name: cause.to_string(),
+                    gain,
+                    why_not,
+                });
+                f.evidence = evidence(
+                    comp,
+                    &f.joints,
+                    &f.parameters,
+                    f.r,
+                    false,
+                    f.rival.as_ref(),
+                    options.joint_z,
+                );
+            }
+        }
+    }
+    drop(fits);
     let (noise_floor_m, noise_floor_source) = match options.noise_floor_m {
         Some(v) => (v, "given (--noise-floor)".to_string()),
         None => noise_floor::estimate(table, &split.test.rows, &options.calibration.noise),
     };
     crate::cancel::checkpoint()?;
     progress("unexplained structure");
-    let unexplained = unexplained::analyse(model, &split, &current, noise_floor_m, options)?;
+    let unexplained =
+        unexplained::analyse(model, &split, &current, noise_floor_m, options, rejected)?;
     plots.test_errors_final_m = current.test_err.iter().map(|e| e.norm()).collect();
     if let Some(j) = unexplained.correlates_with.as_ref().and_then(|p| p.joint) {
         plots.unexplained = Some(report::RegressorPlot {
@@ -747,6 +1303,7 @@ pub fn diagnose_with_progress(
             before: as_joint_angle_urad(model, &split, &current, &current.test_err, j - 1),
             after: Vec::new(),
             slope: 0.0,
+            curve: Vec::new(),
         });
     }
     Ok(Diagnosis {

@@ -22,6 +22,9 @@ pub struct RegressorPlot {
     pub after: Vec<f64>,
     /// Identified slope (vertical units per regressor unit): the fitted line.
     pub slope: f64,
+    /// The identified curve instead of a line, when the term is not linear in `x` (a transmission
+    /// error against its joint's angle): points `(x, vertical)` in ascending `x`; empty for a line.
+    pub curve: Vec<(f64, f64)>,
 }
 
 /// What the report draws; filled by the diagnosis, not part of its JSON.

@@ -76,6 +76,14 @@ impl CauseModel for GearBacklash {
         format!("the approach direction of {joints}")
     }
 
+    fn impossible(&self, value: f64) -> Option<&'static str> {
+        (value < 0.0).then_some("negative lost motion: a link ahead of its motor")
+    }
+
+    fn signature(&self) -> &'static str {
+        "flips sign with the side a joint was approached from"
+    }
+
     fn plot_axis(&self, term: Term) -> PlotAxis {
         PlotAxis {
             sign: -1.0,

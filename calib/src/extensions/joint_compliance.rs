@@ -69,6 +69,14 @@ impl CauseModel for JointCompliance {
         }
     }
 
+    fn impossible(&self, value: f64) -> Option<&'static str> {
+        (value < 0.0).then_some("negative compliance: no spring turns a joint along its load")
+    }
+
+    fn signature(&self) -> &'static str {
+        "turns a joint about its own axis in proportion to its gravity torque"
+    }
+
     fn plot_axis(&self, term: Term) -> PlotAxis {
         PlotAxis {
             sign: -1.0,

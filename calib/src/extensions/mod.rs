@@ -8,7 +8,13 @@
 //!   backlash ([`gear_backlash`]: `x` = half the lost motion, `g` = −approach sign) and joint-zero drift
 //!   ([`thermal_drift`]: `x` = drift per kelvin, `g` = `ΔT`);
 //! - as a growth of the whole arm about the base origin, `p_base ← (1 + x g) p_base` (thermal link
-//!   growth: `x` = expansion coefficient, `g` = `ΔT`).
+//!   growth: `x` = expansion coefficient, `g` = `ΔT`);
+//! - as a rotation of everything beyond joint `i` about an axis orthogonal to the joint's own, through
+//!   the joint's origin, by the angle `Σₑ xₑ gₑ(row)` (link deflection ([`link_deflection`]): `x` =
+//!   bending compliance, `g` = the gravity moment the joint transmits about that axis).
+//!
+//! Joint-angle terms also model the transmission error ([`transmission_error`]: `x` = amplitude of a
+//! harmonic of the joint's own angle, `g` = `sin kqᵢ` or `cos kqᵢ`).
 //!
 //! The regressors `gₑ(row)` depend only on the measured row (joint values, payload, direction signs,
 //! temperature or time) and on the nominal robot, so they are computed once per data set
@@ -24,12 +30,14 @@
 
 pub mod gear_backlash;
 pub mod joint_compliance;
+pub mod link_deflection;
 mod regressors;
 mod settings;
 mod spec;
 pub mod thermal_drift;
+pub mod transmission_error;
 
-pub use regressors::{EQUILIBRIUM_ITERATIONS, Regressors, RowInputs, apply};
+pub use regressors::{EQUILIBRIUM_ITERATIONS, Regressors, RowInputs, apply, bends};
 pub use settings::{BacklashSign, ExtensionSettings, ThermalInput};
 pub use spec::{ModelChoice, ModelSpec};
 
@@ -52,11 +60,12 @@ pub trait CauseModel: Sync {
     /// the robot's inertials. `Err` says why not, in one sentence.
     fn usable(&self, model: &Model, table: &MeasurementTable) -> std::result::Result<(), String>;
 
-    /// Fills this cause's part of `settings` from the training rows `rows` of `table` (`source` names
-    /// the table in errors). Default: nothing to set.
+    /// Fills this cause's part of `settings` for `model` from the training rows `rows` of `table`
+    /// (`source` names the table in errors). Default: nothing to set.
     fn configure(
         &self,
         _settings: &mut ExtensionSettings,
+        _model: &Model,
         _table: &MeasurementTable,
         _rows: &[usize],
         _source: &str,
@@ -78,6 +87,12 @@ pub trait CauseModel: Sync {
 
     /// Whether the regressors read the gravity torques (N m) under `settings`.
     fn needs_gravity_torque(&self, settings: &ExtensionSettings) -> bool;
+
+    /// Whether the regressors read the gravity moment each joint transmits
+    /// ([`RowInputs::moment`], N m; link deflection). Default: no.
+    fn needs_gravity_moment(&self) -> bool {
+        false
+    }
 
     /// Whether the regressors depend on where the link really is, so that the calibration refits with
     /// the torques at the estimated equilibrium (joint compliance). Default: no.
@@ -114,6 +129,26 @@ pub trait CauseModel: Sync {
 
     /// The x axis of a diagnose plot of a parameter acting through `term`.
     fn plot_axis(&self, term: Term) -> PlotAxis;
+
+    /// Why an identified value `value` (parameter unit) of a parameter of this cause is physically
+    /// impossible, if it is (a negative compliance: no spring pushes that way; a negative lost
+    /// motion), in a few words; diagnose does not adopt a cause whose named parameters are impossible
+    /// and reports it as evidence of another error. Default: every value is possible.
+    fn impossible(&self, _value: f64) -> Option<&'static str> {
+        None
+    }
+
+    /// What sets this cause apart from the other causes, in a few words completing "the error …"
+    /// (e.g. "turns the joint about its own axis in proportion to its gravity torque"): the evidence
+    /// sentence of a finding says why this cause and not its nearest rival with it.
+    fn signature(&self) -> &'static str;
+
+    /// The highest harmonic of the joint's own angle that this cause models as an angle error of that
+    /// joint (transmission error: 3), or 0. Diagnose does not hold the probe of an error periodic in
+    /// one joint's angle against a cause that models those harmonics itself.
+    fn own_angle_harmonics(&self) -> usize {
+        0
+    }
 }
 
 /// The x axis of a finding's plot: the regressor times `sign`, labelled `label`.
@@ -165,6 +200,11 @@ causes! {
     GearBacklash => "gear_backlash", gear_backlash::GearBacklash;
     /// Link growth and joint-zero drift with temperature.
     ThermalDrift => "thermal_drift", thermal_drift::ThermalDrift;
+    /// Angle errors periodic in the joint's own angle (gear and encoder eccentricity, harmonic-drive
+    /// kinematic error).
+    TransmissionError => "transmission_error", transmission_error::TransmissionError;
+    /// Links and bearings bending under gravity and payload about the axes orthogonal to a joint's.
+    LinkDeflection => "link_deflection", link_deflection::LinkDeflection;
 }
 
 impl Cause {
@@ -191,16 +231,30 @@ pub enum Term {
     },
     /// Scales the target's base-frame position by `1 + x · g` (growth of every link about the base).
     Growth,
+    /// Turns everything beyond joint `joint` by `x · g` (rad) about axis `about` (0 = x, 1 = y, 2 = z)
+    /// of the joint's frame (the child link's frame, turning with the joint), through the joint's
+    /// origin, after the joint's own rotation; the axis is orthogonal to the joint's own.
+    Bend {
+        /// 0-based joint index.
+        joint: usize,
+        /// Axis of the joint frame: 0 = x, 1 = y, 2 = z.
+        about: usize,
+    },
 }
 
 impl Term {
-    /// The 0-based joint a joint-angle term acts on.
+    /// The 0-based joint a joint-angle or bending term acts on.
     pub fn joint(self) -> Option<usize> {
         match self {
-            Term::JointAngle { joint } => Some(joint),
+            Term::JointAngle { joint } | Term::Bend { joint, .. } => Some(joint),
             Term::Growth => None,
         }
     }
+}
+
+/// The name of axis `about` (0, 1, 2) of a frame: `x`, `y`, `z`.
+pub fn axis_name(about: usize) -> &'static str {
+    ["x", "y", "z"].get(about).copied().unwrap_or("?")
 }
 
 /// One parameter of an extension: its typed identity (cause, term, quantity), unit and scale.
@@ -223,6 +277,14 @@ impl ExtensionParam {
     pub fn name(&self) -> String {
         match self.term {
             Term::JointAngle { joint } => format!("joint {} {}", joint + 1, self.quantity),
+            Term::Bend { joint, about } => {
+                format!(
+                    "joint {} {} about {}",
+                    joint + 1,
+                    self.quantity,
+                    axis_name(about)
+                )
+            }
             Term::Growth => self.quantity.to_string(),
         }
     }

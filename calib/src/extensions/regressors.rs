@@ -10,11 +10,17 @@ use sim::measurement_table::MeasurementTable;
 /// What one measured row gives the regressors of a cause.
 #[derive(Clone, Copy, Debug)]
 pub struct RowInputs<'a> {
+    /// The robot's joints (kind, axis in the joint frame).
+    pub joints: &'a [sim::Joint],
     /// Joint values the controller reports (rad; m for prismatic joints).
     pub q: &'a [f64],
     /// Holding torque of each joint against gravity and payload (N m; N for prismatic joints), at the
     /// link angles of the current estimate; zeros when no cause needs them.
     pub tau: &'a [f64],
+    /// Moment of gravity and payload that each joint transmits, about its origin, in its joint frame
+    /// (N m; [`super::link_deflection::gravity_moments`]), at the link angles of the current estimate;
+    /// zeros when no cause needs them.
+    pub moment: &'a [Vector3<f64>],
     /// Approach direction sign of each joint (−1, 0, +1), when the table has `dir` columns.
     pub dir: Option<&'a [i8]>,
     /// Temperature (°C), when the table has a `temp` column.
@@ -30,6 +36,8 @@ pub struct Regressors {
     pub params: Vec<ExtensionParam>,
     /// `gₑ(row)`, row-major (rows × params).
     pub coef: Vec<f64>,
+    /// Whether any parameter is a [`Term::Bend`].
+    pub bends: bool,
 }
 
 /// Fixed-point steps of the spring balance in [`Regressors::build`]: the error shrinks by about 10⁻²
@@ -42,6 +50,7 @@ impl Regressors {
         Regressors {
             params: Vec::new(),
             coef: Vec::new(),
+            bends: false,
         }
     }
 
@@ -83,22 +92,31 @@ impl Regressors {
         let mut coef = vec![0.0; rows.len() * n];
         let mut data = sim::Data::new(model);
         let mut tau = vec![0.0; model.nq()];
-        let needs_tau = settings.needs_gravity_torque();
+        let mut moment = vec![Vector3::zeros(); model.nq()];
+        let needs_moment = settings.needs_gravity_moment();
+        let needs_tau = settings.needs_gravity_torque() || needs_moment;
         let g = Vector3::from(settings.gravity_base);
         let widths: Vec<(Cause, usize)> = settings
             .causes
             .iter()
             .map(|c| (*c, params.iter().filter(|p| p.cause == *c).count()))
             .collect();
-        let iterations = if needs_tau && at.len() == n && at.iter().any(|x| *x != 0.0) {
-            EQUILIBRIUM_ITERATIONS
-        } else {
-            1
-        };
+        // Only joint-angle terms move the links the torques are evaluated at.
+        let moves_links = params
+            .iter()
+            .any(|p| matches!(p.term, Term::JointAngle { .. }));
+        let iterations =
+            if needs_tau && moves_links && at.len() == n && at.iter().any(|x| *x != 0.0) {
+                EQUILIBRIUM_ITERATIONS
+            } else {
+                1
+            };
         // One row's regressors, to evaluate θ with [`apply`] between the fixed-point steps.
+        let bends = params.iter().any(|p| matches!(p.term, Term::Bend { .. }));
         let mut one = Regressors {
             params,
             coef: vec![0.0; n],
+            bends,
         };
         let mut theta = vec![0.0; model.nq()];
         for (k, &r) in rows.iter().enumerate() {
@@ -119,10 +137,21 @@ impl Regressors {
                         problem: format!("gravity torques: {e}"),
                     })?;
                     tau.copy_from_slice(data.gravity_torque.as_slice());
+                    if needs_moment {
+                        super::link_deflection::gravity_moments(
+                            model,
+                            &data,
+                            &g,
+                            payload.as_ref(),
+                            &mut moment,
+                        );
+                    }
                 }
                 let inputs = RowInputs {
+                    joints: &model.joints,
                     q,
                     tau: &tau,
+                    moment: &moment,
                     dir: table.dir_row(r),
                     temp_c: table.temp.as_ref().map(|t| t[r]),
                     t_s: table.t.as_ref().map(|t| t[r]),
@@ -142,12 +171,13 @@ impl Regressors {
         Ok(Regressors {
             params: one.params,
             coef,
+            bends,
         })
     }
 }
 
 /// Effective joint values of row `r`: `q` plus every joint-angle term, into `q_out`; returns the growth
-/// factor `x · g` (0 without growth).
+/// factor `x · g` (0 without growth). Bending terms are left to [`bends`].
 #[inline]
 pub fn apply(regs: &Regressors, values: &[f64], r: usize, q: &[f64], q_out: &mut [f64]) -> f64 {
     q_out.copy_from_slice(q);
@@ -159,7 +189,25 @@ pub fn apply(regs: &Regressors, values: &[f64], r: usize, q: &[f64], q_out: &mut
         match p.term {
             Term::JointAngle { joint } => q_out[joint] += x * g,
             Term::Growth => growth += x * g,
+            Term::Bend { .. } => {}
         }
     }
     growth
+}
+
+/// The bending rotation vector of each joint in row `r` (rad, joint frame: `φᵢ = Σₑ xₑ gₑ e_about`
+/// over the [`Term::Bend`] terms of joint `i`) into `out` (one per joint); returns whether the model
+/// has bending terms at all (`out` is then untouched).
+#[inline]
+pub fn bends(regs: &Regressors, values: &[f64], r: usize, out: &mut [Vector3<f64>]) -> bool {
+    if !regs.bends {
+        return false;
+    }
+    out.fill(Vector3::zeros());
+    for ((p, &x), &g) in regs.params.iter().zip(values).zip(regs.row(r)) {
+        if let Term::Bend { joint, about } = p.term {
+            out[joint][about] += x * g;
+        }
+    }
+    true
 }

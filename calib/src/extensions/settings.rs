@@ -52,6 +52,10 @@ pub struct ExtensionSettings {
     pub backlash_sign: BacklashSign,
     /// Source of `ΔT`, with thermal drift.
     pub thermal: Option<ThermalInput>,
+    /// 0-based joints with transmission-error harmonics: those that turn over at least half a
+    /// revolution in the training data ([`super::transmission_error::MIN_SPAN_RAD`]).
+    #[serde(default)]
+    pub transmission_joints: Vec<usize>,
 }
 
 impl ExtensionSettings {
@@ -80,14 +84,18 @@ impl ExtensionSettings {
                 BacklashSign::GravityTorque
             },
             thermal: None,
+            transmission_joints: Vec::new(),
         };
         let mut refused = None;
         for c in settings.causes.clone() {
-            if let Err(e) = c.model().configure(&mut settings, table, rows, source) {
+            if let Err(e) = c
+                .model()
+                .configure(&mut settings, model, table, rows, source)
+            {
                 refused.get_or_insert(e);
             }
         }
-        if settings.needs_gravity_torque()
+        if (settings.needs_gravity_torque() || settings.needs_gravity_moment())
             && let Err(e) = model.require_inertials()
         {
             return Err(CalibError::BadValue {
@@ -108,6 +116,11 @@ impl ExtensionSettings {
         self.causes
             .iter()
             .any(|c| c.model().needs_gravity_torque(self))
+    }
+
+    /// Whether any cause's regressors read the gravity moments the joints transmit.
+    pub fn needs_gravity_moment(&self) -> bool {
+        self.causes.iter().any(|c| c.model().needs_gravity_moment())
     }
 
     /// Whether any cause's regressors depend on the link angles (refits at the equilibrium).

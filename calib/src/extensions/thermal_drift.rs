@@ -86,6 +86,7 @@ impl CauseModel for ThermalDrift {
     fn configure(
         &self,
         settings: &mut ExtensionSettings,
+        _model: &Model,
         table: &MeasurementTable,
         rows: &[usize],
         source: &str,
@@ -188,6 +189,10 @@ impl CauseModel for ThermalDrift {
 
     fn evidence_subject(&self, _joints: &str) -> String {
         "the temperature change".to_string()
+    }
+
+    fn signature(&self) -> &'static str {
+        "follows the temperature or the warm-up, whatever the pose"
     }
 
     fn plot_axis(&self, _term: Term) -> PlotAxis {

@@ -1,0 +1,189 @@
+//! Transmission error, as the estimator models it: an angle error periodic in the joint's own angle,
+//!
+//! ```text
+//! θᵢ = qᵢ + Σₖ₌₁..₃ (aᵢₖ sin k qᵢ + bᵢₖ cos k qᵢ)
+//! ```
+//!
+//! `aᵢₖ`, `bᵢₖ` (rad) are the sine and cosine amplitudes of harmonic `k` per revolution of joint `i`:
+//! the eccentricity of a gear or an encoder disc (k = 1), the elliptic flexspline of a harmonic drive
+//! (k = 2) and their products (k = 3). Six parameters per rotational joint that turns over at least
+//! half a revolution ([`MIN_SPAN_RAD`]) in the training data (prismatic joints have none: a lead
+//! screw's error is periodic in its pitch, not in a revolution). They are linear in the regressors
+//! `sin k qᵢ`, `cos k qᵢ` of the commanded angle, so they enter as joint-angle terms. No harmonic is a
+//! geometric error: a constant error twist or zero offset changes the angle about the joint's axis by a
+//! constant, never by `sin k qᵢ`.
+//!
+//! # What the data can tell
+//! Over less than a full turn a periodic error is not told from a smooth one: within 340° a first
+//! harmonic is 99.5 % a cubic in the angle, and harmonics 1–3 represent `q²` or `q⁴` as well
+//! (`scripts/`-free arithmetic in docs/diagnose.md). So this cause stands for *an angle error of a
+//! joint that depends on its own angle alone*, smooth at the scale of a third of a turn: gear and
+//! encoder eccentricity, a harmonic drive's two-per-revolution error, a wrong gear ratio. Below half
+//! a turn even the third harmonic is 80 % a cubic and the amplitudes lose their meaning, so such a
+//! joint gets none. An amplitude beyond [`MAX_AMPLITUDE_RAD`] is no gear's ([`CauseModel::impossible`]):
+//! it is what harmonics fitted to something else over part of a turn look like.
+
+use super::{Cause, CauseModel, ExtensionParam, ExtensionSettings, PlotAxis, RowInputs, Term};
+use crate::units::Unit;
+use sim::Model;
+use sim::measurement_table::MeasurementTable;
+
+/// Harmonics per revolution modelled: 1 to this.
+pub const HARMONICS: usize = 3;
+
+/// Expected amplitude of one harmonic (rad): harmonic drives have 1 arc-min (2.9e-4 rad) of
+/// transmission error peak to peak.
+pub const SCALE_RAD: f64 = 1e-4;
+
+/// Smallest span of a joint's angles in the training data (rad) for it to get harmonics: half a turn.
+pub const MIN_SPAN_RAD: f64 = std::f64::consts::PI;
+
+/// Largest plausible amplitude of one harmonic (rad): 5 mrad, 17 arc-min, over ten times the
+/// transmission error of a harmonic drive or a worn spur gear.
+pub const MAX_AMPLITUDE_RAD: f64 = 5e-3;
+
+/// 0-based rotational joints of `model` whose angles span at least [`MIN_SPAN_RAD`] over `rows` of
+/// `table`.
+pub fn turning_joints(model: &Model, table: &MeasurementTable, rows: &[usize]) -> Vec<usize> {
+    (0..model.nq())
+        .filter(|&j| model.joints[j].kind.is_rotational())
+        .filter(|&j| {
+            let (lo, hi) = rows
+                .iter()
+                .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &r| {
+                    let v = table.q_row(r)[j];
+                    (lo.min(v), hi.max(v))
+                });
+            hi - lo >= MIN_SPAN_RAD
+        })
+        .collect()
+}
+
+/// Parameter names, in order: sine and cosine of each harmonic.
+const QUANTITIES: [&str; 2 * HARMONICS] = [
+    "transmission error sin q",
+    "transmission error cos q",
+    "transmission error sin 2q",
+    "transmission error cos 2q",
+    "transmission error sin 3q",
+    "transmission error cos 3q",
+];
+
+/// Transmission error: `2 · HARMONICS` amplitudes per rotational joint.
+pub struct TransmissionError;
+
+impl CauseModel for TransmissionError {
+    fn cause(&self) -> Cause {
+        Cause::TransmissionError
+    }
+
+    fn usable(&self, model: &Model, table: &MeasurementTable) -> std::result::Result<(), String> {
+        let all: Vec<usize> = (0..table.len()).collect();
+        if turning_joints(model, table, &all).is_empty() {
+            return Err(format!(
+                "no rotational joint turns over half a revolution in the data ({:.0}°): an error \
+                 periodic in its angle cannot be told from a smooth one",
+                MIN_SPAN_RAD.to_degrees()
+            ));
+        }
+        Ok(())
+    }
+
+    /// The joints that turn over half a revolution in the training rows.
+    fn configure(
+        &self,
+        settings: &mut ExtensionSettings,
+        model: &Model,
+        table: &MeasurementTable,
+        rows: &[usize],
+        _source: &str,
+    ) -> crate::error::Result<()> {
+        settings.transmission_joints = turning_joints(model, table, rows);
+        Ok(())
+    }
+
+    fn needs_gravity_torque(&self, _settings: &ExtensionSettings) -> bool {
+        false
+    }
+
+    fn params(&self, _model: &Model, settings: &ExtensionSettings) -> Vec<ExtensionParam> {
+        settings
+            .transmission_joints
+            .iter()
+            .flat_map(|&i| {
+                QUANTITIES.iter().map(move |&quantity| ExtensionParam {
+                    cause: Cause::TransmissionError,
+                    term: Term::JointAngle { joint: i },
+                    quantity,
+                    unit: Unit::Radian,
+                    scale: SCALE_RAD,
+                })
+            })
+            .collect()
+    }
+
+    /// `sin k qᵢ`, `cos k qᵢ` (dimensionless) of each harmonic joint's commanded angle.
+    fn regressors(&self, settings: &ExtensionSettings, row: &RowInputs<'_>, out: &mut [f64]) {
+        for (&j, o) in settings
+            .transmission_joints
+            .iter()
+            .zip(out.chunks_exact_mut(2 * HARMONICS))
+        {
+            harmonics(row.q[j], o);
+        }
+    }
+
+    fn impossible(&self, value: f64) -> Option<&'static str> {
+        (value.abs() > MAX_AMPLITUDE_RAD)
+            .then_some("a harmonic amplitude beyond 5 mrad: no gear errs by that much")
+    }
+
+    fn evidence_subject(&self, joints: &str) -> String {
+        format!("the angle of {joints}, periodically (harmonics 1 to {HARMONICS} per revolution)")
+    }
+
+    fn signature(&self) -> &'static str {
+        "is periodic in the joint's own angle"
+    }
+
+    fn own_angle_harmonics(&self) -> usize {
+        HARMONICS
+    }
+
+    fn plot_axis(&self, term: Term) -> PlotAxis {
+        PlotAxis {
+            sign: 1.0,
+            label: format!("q{} (rad)", term.joint().map_or(0, |j| j + 1)),
+        }
+    }
+}
+
+/// `[sin q, cos q, sin 2q, cos 2q, …]` up to [`HARMONICS`] into `out` (angle `q` in rad).
+pub fn harmonics(q: f64, out: &mut [f64]) {
+    let (s1, c1) = q.sin_cos();
+    let (mut s, mut c) = (s1, c1);
+    for k in 0..HARMONICS {
+        out[2 * k] = s;
+        out[2 * k + 1] = c;
+        // sin((k+1)q + q), cos((k+1)q + q) by the addition theorems: one sin_cos per row.
+        (s, c) = (s * c1 + c * s1, c * c1 - s * s1);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn harmonics_match_the_library_sines() {
+        let mut out = [0.0; 2 * HARMONICS];
+        for q in [-3.0, -1.2, 0.0, 0.4, 2.9] {
+            harmonics(q, &mut out);
+            for k in 0..HARMONICS {
+                let kq = (k + 1) as f64 * q;
+                assert!((out[2 * k] - kq.sin()).abs() < 1e-14);
+                assert!((out[2 * k + 1] - kq.cos()).abs() < 1e-14);
+            }
+        }
+    }
+}
