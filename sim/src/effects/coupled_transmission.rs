@@ -32,6 +32,7 @@
 //! passes it on in full. Amplitudes of 10⁻⁵–10⁻⁴ rad at the link cover the two cases.
 
 use super::effect::{Effect, Moved, Needs, Prepare, ResolveCx, State};
+use super::joint_pairs;
 use super::transmission_error::{MAX_AMPLITUDE_RAD, MAX_ORDER};
 use crate::error::{Result, SimError};
 use crate::scenario::magnitude::Magnitude;
@@ -93,12 +94,7 @@ impl CoupledTransmission {
     pub fn new(terms: Vec<CoupledTerm>) -> Result<Self> {
         for (k, t) in terms.iter().enumerate() {
             let f = |name: &str| format!("terms[{k}].{name}");
-            if t.joint == 0 {
-                return Err(bad(f("joint"), 0, "joints are numbered from 1"));
-            }
-            if t.source == 0 {
-                return Err(bad(f("source"), 0, "joints are numbered from 1"));
-            }
+            joint_pairs::check_numbered(EFFECT, k, t.joint, t.source)?;
             if t.source == t.joint {
                 return Err(bad(
                     f("source"),
@@ -147,51 +143,13 @@ impl CoupledTransmission {
 
     /// Checks that every joint number fits a robot with `nq` joints.
     pub fn check_fits(&self, nq: usize) -> Result<()> {
-        for (k, t) in self.terms.iter().enumerate() {
-            for (name, j) in [("joint", t.joint), ("source", t.source)] {
-                if j > nq {
-                    return Err(bad(
-                        format!("terms[{k}].{name}"),
-                        j,
-                        format!("the robot has {nq} joints"),
-                    ));
-                }
-            }
-        }
-        Ok(())
+        joint_pairs::check_fits(EFFECT, self.terms.iter().map(|t| (t.joint, t.source)), nq)
     }
 }
 
-/// The constructor's field `terms[k].joint` / `.source` / `terms[k]` as the scenario section writes it
-/// (`pairs[k]`), and `terms[k].order` / `.amplitude_rad` / `.phase_rad` as `order[k]` etc.
+/// The constructor's field as the scenario section writes it ([`joint_pairs::section_field`]).
 fn section_field(e: SimError) -> SimError {
-    match e {
-        SimError::BadEffect {
-            effect,
-            field,
-            value,
-            problem,
-        } => {
-            let (index, rest) = field
-                .strip_prefix("terms[")
-                .and_then(|f| f.split_once(']'))
-                .unwrap_or(("", ""));
-            let field = match rest.strip_prefix('.') {
-                Some(name @ ("order" | "amplitude_rad" | "phase_rad")) => {
-                    format!("{name}[{index}]")
-                }
-                _ if !index.is_empty() => format!("pairs[{index}]"),
-                _ => field,
-            };
-            SimError::BadEffect {
-                effect,
-                field,
-                value,
-                problem,
-            }
-        }
-        other => other,
-    }
+    joint_pairs::section_field(e, &["order", "amplitude_rad", "phase_rad"])
 }
 
 /// `[effects.coupled_transmission]`.

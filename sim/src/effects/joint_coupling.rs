@@ -35,6 +35,7 @@
 //! about 5 times the tracker noise floor unexplained, i.e. ratios of order 10⁻⁴.
 
 use super::effect::{Effect, Moved, Needs, Prepare, ResolveCx, State};
+use super::joint_pairs;
 use crate::error::{Result, SimError};
 use crate::scenario::magnitude::Magnitude;
 
@@ -91,20 +92,7 @@ impl JointCoupling {
     /// non-finite ratios and `|ratio|` above [`MAX_RATIO`]. An empty list is no coupling.
     pub fn new(terms: Vec<CouplingTerm>) -> Result<Self> {
         for (k, t) in terms.iter().enumerate() {
-            if t.joint == 0 {
-                return Err(bad(
-                    format!("terms[{k}].joint"),
-                    0,
-                    "joints are numbered from 1",
-                ));
-            }
-            if t.source == 0 {
-                return Err(bad(
-                    format!("terms[{k}].source"),
-                    0,
-                    "joints are numbered from 1",
-                ));
-            }
+            joint_pairs::check_numbered(EFFECT, k, t.joint, t.source)?;
             let r = t.ratio_rad_per_rad;
             if !r.is_finite() {
                 return Err(bad(
@@ -150,49 +138,13 @@ impl JointCoupling {
 
     /// Checks that every joint number fits a robot with `nq` joints.
     pub fn check_fits(&self, nq: usize) -> Result<()> {
-        for (k, t) in self.terms.iter().enumerate() {
-            for (name, j) in [("joint", t.joint), ("source", t.source)] {
-                if j > nq {
-                    return Err(bad(
-                        format!("terms[{k}].{name}"),
-                        j,
-                        format!("the robot has {nq} joints"),
-                    ));
-                }
-            }
-        }
-        Ok(())
+        joint_pairs::check_fits(EFFECT, self.terms.iter().map(|t| (t.joint, t.source)), nq)
     }
 }
 
-/// The constructor's field `terms[k].joint`, `.source` or `terms[k]` as the scenario section writes
-/// it (`pairs[k]`), and `terms[k].ratio_rad_per_rad` as `ratio_rad_per_rad[k]`.
+/// The constructor's field as the scenario section writes it ([`joint_pairs::section_field`]).
 fn section_field(e: SimError) -> SimError {
-    match e {
-        SimError::BadEffect {
-            effect,
-            field,
-            value,
-            problem,
-        } => {
-            let (index, rest) = field
-                .strip_prefix("terms[")
-                .and_then(|f| f.split_once(']'))
-                .unwrap_or(("", ""));
-            let field = match rest {
-                ".ratio_rad_per_rad" => format!("ratio_rad_per_rad[{index}]"),
-                _ if !index.is_empty() => format!("pairs[{index}]"),
-                _ => field,
-            };
-            SimError::BadEffect {
-                effect,
-                field,
-                value,
-                problem,
-            }
-        }
-        other => other,
-    }
+    joint_pairs::section_field(e, &["ratio_rad_per_rad"])
 }
 
 /// `[effects.coupling]`.

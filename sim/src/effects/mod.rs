@@ -92,6 +92,7 @@ pub mod gear_backlash;
 pub(crate) mod gravity;
 pub mod joint_compliance;
 pub mod joint_coupling;
+mod joint_pairs;
 pub mod kinematic_offsets;
 pub mod link_deflection;
 pub mod rapier_compliance;
