@@ -20,7 +20,7 @@
 //! them it leaves out the repeatability scatter that averaging removes.
 
 use super::{
-    Calibration, CalibrationOptions, Dataset, FoldShare, FoldStart, SolveShare, calibrate_model,
+    Calibration, CalibrationOptions, Dataset, FoldShare, SolveShare, WarmStart, calibrate_model,
     calibrate_model_from, observations,
 };
 use crate::error::{CalibError, Result};
@@ -290,7 +290,7 @@ pub fn cross_validate(
 
 /// [`cross_validate`] with each fold's fit started at `all`, the calibration of `spec` on every row
 /// of `data` (what `calibrate` saves): the same minima, reached in fewer iterations, without the
-/// fold reports' training statistics (see [`FoldStart`]).
+/// fold reports' training statistics (see [`WarmStart`]).
 pub fn cross_validate_warm(
     model: &Model,
     data: &Dataset<'_>,
@@ -304,17 +304,21 @@ pub fn cross_validate_warm(
 }
 
 /// Where the folds start from the all-pose calibration `all`.
-fn fold_start(all: &Calibration) -> FoldStart<'_> {
-    FoldStart {
+fn fold_start(all: &Calibration) -> WarmStart<'_> {
+    WarmStart {
         before: &all.before,
         physical: all.physical.as_ref().unwrap_or(&all.params),
+        extensions: &all.layout.extensions,
         shared: None,
+        lean: true,
+        other_model: false,
+        payload_com_m: all.extensions.as_ref().map(|s| s.payload_com_m),
     }
 }
 
 /// Every fold's [`FoldShare`] at `start`'s "before" and physical parameters, from one pass over
 /// the rows of `data` for each (`fold_of` per row, `k` folds): fold `f`'s is the sum of the other
-/// folds' shares, in fold order. `None` where the folds cannot start there (see [`FoldStart`]),
+/// folds' shares, in fold order. `None` where the folds cannot start there (see [`WarmStart`]),
 /// with a robust loss (its reweighting starts elsewhere), or for an extended model.
 fn fold_shares(
     model: &Model,
@@ -323,7 +327,7 @@ fn fold_shares(
     options: &CalibrationOptions,
     fold_of: &[usize],
     k: usize,
-    start: &FoldStart<'_>,
+    start: &WarmStart<'_>,
 ) -> Result<Option<Vec<FoldShare>>> {
     if !spec.causes.is_empty() || options.robust.is_some() {
         return Ok(None);
@@ -407,7 +411,7 @@ fn fit_fold(
     options: &CalibrationOptions,
     fold_of: &[usize],
     f: usize,
-    start: Option<FoldStart<'_>>,
+    start: Option<WarmStart<'_>>,
 ) -> Result<(Calibration, FoldErrors, Vec<usize>)> {
     let (train, test) = fold_rows(data, fold_of, f);
     let train_set = Dataset {
@@ -457,7 +461,7 @@ fn fit_folds(
     options: &CalibrationOptions,
     fold_of: &[usize],
     k: usize,
-    start: Option<FoldStart<'_>>,
+    start: Option<WarmStart<'_>>,
 ) -> Result<Vec<Result<(Calibration, FoldErrors, Vec<usize>)>>> {
     let shares = match &start {
         Some(s) => fold_shares(model, data, spec, options, fold_of, k, s)?,
@@ -466,7 +470,7 @@ fn fit_folds(
     Ok((0..k)
         .into_par_iter()
         .map(|f| {
-            let start = start.map(|s| FoldStart {
+            let start = start.map(|s| WarmStart {
                 shared: shares.as_ref().map(|v| &v[f]),
                 ..s
             });
@@ -482,7 +486,7 @@ fn cross_validate_from(
     options: &CalibrationOptions,
     k: usize,
     seed: u64,
-    start: Option<FoldStart<'_>>,
+    start: Option<WarmStart<'_>>,
 ) -> Result<Validation> {
     let keys = pose_keys(data);
     let n_poses = keys.iter().collect::<std::collections::HashSet<_>>().len();

@@ -29,7 +29,9 @@ pub mod report;
 pub mod significance;
 pub mod unexplained;
 
-use crate::calibrate::{Calibration, CalibrationOptions, Dataset, calibrate_model, observations};
+use crate::calibrate::{
+    Calibration, CalibrationOptions, Dataset, WarmStart, calibrate_model_from, observations,
+};
 use crate::error::{CalibError, Result};
 use crate::extensions::{Cause, ModelSpec, Regressors, Term, joint_words};
 use crate::health::Health;
@@ -346,18 +348,32 @@ pub(crate) struct Split<'a> {
     pub test_pose: Vec<i64>,
 }
 
+/// Fits `spec` on the training poses and predicts the test poses. With `from`, a fitted model that
+/// `spec` extends or reduces, the fit starts at its solution (the terms `spec` adds at zero) and its
+/// report is lean ([`WarmStart`]): the same minimum, in a few iterations.
 pub(crate) fn evaluate(
     model: &Model,
     split: &Split<'_>,
     spec: &ModelSpec,
     options: &DiagnoseOptions,
+    from: Option<&Evaluated>,
 ) -> Result<Evaluated> {
-    let cal = calibrate_model(
+    let warm = from.map(|c| WarmStart {
+        before: &c.cal.before,
+        physical: c.cal.physical.as_ref().unwrap_or(&c.cal.params),
+        extensions: &c.cal.layout.extensions,
+        shared: None,
+        lean: true,
+        other_model: true,
+        payload_com_m: c.cal.extensions.as_ref().map(|s| s.payload_com_m),
+    });
+    let cal = calibrate_model_from(
         model,
         &split.train,
         Some(&split.test),
         spec,
         &options.calibration,
+        warm,
     )?;
     let ext = cal.extensions.as_ref();
     let at = &cal.params.extension;
@@ -936,7 +952,7 @@ fn select(
             let cand = match book.fits.get(&spec.name()) {
                 Some(Some(c)) => c.clone(),
                 Some(None) => continue,
-                None => match evaluate(model, split, &spec, options) {
+                None => match evaluate(model, split, &spec, options, Some(&current)) {
                     Ok(c) => {
                         book.health.merge(&c.cal.report.health);
                         book.fits.insert(spec.name(), Some(c.clone()));
@@ -1137,7 +1153,7 @@ pub fn diagnose_with_progress(
         }
     }
     progress("kinematic");
-    let kinematic = evaluate(model, &split, &ModelSpec::kinematic(), options)?;
+    let kinematic = evaluate(model, &split, &ModelSpec::kinematic(), options, None)?;
     let mut health = kinematic.cal.report.health;
     let mut trials = Vec::new();
     let mut plots = report::PlotData {
@@ -1239,7 +1255,7 @@ pub fn diagnose_with_progress(
             progress(&reduced.name());
             let without = match fits.get(&reduced.name()) {
                 Some(Some(c)) => c.clone(),
-                _ => evaluate(model, &split, &reduced, options)?,
+                _ => evaluate(model, &split, &reduced, options, Some(&current))?,
             };
             let tz = significance::paired(&without.pose_sq, &current.pose_sq).z;
             let trz = train_z(&without.cal, &current.cal);
