@@ -48,12 +48,25 @@ pub struct Options {
     /// a robot's repeatability; by default estimated from repeated poses, `sigma` or the tracker model.
     #[arg(long, value_name = "M")]
     pub noise_floor: Option<f64>,
+    /// With more poses than this, the candidate causes are tried on a seeded subsample of this many
+    /// (training and test in the split's proportion) and the models adopted there are refitted on
+    /// every pose, which every reported figure comes from; 0 uses every pose throughout (slow on
+    /// large tables: each candidate of each round is fitted on every pose).
+    #[arg(long, value_name = "N", default_value_t = calib::diagnose::screening::DEFAULT_SCREEN_POSES)]
+    pub screen_poses: usize,
 }
 
 impl Options {
     /// calib's diagnose options; bad values are input errors naming the flag.
     pub fn resolve(&self) -> Result<DiagnoseOptions, CliError> {
         let mut o = options(self.test_fraction, self.seed, self.alpha)?;
+        if self.screen_poses != 0 && self.screen_poses < MIN_SCREEN_POSES {
+            return Err(CliError::Input(format!(
+                "--screen-poses {}: must be 0 (no subsample) or at least {MIN_SCREEN_POSES}",
+                self.screen_poses
+            )));
+        }
+        o.screen_poses = self.screen_poses;
         if let Some(v) = self.noise_floor {
             if !(v > 0.0 && v.is_finite() && v < 0.1) {
                 return Err(CliError::Input(format!(
@@ -65,6 +78,10 @@ impl Options {
         Ok(o)
     }
 }
+
+/// Smallest screening subsample `--screen-poses` accepts: below it the held-out test of a cause at the
+/// smallest adopted gain loses its power (see calib's `diagnose::screening`).
+const MIN_SCREEN_POSES: usize = 300;
 
 /// A fraction given as a decimal (`0.25`) or a ratio (`1/3`).
 fn parse_fraction(text: &str) -> Result<f64, String> {
@@ -84,8 +101,13 @@ fn parse_fraction(text: &str) -> Result<f64, String> {
 /// Human-readable summary of a diagnosis.
 pub(crate) fn text(d: &Diagnosis, data: &str) -> String {
     let um = |x: f64| format!("{:8.1} µm", x * 1e6);
+    let screened = d
+        .screening
+        .as_ref()
+        .map(|s| format!("screening: {}\n", s.note))
+        .unwrap_or_default();
     let mut s = format!(
-        "diagnose {} on {data}: {} training / {} test poses\nnoise floor {} ({})\n\n  {:<52} {:>11} {:>11} {:>11}\n",
+        "diagnose {} on {data}: {} training / {} test poses\n{screened}noise floor {} ({})\n\n  {:<52} {:>11} {:>11} {:>11}\n",
         d.robot,
         d.n_train,
         d.n_test,

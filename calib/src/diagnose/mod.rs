@@ -26,6 +26,7 @@
 pub mod campaigns;
 pub mod noise_floor;
 pub mod report;
+pub mod screening;
 pub mod significance;
 pub mod unexplained;
 
@@ -72,6 +73,15 @@ pub struct DiagnoseOptions {
     /// The noise floor (RMS position error norm, m) when the user knows it better than the data tell,
     /// e.g. a robot's repeatability; `None` estimates it ([`noise_floor::estimate`]).
     pub noise_floor_m: Option<f64>,
+    /// Poses (training and test) above which the candidates are tried on a seeded subsample of this
+    /// many and the adopted models refitted on every pose (default
+    /// [`screening::DEFAULT_SCREEN_POSES`]; 0: every pose throughout).
+    #[serde(default = "default_screen_poses")]
+    pub screen_poses: usize,
+}
+
+fn default_screen_poses() -> usize {
+    screening::DEFAULT_SCREEN_POSES
 }
 
 impl Default for DiagnoseOptions {
@@ -87,6 +97,7 @@ impl Default for DiagnoseOptions {
             candidates: Cause::ALL.to_vec(),
             learned_kinds: vec![LearnedKind::Kernel, LearnedKind::Poly],
             noise_floor_m: None,
+            screen_poses: screening::DEFAULT_SCREEN_POSES,
         }
     }
 }
@@ -268,6 +279,10 @@ pub struct Diagnosis {
     /// thermal drift.
     #[serde(default)]
     pub not_tried: Vec<NotTried>,
+    /// How the candidates were screened, when on a subsample of the poses (many poses, see
+    /// [`screening`]); absent when every pose was used throughout.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub screening: Option<screening::Screening>,
     /// The held-out residual per measurement campaign, with several campaigns.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub campaigns: Option<campaigns::CampaignReport>,
@@ -348,23 +363,39 @@ pub(crate) struct Split<'a> {
     pub test_pose: Vec<i64>,
 }
 
-/// Fits `spec` on the training poses and predicts the test poses. With `from`, a fitted model that
-/// `spec` extends or reduces, the fit starts at its solution (the terms `spec` adds at zero) and its
-/// report is lean ([`WarmStart`]): the same minimum, in a few iterations.
+/// Where a fit of [`evaluate`] starts.
+#[derive(Clone, Copy)]
+pub(crate) enum Start<'e> {
+    /// The closed-form start.
+    Cold,
+    /// The solution of a model that this one extends or reduces, on the same poses (the terms it
+    /// adds at zero, or the nominal geometry when that is nearer, see [`WarmStart::other_model`]).
+    Nearby(&'e Evaluated),
+    /// The solution of the same model on other poses (the screening subsample).
+    Same(&'e Evaluated),
+}
+
+/// Fits `spec` on the training poses and predicts the test poses. A fit that starts at another fit
+/// ([`Start`]) has a lean report ([`WarmStart`]): the same minimum, in a few iterations.
 pub(crate) fn evaluate(
     model: &Model,
     split: &Split<'_>,
     spec: &ModelSpec,
     options: &DiagnoseOptions,
-    from: Option<&Evaluated>,
+    start: Start<'_>,
 ) -> Result<Evaluated> {
+    let (from, other_model) = match start {
+        Start::Cold => (None, false),
+        Start::Nearby(c) => (Some(c), true),
+        Start::Same(c) => (Some(c), false),
+    };
     let warm = from.map(|c| WarmStart {
         before: &c.cal.before,
         physical: c.cal.physical.as_ref().unwrap_or(&c.cal.params),
         extensions: &c.cal.layout.extensions,
         shared: None,
         lean: true,
-        other_model: true,
+        other_model,
         payload_com_m: c.cal.extensions.as_ref().map(|s| s.payload_com_m),
     });
     let cal = calibrate_model_from(
@@ -952,7 +983,7 @@ fn select(
             let cand = match book.fits.get(&spec.name()) {
                 Some(Some(c)) => c.clone(),
                 Some(None) => continue,
-                None => match evaluate(model, split, &spec, options, Some(&current)) {
+                None => match evaluate(model, split, &spec, options, Start::Nearby(&current)) {
                     Ok(c) => {
                         book.health.merge(&c.cal.report.health);
                         book.fits.insert(spec.name(), Some(c.clone()));
@@ -1100,6 +1131,58 @@ fn invalid_finding(sel: &Selection, options: &DiagnoseOptions) -> Option<Rejecte
     })
 }
 
+/// The models of a selection made on a subsample (`steps`, kinematic first), each refitted on every
+/// pose of `split`, starting at its fit on the subsample (`fits` by name; `kinematic` for the first).
+#[allow(clippy::too_many_arguments)]
+fn confirm_on_every_pose(
+    model: &Model,
+    split: &Split<'_>,
+    steps: &[Step],
+    fits: &BTreeMap<String, Option<Evaluated>>,
+    kinematic: &Evaluated,
+    options: &DiagnoseOptions,
+    progress: &mut dyn FnMut(&str),
+    health: &mut Health,
+) -> Result<Vec<Evaluated>> {
+    let mut out: Vec<Evaluated> = Vec::with_capacity(steps.len());
+    for step in steps {
+        crate::cancel::checkpoint()?;
+        let name = step.model.name();
+        progress(&format!("{name} (every pose)"));
+        let screened = match fits.get(&name) {
+            Some(Some(c)) => c,
+            _ => kinematic,
+        };
+        let start = if screened.spec == step.model {
+            Start::Same(screened)
+        } else {
+            out.last().map_or(Start::Cold, Start::Nearby)
+        };
+        let e = evaluate(model, split, &step.model, options, start)?;
+        health.merge(&e.cal.report.health);
+        out.push(e);
+    }
+    Ok(out)
+}
+
+/// The figures of `findings` (adopted in the order of the models `all`, kinematic first, each fitted
+/// on every pose) from those fits: test RMS before and after, gain, correlation, paired and training
+/// `z`. A finding belongs to the first model that holds its cause.
+fn refigure_findings(findings: &mut [Finding], all: &[Evaluated]) {
+    for f in findings.iter_mut() {
+        let Some(k) = (1..all.len()).find(|&k| all[k].spec.causes.contains(&f.cause)) else {
+            continue;
+        };
+        let (before, after) = (&all[k - 1], &all[k]);
+        f.test_rms_m_before = before.step.test_rms_m;
+        f.test_rms_m_after = after.step.test_rms_m;
+        f.gain = 1.0 - after.step.test_rms_m / before.step.test_rms_m;
+        f.r = explained_correlation(&before.test_err, &after.test_err);
+        f.test_z = significance::paired(&before.pose_sq, &after.pose_sq).z;
+        f.train_z = train_z(&before.cal, &after.cal);
+    }
+}
+
 /// Diagnoses `table` (all rows; `name` names it in messages) for `model`.
 ///
 /// Errors: input the calibration refuses (too few poses, a bad `sigma`), or too few poses to hold out
@@ -1152,14 +1235,13 @@ pub fn diagnose_with_progress(
             Err(reason) => not_tried.push(NotTried { cause: c, reason }),
         }
     }
+    // With many poses the candidates are screened on a subsample ([`screening`]).
+    let sub = screening::subsample(&split, options.screen_poses, options.seed);
+    let screen = sub.as_ref().unwrap_or(&split);
     progress("kinematic");
-    let kinematic = evaluate(model, &split, &ModelSpec::kinematic(), options, None)?;
+    let kinematic = evaluate(model, screen, &ModelSpec::kinematic(), options, Start::Cold)?;
     let mut health = kinematic.cal.report.health;
     let mut trials = Vec::new();
-    let mut plots = report::PlotData {
-        test_errors_kinematic_m: kinematic.test_err.iter().map(|e| e.norm()).collect(),
-        ..Default::default()
-    };
     // Forward selection, then the adopted causes checked in their joint fit: one whose named
     // parameters are impossible there (or that names nothing) is rejected, and the selection runs
     // again without it (it may have stood in for another cause), until every adopted cause holds.
@@ -1180,7 +1262,7 @@ pub fn diagnose_with_progress(
             .collect();
         let sel = select(
             model,
-            &split,
+            screen,
             kinematic.clone(),
             &candidates,
             options,
@@ -1198,6 +1280,34 @@ pub fn diagnose_with_progress(
             Some(r) => rejected.push(r),
         }
     };
+    // Screened on a subsample: the adopted models refitted on every pose, and the findings' figures
+    // from those fits.
+    let (current, steps, kinematic) = match &sub {
+        None => (current, steps, kinematic),
+        Some(_) => {
+            let fits_all = confirm_on_every_pose(
+                model,
+                &split,
+                &steps,
+                &fits,
+                &kinematic,
+                options,
+                progress,
+                &mut health,
+            )?;
+            refigure_findings(&mut findings, &fits_all);
+            let steps = fits_all.iter().map(|e| e.step.clone()).collect();
+            let mut fits_all = fits_all.into_iter();
+            let kinematic = fits_all.next().expect("the kinematic step");
+            let current = fits_all.last().unwrap_or_else(|| kinematic.clone());
+            (current, steps, kinematic)
+        }
+    };
+    let mut plots = report::PlotData {
+        test_errors_kinematic_m: kinematic.test_err.iter().map(|e| e.norm()).collect(),
+        ..Default::default()
+    };
+    drop(kinematic);
     // Joints, values and evidence from the final model, where every adopted cause is fitted jointly
     // (a cause adopted early may have taken up part of a later one before that was in the model).
     for f in &mut findings {
@@ -1253,9 +1363,12 @@ pub fn diagnose_with_progress(
             let mut reduced = current.spec.clone();
             reduced.causes.retain(|c| *c != cause);
             progress(&reduced.name());
-            let without = match fits.get(&reduced.name()) {
-                Some(Some(c)) => c.clone(),
-                _ => evaluate(model, &split, &reduced, options, Some(&current))?,
+            let without = match (fits.get(&reduced.name()), &sub) {
+                (Some(Some(c)), None) => c.clone(),
+                (Some(Some(c)), Some(_)) => {
+                    evaluate(model, &split, &reduced, options, Start::Same(c))?
+                }
+                _ => evaluate(model, &split, &reduced, options, Start::Nearby(&current))?,
             };
             let tz = significance::paired(&without.pose_sq, &current.pose_sq).z;
             let trz = train_z(&without.cal, &current.cal);
@@ -1345,6 +1458,7 @@ pub fn diagnose_with_progress(
         trials,
         not_tried,
         campaigns: campaigns::report(&split, &current, options.alpha),
+        screening: sub.as_ref().map(screening::record),
         alpha: options.alpha,
         seed: options.seed,
         health,
