@@ -135,6 +135,9 @@ pub struct KinematicProblem<'a> {
 /// many rows is one chunk, summed in row order.
 const CHUNK_ROWS: usize = 2048;
 
+/// Measurements per block product of [`KinematicProblem::normal_part`].
+const NORMAL_BLOCK_ROWS: usize = 32;
+
 /// Workspace of one row's evaluation: made once per chunk of rows, reused without allocating.
 #[derive(Clone, Debug)]
 struct RowScratch {
@@ -393,13 +396,74 @@ impl<'a> KinematicProblem<'a> {
     }
 
     /// Chunk `c`'s share of the normal equations (rows `c · CHUNK_ROWS ..`), scaled by `scales`.
+    ///
+    /// The scaled Jacobian rows of [`NORMAL_BLOCK_ROWS`] measurements are gathered (as columns of
+    /// `Bᵀ`, p × rows) and added to the normal matrix as one product `Bᵀ B` (a cache-blocked matrix
+    /// product instead of a pass over the normal matrix per measurement); every entry of the
+    /// matrix is filled (the lower triangle is what is read).
     fn normal_part(&self, c: usize, scales: &[f64], ws: &mut RowScratch, part: &mut NormalPart) {
         let d = self.obs.dim();
         let np = self.layout.len();
         let p = self.active.len();
         let rows = c * CHUNK_ROWS..((c + 1) * CHUNK_ROWS).min(self.obs.len());
+        if p == 0 {
+            for r in rows {
+                self.add_row_normal(r, d, np, p, scales, ws, part);
+            }
+            return;
+        }
+        let width = NORMAL_BLOCK_ROWS * d;
+        let mut bt = DMatrix::<f64>::zeros(p, width);
+        let mut b = DMatrix::<f64>::zeros(width, p);
+        let mut filled = 0;
+        let mut flush = |bt: &DMatrix<f64>, filled: usize, gram: &mut [f64]| {
+            let cols = bt.columns(0, filled);
+            b.rows_mut(0, filled).tr_copy_from(&cols);
+            let mut g = nalgebra::DMatrixViewMut::from_slice(gram, p, p);
+            g.gemm(1.0, &cols, &b.rows(0, filled), 1.0);
+        };
         for r in rows {
-            self.add_row_normal(r, d, np, p, scales, ws, part);
+            self.gather_row(r, d, np, p, scales, ws, part);
+            for row in 0..d {
+                bt.column_mut(filled)
+                    .copy_from_slice(&ws.rows[row * p..(row + 1) * p]);
+                filled += 1;
+            }
+            if filled == width {
+                flush(&bt, filled, &mut part.gram);
+                filled = 0;
+            }
+        }
+        if filled > 0 {
+            flush(&bt, filled, &mut part.gram);
+        }
+    }
+
+    /// Row `r`'s share of `χ²` and of the gradient added to `part`; leaves its active, scaled
+    /// Jacobian rows in `ws.rows` (d × p, row-major) for the normal matrix.
+    #[allow(clippy::too_many_arguments)]
+    #[inline]
+    fn gather_row(
+        &self,
+        r: usize,
+        d: usize,
+        np: usize,
+        p: usize,
+        scales: &[f64],
+        ws: &mut RowScratch,
+        part: &mut NormalPart,
+    ) {
+        let res = self.row_block(r, true, ws);
+        for (row, &e) in res.iter().enumerate().take(d) {
+            let base = row * np;
+            part.cost += e * e;
+            let dst = &mut ws.rows[row * p..(row + 1) * p];
+            for ((x, &k), &s) in dst.iter_mut().zip(&self.active).zip(scales) {
+                *x = ws.block[base + k] * s;
+            }
+            for (g, &j) in part.gradient.iter_mut().zip(dst.iter()) {
+                *g += j * e;
+            }
         }
     }
 

@@ -45,9 +45,13 @@ fn payload_com_step(
     let mut r0 = vec![0.0; m];
     prob.set_params(&vec![0.0; p]);
     prob.residuals(&mut r0);
-    let mut j = DMatrix::zeros(m, p + 3);
-    let mut jk = DMatrix::zeros(m, p);
-    prob.jacobian(&mut jk);
+    // [J D, J_c s_c, r]: the scaled Jacobian, the centre of mass's columns, the residuals.
+    let n = p + 3;
+    let mut j = {
+        let mut jk = DMatrix::zeros(m, p);
+        prob.jacobian(&mut jk);
+        jk.resize_horizontally(n + 1, 0.0)
+    };
     let scales = options.scales.vector(&cal.layout);
     for c in 0..p {
         let s = if cal.subspace.scales.get(c).is_some_and(|v| *v == 0.0) {
@@ -55,9 +59,7 @@ fn payload_com_step(
         } else {
             scales[c]
         };
-        for row in 0..m {
-            j[(row, c)] = jk[(row, c)] * s;
-        }
+        j.column_mut(c).scale_mut(s);
     }
     for axis in 0..3 {
         let mut plus = settings.clone();
@@ -69,10 +71,23 @@ fn payload_com_step(
             j[(row, p + axis)] = (rp[row] - rm[row]) / (2.0 * H) * COM_SCALE_M;
         }
     }
-    let svd = j.svd(true, true);
+    // The least-squares step from the R factor of [J r] (tall-skinny QR: the top of its last column
+    // is Qᵀr), then the SVD of the small R: the same minimum-norm solution as the SVD of J, without
+    // the m × (p + 3) left singular vectors.
+    j.column_mut(n).copy_from_slice(&r0);
+    let r_aug = crate::linalg::r_factor(&j);
+    drop(j);
+    let rows = n.min(r_aug.nrows());
+    let mut r = DMatrix::zeros(n, n);
+    r.view_mut((0, 0), (rows, n))
+        .copy_from(&r_aug.view((0, 0), (rows, n)));
+    let mut qtr = DVector::zeros(n);
+    qtr.rows_mut(0, rows)
+        .copy_from(&r_aug.view((0, n), (rows, 1)));
+    let svd = r.svd(true, true);
     let smax = svd.singular_values.max();
     let step = svd
-        .solve(&DVector::from_vec(r0), 1e-8 * smax)
+        .solve(&qtr, 1e-8 * smax)
         .map_err(|e| CalibError::BadValue {
             context: train.name.clone(),
             field: "payload".into(),

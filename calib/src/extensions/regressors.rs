@@ -4,6 +4,7 @@
 use super::{Cause, ExtensionParam, ExtensionSettings, Term};
 use crate::error::{CalibError, Result};
 use nalgebra::Vector3;
+use rayon::prelude::*;
 use sim::Model;
 use sim::measurement_table::MeasurementTable;
 
@@ -90,9 +91,6 @@ impl Regressors {
         let params = settings.params(model);
         let n = params.len();
         let mut coef = vec![0.0; rows.len() * n];
-        let mut data = sim::Data::new(model);
-        let mut tau = vec![0.0; model.nq()];
-        let mut moment = vec![Vector3::zeros(); model.nq()];
         let needs_moment = settings.needs_gravity_moment();
         let needs_tau = settings.needs_gravity_torque() || needs_moment;
         let g = Vector3::from(settings.gravity_base);
@@ -111,70 +109,98 @@ impl Regressors {
             } else {
                 1
             };
-        // One row's regressors, to evaluate θ with [`apply`] between the fixed-point steps.
         let bends = params.iter().any(|p| matches!(p.term, Term::Bend { .. }));
-        let mut one = Regressors {
-            params,
-            coef: vec![0.0; n],
-            bends,
-        };
-        let mut theta = vec![0.0; model.nq()];
-        for (k, &r) in rows.iter().enumerate() {
-            let q = table.q_row(r);
-            theta.copy_from_slice(q);
-            for it in 0..iterations {
-                if needs_tau {
-                    let mass = table.payload.as_ref().map_or(0.0, |p| p[r]);
-                    let payload = (mass > 0.0).then_some(sim::statics::Payload {
-                        mass,
-                        com: settings.payload_com_m,
-                    });
-                    sim::statics::gravity_torques(model, &mut data, &theta, &g, payload.as_ref())
-                        .map_err(|e| CalibError::BadValue {
-                        context: format!("{source}: row {}", r + 1),
-                        field: "q1..qN".into(),
-                        value: String::new(),
-                        problem: format!("gravity torques: {e}"),
-                    })?;
-                    tau.copy_from_slice(data.gravity_torque.as_slice());
-                    if needs_moment {
-                        super::link_deflection::gravity_moments(
-                            model,
-                            &data,
-                            &g,
-                            payload.as_ref(),
-                            &mut moment,
-                        );
+        if n > 0 {
+            // Rows are independent: blocks of them in parallel, each with its own scratch; the first
+            // error in row order is returned.
+            let blocks: Vec<Result<()>> = coef
+                .par_chunks_mut(BUILD_BLOCK_ROWS * n)
+                .zip(rows.par_chunks(BUILD_BLOCK_ROWS))
+                .map(|(out, rows)| {
+                    let mut data = sim::Data::new(model);
+                    let mut tau = vec![0.0; model.nq()];
+                    let mut moment = vec![Vector3::zeros(); model.nq()];
+                    // One row's regressors, to evaluate θ with [`apply`] between the fixed-point
+                    // steps.
+                    let mut one = Regressors {
+                        params: params.clone(),
+                        coef: vec![0.0; n],
+                        bends,
+                    };
+                    let mut theta = vec![0.0; model.nq()];
+                    for (k, &r) in rows.iter().enumerate() {
+                        let q = table.q_row(r);
+                        theta.copy_from_slice(q);
+                        for it in 0..iterations {
+                            if needs_tau {
+                                let mass = table.payload.as_ref().map_or(0.0, |p| p[r]);
+                                let payload = (mass > 0.0).then_some(sim::statics::Payload {
+                                    mass,
+                                    com: settings.payload_com_m,
+                                });
+                                sim::statics::gravity_torques(
+                                    model,
+                                    &mut data,
+                                    &theta,
+                                    &g,
+                                    payload.as_ref(),
+                                )
+                                .map_err(|e| CalibError::BadValue {
+                                    context: format!("{source}: row {}", r + 1),
+                                    field: "q1..qN".into(),
+                                    value: String::new(),
+                                    problem: format!("gravity torques: {e}"),
+                                })?;
+                                tau.copy_from_slice(data.gravity_torque.as_slice());
+                                if needs_moment {
+                                    super::link_deflection::gravity_moments(
+                                        model,
+                                        &data,
+                                        &g,
+                                        payload.as_ref(),
+                                        &mut moment,
+                                    );
+                                }
+                            }
+                            let inputs = RowInputs {
+                                joints: &model.joints,
+                                q,
+                                tau: &tau,
+                                moment: &moment,
+                                dir: table.dir_row(r),
+                                temp_c: table.temp.as_ref().map(|t| t[r]),
+                                t_s: table.t.as_ref().map(|t| t[r]),
+                            };
+                            let mut col = 0;
+                            for &(c, width) in &widths {
+                                c.model().regressors(
+                                    settings,
+                                    &inputs,
+                                    &mut one.coef[col..col + width],
+                                );
+                                col += width;
+                            }
+                            if it + 1 < iterations {
+                                apply(&one, at, 0, q, &mut theta);
+                            }
+                        }
+                        out[k * n..(k + 1) * n].copy_from_slice(&one.coef);
                     }
-                }
-                let inputs = RowInputs {
-                    joints: &model.joints,
-                    q,
-                    tau: &tau,
-                    moment: &moment,
-                    dir: table.dir_row(r),
-                    temp_c: table.temp.as_ref().map(|t| t[r]),
-                    t_s: table.t.as_ref().map(|t| t[r]),
-                };
-                let mut col = 0;
-                for &(c, width) in &widths {
-                    c.model()
-                        .regressors(settings, &inputs, &mut one.coef[col..col + width]);
-                    col += width;
-                }
-                if it + 1 < iterations {
-                    apply(&one, at, 0, q, &mut theta);
-                }
-            }
-            coef[k * n..(k + 1) * n].copy_from_slice(&one.coef);
+                    Ok(())
+                })
+                .collect();
+            blocks.into_iter().collect::<Result<()>>()?;
         }
         Ok(Regressors {
-            params: one.params,
+            params,
             coef,
             bends,
         })
     }
 }
+
+/// Rows per parallel block of [`Regressors::build`].
+const BUILD_BLOCK_ROWS: usize = 256;
 
 /// Effective joint values of row `r`: `q` plus every joint-angle term, into `q_out`; returns the growth
 /// factor `x · g` (0 without growth). Bending terms are left to [`bends`].
