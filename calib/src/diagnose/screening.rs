@@ -99,3 +99,80 @@ pub(crate) fn record(sub: &Split<'_>) -> Screening {
         ),
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::stats::split_by_pose;
+    use sim::measurement_table::{MeasurementTable, OptionalColumns, Row};
+
+    /// 90 poses measured twice each.
+    fn table() -> MeasurementTable {
+        let mut t = MeasurementTable::new(2, OptionalColumns::NONE);
+        for pose in 0..90 {
+            for _ in 0..2 {
+                t.push_row(&Row {
+                    pose,
+                    q: &[pose as f64 * 0.01, 0.0],
+                    position: [0.0; 3],
+                    ..Row::default()
+                })
+                .unwrap();
+            }
+        }
+        t
+    }
+
+    fn split(t: &MeasurementTable) -> Split<'_> {
+        let (train, test) = split_by_pose(t, 1.0 / 3.0, 4);
+        Split {
+            test_pose: crate::diagnose::campaigns::pose_ids(t, &test),
+            train: Dataset {
+                table: t,
+                rows: train,
+                name: "t".into(),
+            },
+            test: Dataset {
+                table: t,
+                rows: test,
+                name: "t".into(),
+            },
+        }
+    }
+
+    fn poses(t: &MeasurementTable, rows: &[usize]) -> Vec<i64> {
+        let mut p: Vec<i64> = rows.iter().map(|&r| t.pose[r]).collect();
+        p.dedup();
+        p
+    }
+
+    #[test]
+    fn the_subsample_keeps_whole_poses_in_the_split_proportion_and_is_seeded() {
+        let t = table();
+        let full = split(&t);
+        let sub = subsample(&full, 30, 7).unwrap();
+        let (train, test) = (poses(&t, &sub.train.rows), poses(&t, &sub.test.rows));
+        // 30 poses, a third of them test poses (30 of 90 in the full split), both rows of each.
+        assert_eq!((train.len(), test.len()), (20, 10));
+        assert_eq!(sub.train.rows.len(), 40);
+        assert_eq!(sub.test.rows.len(), 20);
+        // Drawn from the split's own sides, never across.
+        assert!(sub.train.rows.iter().all(|r| full.train.rows.contains(r)));
+        assert!(sub.test.rows.iter().all(|r| full.test.rows.contains(r)));
+        let record = record(&sub);
+        assert_eq!((record.n_train, record.n_test), (20, 10));
+        // The same seed draws the same subsample, another seed another one.
+        assert_eq!(subsample(&full, 30, 7).unwrap().train.rows, sub.train.rows);
+        assert_ne!(subsample(&full, 30, 8).unwrap().train.rows, sub.train.rows);
+    }
+
+    #[test]
+    fn no_subsample_when_the_table_is_not_larger_or_screening_is_off() {
+        let t = table();
+        let full = split(&t);
+        assert!(subsample(&full, 90, 7).is_none());
+        assert!(subsample(&full, 500, 7).is_none());
+        assert!(subsample(&full, 0, 7).is_none());
+        assert!(subsample(&full, 89, 7).is_some());
+    }
+}

@@ -145,11 +145,13 @@ impl Regressors {
                                     &g,
                                     payload.as_ref(),
                                 )
-                                .map_err(|e| CalibError::BadValue {
-                                    context: format!("{source}: row {}", r + 1),
-                                    field: "q1..qN".into(),
-                                    value: String::new(),
-                                    problem: format!("gravity torques: {e}"),
+                                .map_err(|e| {
+                                    CalibError::BadValue {
+                                        context: format!("{source}: row {}", r + 1),
+                                        field: "q1..qN".into(),
+                                        value: String::new(),
+                                        problem: format!("gravity torques: {e}"),
+                                    }
                                 })?;
                                 tau.copy_from_slice(data.gravity_torque.as_slice());
                                 if needs_moment {
