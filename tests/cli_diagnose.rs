@@ -210,6 +210,10 @@ fn bad_input_exits_2_with_a_one_line_message() {
         ),
         (vec!["diagnose", "--data", data, "--alpha", "2"], "--alpha"),
         (
+            vec!["diagnose", "--data", data, "--screen-poses", "10"],
+            "--screen-poses",
+        ),
+        (
             vec![
                 "calibrate",
                 "--data",

@@ -281,7 +281,8 @@ def diagnose(
         data: the measurements (DataFrame, dict of arrays, ``.csv``/``.parquet`` path, Dataset).
         robot: a built-in robot name, a URDF path or a :class:`Robot`.
         **options: the ``diagnose`` flags: ``test_fraction=1/3``, ``seed=0``, ``alpha=1e-3``,
-            ``noise_floor=None`` (m); :func:`options` lists them.
+            ``noise_floor=None`` (m), ``screen_poses=3000`` (above it the candidates are tried on a
+            subsample and the adopted models refitted on every pose); :func:`options` lists them.
     """
     _check_options("diagnose", options)
     return json.loads(_robocal.diagnose(_robot(robot), to_table(data), flags(options)))
