@@ -600,26 +600,6 @@ impl Damping {
     }
 }
 
-/// Length (scaled units) of the Gauss–Newton step of the normal equations `gram`, `gradient` (as
-/// [`LeastSquaresProblem::normal_equations`] gives them) in the starting subspace of [`minimize`]:
-/// how far the linearisation at that point puts the minimum. Infinite when the equations are not
-/// finite or not positive definite there.
-pub fn gauss_newton_step_length(gram: &DMatrix<f64>, gradient: &[f64], floor: f64) -> f64 {
-    if !gram.iter().chain(gradient).all(|v| v.is_finite()) {
-        return f64::INFINITY;
-    }
-    let b = gram_basis(gram, floor);
-    let mut gr = b.tr_mul(&(gram * &b));
-    for k in 0..gr.nrows() {
-        gr[(k, k)] *= 1.0 + 1e-14;
-    }
-    let g = b.tr_mul(&DVector::from_column_slice(gradient));
-    match gr.cholesky() {
-        Some(ch) => ch.solve(&g).norm(),
-        None => f64::INFINITY,
-    }
-}
-
 /// Relative eigenvalue threshold of the scaled normal matrix for the starting subspace: rounding in
 /// `JᵀJ` leaves structural null eigenvalues near 1e-14 λ_max.
 const GRAM_RTOL: f64 = 1e-11;

@@ -107,11 +107,6 @@ fn payload_com_step(
 /// when the table carries a payload, each refit also moves the payload's centre of mass (unknown to the
 /// table, [`ExtensionSettings::payload_com_m`]) by a Gauss–Newton step, until it moves less than 1 µm.
 /// The covariance treats the centre of mass as known.
-///
-/// With `warm`, the first fit starts there ([`WarmStart`]), its torques at the equilibrium of its
-/// extension values; each refit starts at the fit before it, whose parameters differ from its
-/// minimum only by what moving the torques changed, so that it takes a few iterations instead of a
-/// solve from the closed-form start.
 pub(super) fn calibrate_extended(
     model: &Model,
     train: &Dataset<'_>,
@@ -121,12 +116,7 @@ pub(super) fn calibrate_extended(
     warm: Option<WarmStart<'_>>,
 ) -> Result<Calibration> {
     let mut settings = settings.clone();
-    let at = match warm {
-        Some(w) if settings.needs_equilibrium() => w.extension_for(&settings.params(model)),
-        _ => Vec::new(),
-    };
-    let lean = warm.is_some_and(|w| w.lean);
-    let mut cal = calibrate_with(model, train, test, options, Some(&settings), &at, warm)?;
+    let mut cal = calibrate_with(model, train, test, options, Some(&settings), &[], warm)?;
     if !settings.needs_equilibrium() {
         return Ok(cal);
     }
@@ -136,20 +126,10 @@ pub(super) fn calibrate_extended(
         .as_ref()
         .is_some_and(|m| train.rows.iter().any(|&r| m[r] > 0.0));
     let mut health = cal.report.health;
-    let mut last_com_step = f64::INFINITY;
-    let mut com_damping = 1.0;
     for _ in 0..EQUILIBRIUM_REFITS {
         let at = cal.params.extension.clone();
         let com_step = if payload {
             let d = payload_com_step(model, train, options, &settings, &cal)?;
-            // A step that did not halve the last one: the centre of mass swings between the
-            // refits (it trades with a weakly determined combination), and each further step is
-            // halved so that it settles.
-            if d.norm() > 0.5 * last_com_step {
-                com_damping *= 0.5;
-            }
-            last_com_step = d.norm();
-            let d = d * com_damping;
             for (c, d) in settings.payload_com_m.iter_mut().zip(d.iter()) {
                 *c += d;
             }
@@ -157,24 +137,7 @@ pub(super) fn calibrate_extended(
         } else {
             0.0
         };
-        let start = WarmStart {
-            before: &cal.before,
-            physical: &cal.params,
-            extensions: &cal.layout.extensions,
-            shared: None,
-            lean,
-            other_model: false,
-            payload_com_m: None,
-        };
-        let next = calibrate_with(
-            model,
-            train,
-            test,
-            options,
-            Some(&settings),
-            &at,
-            Some(start),
-        )?;
+        let next = calibrate_with(model, train, test, options, Some(&settings), &at, None)?;
         let change = next
             .params
             .extension
@@ -183,50 +146,14 @@ pub(super) fn calibrate_extended(
             .zip(&next.layout.extensions)
             .map(|((a, b), p)| (a - b).abs() / p.scale)
             .fold(0.0, f64::max);
-        let moved = moved_in_sds(&next, &at);
         health.merge(&next.report.health);
         cal = next;
-        if (change < 1e-6 || moved < SETTLED_SDS) && com_step < 1e-6 {
+        if change < 1e-6 && com_step < 1e-6 {
             break;
         }
     }
     cal.report.health = health;
     Ok(cal)
-}
-
-/// The equilibrium refits stop when the extension parameters moved by less than this many standard
-/// deviations along every identifiable combination ([`moved_in_sds`]): a further refit could not
-/// change an estimate or a prediction by a meaningful fraction of its uncertainty. (Weakly
-/// determined combinations can drift along a flat valley of `χ²` by many of their expected
-/// magnitudes per refit, joint compliance against link deflection among them, while the fit does
-/// not change.)
-pub const SETTLED_SDS: f64 = 1e-3;
-
-/// How far the extension parameters of `cal` moved from `at` (same layout), in standard deviations:
-/// the largest `|σₖ vₖᵀ D⁻¹ Δx| / σ̂` over the identifiable combinations `k` of `cal`'s subspace
-/// (`σₖ` its singular value, `vₖ` its direction in scaled coordinates, `σ̂²` the variance factor
-/// `χ²/dof`), the other parameters held. Infinite without degrees of freedom.
-fn moved_in_sds(cal: &Calibration, at: &[f64]) -> f64 {
-    let sub = &cal.subspace;
-    let dof = cal.report.dof;
-    if dof == 0 || at.len() != cal.params.extension.len() {
-        return f64::INFINITY;
-    }
-    let sd = (cal.report.after.solver.cost_final / dof as f64).sqrt();
-    let mut d = vec![0.0; sub.n_params()];
-    for (e, (x, a)) in cal.params.extension.iter().zip(at).enumerate() {
-        let k = cal.layout.extension(e);
-        if sub.scales[k] > 0.0 {
-            d[k] = (x - a) / sub.scales[k];
-        }
-    }
-    (0..sub.rank)
-        .map(|c| {
-            let along: f64 = sub.v.column(c).iter().zip(&d).map(|(v, d)| v * d).sum();
-            (sub.singular_values[c] * along).abs()
-        })
-        .fold(0.0, f64::max)
-        / sd.max(f64::MIN_POSITIVE)
 }
 
 /// [`calibrate_extended`] for `settings` and every alternative its causes offer

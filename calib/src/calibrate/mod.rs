@@ -40,9 +40,7 @@ use crate::error::{CalibError, Result};
 use crate::extensions::{ExtensionSettings, ModelSpec, Regressors};
 use crate::identifiability::{Observability, describe_null_space};
 use crate::learned::LearnedResidual;
-use crate::lm::{
-    LeastSquaresProblem, LmOptions, LmWorkspace, SolveHints, Subspace, minimize, minimize_with,
-};
+use crate::lm::{LmOptions, LmWorkspace, SolveHints, Subspace, minimize, minimize_with};
 use crate::params::{KinematicParams, ParamLayout, ParameterScales};
 use crate::problem::{KinematicProblem, NoiseModel, Observations};
 use crate::stats::residual_stats;
@@ -187,16 +185,17 @@ pub fn calibrate_model(
     calibrate_model_from(model, train, test, spec, options, None)
 }
 
-/// Where a fit starts when a nearby calibration is known, instead of the closed-form start: a
-/// cross-validation fold's fit ([`validation::cross_validate`]) at the calibration of the same model
-/// on every pose, an extended model's refit at the torques of the estimated equilibrium at the fit
-/// before it, and a candidate of diagnose at the model it extends (its extension parameters at zero).
-/// The minimum lies within a few standard deviations of the start (a fold leaves out a fifth of the
-/// poses; a candidate adds terms that are zero at the start): Levenberg–Marquardt from there reaches
-/// the same minimum as from the closed-form start (the convergence test is the same), in fewer
-/// iterations, and without the Kabsch start. A lean fit also leaves out what its caller does not
-/// use: the report's training residual statistics and its outlier list (the gross-error exclusion,
-/// which changes the fit, stays).
+/// Where a fit starts when a nearby calibration of the same model is known, instead of the closed-form
+/// start: a cross-validation fold's fit ([`validation::cross_validate`]) at the calibration on every
+/// pose, and diagnose's refit on every pose at its fit on a subsample (the first fit of an
+/// extended model; its equilibrium refits start from the closed form). The minimum
+/// lies within a few standard deviations of the start: Levenberg–Marquardt from there reaches the
+/// same minimum as from the closed-form start (the convergence test is the same), in fewer
+/// iterations, and without the Kabsch start. (Not the solution of another model: an extended model
+/// started at a kinematic fit that absorbed a large unmodelled error can stop in another local
+/// minimum, see `diagnose::Start`.) A lean fit also leaves out what its caller does not use: the
+/// report's training residual statistics and its outlier list (the gross-error exclusion, which
+/// changes the fit, stays).
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct WarmStart<'a> {
     /// The calibration on every pose ("before": nominal joints, base and target fitted).
@@ -209,16 +208,6 @@ pub(crate) struct WarmStart<'a> {
     pub extensions: &'a [crate::extensions::ExtensionParam],
     /// Leave out the training residual statistics and the outlier list of the report.
     pub lean: bool,
-    /// Whether `physical` is the solution of another model (a candidate of diagnose extending the
-    /// current one) rather than of this model on other poses. Then the full fit starts at whichever
-    /// of `physical` and the nominal geometry (the base-and-target fit, with the extension values
-    /// of `physical`) puts the minimum nearer, by the length of the Gauss–Newton step there
-    /// ([`crate::lm::gauss_newton_step_length`]): a kinematic model fitted to data with a large
-    /// unmodelled error has bent its weakly determined geometry to absorb it, hundreds of expected
-    /// magnitudes from where the extended model's minimum lies, and Levenberg–Marquardt then walks a
-    /// long curved valley back (160 iterations instead of 4 for joint compliance on 300 poses);
-    /// from a model that already holds that error, its own solution is the nearer start.
-    pub other_model: bool,
     /// The payload's centre of mass in the flange frame (m) that the calibration it starts from
     /// estimated ([`ExtensionSettings::payload_com_m`]), where an extended model's refits start.
     pub payload_com_m: Option<[f64; 3]>,
@@ -521,42 +510,11 @@ fn calibrate_with(
     let mut final_norms: Option<Vec<f64>> = None;
     let (report, sub) = match options.robust {
         None => {
-            // Another model's solution: the start nearer the minimum, with its normal equations.
-            let mut initial = None;
-            if let Some(f) = warm.filter(|f| f.other_model) {
-                let mut nominal = before_params.clone();
-                nominal.extension = f.extension_for(&obs.ext.params);
-                let probe = |at: &KinematicParams| {
-                    let mut prob = KinematicProblem::new(model, &obs, at.clone(), all.clone());
-                    let mut gram = DMatrix::zeros(p, p);
-                    let mut gradient = vec![0.0; p];
-                    prob.set_params(&vec![0.0; p]);
-                    let cost = prob.normal_equations(scales.as_slice(), &mut gram, &mut gradient);
-                    let length = crate::lm::gauss_newton_step_length(
-                        &gram,
-                        &gradient,
-                        options.lm.min_singular_value,
-                    );
-                    (length, (cost, gram, gradient))
-                };
-                let (own, own_ne) = probe(&params);
-                let (nom, nom_ne) = probe(&nominal);
-                initial = Some(if nom < own {
-                    params = nominal;
-                    nom_ne
-                } else {
-                    own_ne
-                });
-            }
             let mut prob = KinematicProblem::new(model, &obs, params.clone(), all.clone());
             // A fold's first solve starts where its shared work was done (weights 1, no exclusion).
-            let hints = match (warm.and_then(|f| f.shared), &initial) {
-                (Some(s), _) => s.after.hints(p),
-                (None, Some((cost, gram, gradient))) => SolveHints {
-                    initial: Some((*cost, gram, gradient)),
-                    factor: None,
-                },
-                (None, None) => SolveHints::default(),
+            let hints = match warm.and_then(|f| f.shared) {
+                Some(s) => s.after.hints(p),
+                None => SolveHints::default(),
             };
             let mut out = minimize_with(&mut prob, scales.as_slice(), &options.lm, &mut ws, &hints);
             params = prob.into_params();

@@ -311,7 +311,6 @@ fn fold_start(all: &Calibration) -> WarmStart<'_> {
         extensions: &all.layout.extensions,
         shared: None,
         lean: true,
-        other_model: false,
         payload_com_m: all.extensions.as_ref().map(|s| s.payload_com_m),
     }
 }
