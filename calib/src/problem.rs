@@ -481,22 +481,9 @@ impl<'a> KinematicProblem<'a> {
         ws: &mut RowScratch,
         part: &mut NormalPart,
     ) {
+        self.gather_row(r, d, np, p, scales, ws, part);
         let gs = &mut part.gram;
-        let gradient = &mut part.gradient;
         {
-            let res = self.row_block(r, true, ws);
-            // Gather the active, scaled rows of this measurement (d × p, row-major).
-            for (row, &e) in res.iter().enumerate().take(d) {
-                let base = row * np;
-                part.cost += e * e;
-                let dst = &mut ws.rows[row * p..(row + 1) * p];
-                for ((x, &k), &s) in dst.iter_mut().zip(&self.active).zip(scales) {
-                    *x = ws.block[base + k] * s;
-                }
-                for (g, &j) in gradient.iter_mut().zip(dst.iter()) {
-                    *g += j * e;
-                }
-            }
             // Lower triangle of the rank-d update, one pass over the normal matrix per measurement.
             if d == 3 {
                 let (r0, rest) = ws.rows.split_at(p);
