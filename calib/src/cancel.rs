@@ -24,6 +24,8 @@
 use crate::error::{CalibError, Result};
 use std::cell::{Cell, RefCell};
 use std::rc::Rc;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
 
 thread_local! {
     /// The checks installed by [`with_check`] on this thread, innermost last.
@@ -71,6 +73,57 @@ pub fn checkpoint() -> Result<()> {
     Ok(())
 }
 
+/// How often [`relayed`] polls the calling thread's check while the work runs elsewhere.
+const RELAY_POLL: std::time::Duration = std::time::Duration::from_millis(20);
+
+/// Carries the calling thread's stop to work that runs on other threads ([`relayed`]).
+#[derive(Clone, Debug)]
+pub struct Relay(Arc<AtomicBool>);
+
+impl Relay {
+    /// Runs `work` (on any thread) with a check that says stop once the calling thread's check of
+    /// [`relayed`] said so.
+    pub fn run<R>(&self, work: impl FnOnce() -> R) -> R {
+        let flag = self.0.clone();
+        with_check(move || flag.load(Ordering::Relaxed), work)
+    }
+}
+
+/// Runs `work`, which spreads its parts over rayon's threads with each part inside [`Relay::run`],
+/// so that the calling thread's check still stops it: the calling thread waits, polling its check
+/// every 20 ms, while `work` runs on a scoped thread; once the check says stop, every part stops at
+/// its next checkpoint, and the calling thread is stopped too when `work` returns. Without a check
+/// on the calling thread (the command line, the tests), `work` runs right there.
+///
+/// A part stolen by a rayon thread while it waits inside a relayed part runs under that part's
+/// check: two independent works on the pool at once (two Python threads) can see each other's
+/// stop.
+pub fn relayed<R: Send>(work: impl FnOnce(&Relay) -> R + Send) -> R {
+    let relay = Relay(Arc::new(AtomicBool::new(stopped())));
+    if CHECKS.with(|c| c.borrow().is_empty()) {
+        return work(&relay);
+    }
+    let caller = std::thread::current();
+    let out = std::thread::scope(|s| {
+        let running = s.spawn(|| {
+            let out = work(&relay);
+            caller.unpark();
+            out
+        });
+        while !running.is_finished() {
+            if checkpoint().is_err() {
+                relay.0.store(true, Ordering::Relaxed);
+            }
+            std::thread::park_timeout(RELAY_POLL);
+        }
+        running.join()
+    });
+    match out {
+        Ok(r) => r,
+        Err(panic) => std::panic::resume_unwind(panic),
+    }
+}
+
 /// True when [`checkpoint`] would say stop without asking the check again.
 pub fn stopped() -> bool {
     STOPPED.with(Cell::get)
@@ -101,6 +154,58 @@ mod tests {
         let r = std::panic::catch_unwind(|| with_check(|| true, || panic!("boom")));
         assert!(r.is_err());
         assert!(checkpoint().is_ok());
+    }
+
+    #[test]
+    fn a_relay_carries_the_stop_to_other_threads() {
+        use rayon::prelude::*;
+        use std::sync::atomic::AtomicUsize;
+        // The caller's check says stop on its third call; parts on rayon's threads poll a
+        // checkpoint until they see it (each part would otherwise spin for ever).
+        let calls = Rc::new(Cell::new(0));
+        let counter = calls.clone();
+        let polls = AtomicUsize::new(0);
+        let stopped_parts = with_check(
+            move || {
+                counter.set(counter.get() + 1);
+                counter.get() >= 3
+            },
+            || {
+                let n = relayed(|relay| {
+                    (0..4)
+                        .into_par_iter()
+                        .filter(|_| {
+                            relay.run(|| {
+                                while checkpoint().is_ok() {
+                                    polls.fetch_add(1, Ordering::Relaxed);
+                                    std::thread::yield_now();
+                                }
+                                true
+                            })
+                        })
+                        .count()
+                });
+                // The caller is stopped too once the work returns.
+                assert!(stopped());
+                n
+            },
+        );
+        assert_eq!(stopped_parts, 4);
+        assert_eq!(calls.get(), 3);
+        assert!(!stopped());
+    }
+
+    #[test]
+    fn without_a_check_a_relayed_work_runs_on_the_calling_thread() {
+        let here = std::thread::current().id();
+        let (there, ok) = relayed(|relay| {
+            (
+                std::thread::current().id(),
+                relay.run(|| checkpoint().is_ok()),
+            )
+        });
+        assert_eq!(there, here);
+        assert!(ok);
     }
 
     #[test]

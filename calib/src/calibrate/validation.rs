@@ -466,16 +466,18 @@ fn fit_folds(
         Some(s) => fold_shares(model, data, spec, options, fold_of, k, s)?,
         None => None,
     };
-    Ok((0..k)
-        .into_par_iter()
-        .map(|f| {
-            let start = start.map(|s| WarmStart {
-                shared: shares.as_ref().map(|v| &v[f]),
-                ..s
-            });
-            fit_fold(model, data, spec, options, fold_of, f, start)
-        })
-        .collect())
+    Ok(crate::cancel::relayed(|relay| {
+        (0..k)
+            .into_par_iter()
+            .map(|f| {
+                let start = start.map(|s| WarmStart {
+                    shared: shares.as_ref().map(|v| &v[f]),
+                    ..s
+                });
+                relay.run(|| fit_fold(model, data, spec, options, fold_of, f, start))
+            })
+            .collect()
+    }))
 }
 
 fn cross_validate_from(

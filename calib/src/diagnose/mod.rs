@@ -41,6 +41,7 @@ use crate::predict::Prediction;
 use crate::stats::split_by_pose;
 use crate::units::Unit;
 use nalgebra::Vector3;
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use sim::Model;
 use sim::measurement_table::MeasurementTable;
@@ -974,29 +975,22 @@ fn select(
             .entry(current.spec.name())
             .or_insert_with(|| unexplained::probes(model, split, &current, &[], options.seed))
             .clone();
+        let specs: Vec<(Cause, ModelSpec)> = remaining
+            .iter()
+            .map(|&cause| {
+                let mut spec = current.spec.with(cause);
+                if let Some(c) = companion(cause).filter(|c| candidates.contains(c)) {
+                    spec = spec.with(c);
+                }
+                (cause, spec)
+            })
+            .collect();
+        fit_candidates(model, split, &specs, options, book)?;
         let mut tried: Vec<(Cause, Evaluated, f64, f64, f64)> = Vec::new();
-        for cause in remaining {
-            crate::cancel::checkpoint()?;
-            let mut spec = current.spec.with(cause);
-            if let Some(c) = companion(cause).filter(|c| candidates.contains(c)) {
-                spec = spec.with(c);
-            }
-            (book.progress)(&spec.name());
+        for (cause, spec) in specs {
             let cand = match book.fits.get(&spec.name()) {
                 Some(Some(c)) => c.clone(),
-                Some(None) => continue,
-                None => match evaluate(model, split, &spec, options, Start::Cold) {
-                    Ok(c) => {
-                        book.health.merge(&c.cal.report.health);
-                        book.fits.insert(spec.name(), Some(c.clone()));
-                        c
-                    }
-                    Err(CalibError::TooFewPoses { .. }) => {
-                        book.fits.insert(spec.name(), None);
-                        continue;
-                    }
-                    Err(e) => return Err(e),
-                },
+                _ => continue,
             };
             let tz = significance::paired(&current.pose_sq, &cand.pose_sq).z;
             let trz = train_z(&current.cal, &cand.cal);
@@ -1088,6 +1082,56 @@ fn select(
         findings,
         companions,
     })
+}
+
+/// Fits every model of `specs` that `book` has not fitted yet, from the closed form, in parallel
+/// (each fit is deterministic and independent of the others, so the outcome does not depend on the
+/// order or the number of threads), and files each under its name (`None`: too few poses). The first
+/// other error, in the order of `specs`, is returned. A caller's cancellation check
+/// ([`crate::cancel`]) is polled on its thread while the fits run and stops them at their next
+/// checkpoint.
+fn fit_candidates(
+    model: &Model,
+    split: &Split<'_>,
+    specs: &[(Cause, ModelSpec)],
+    options: &DiagnoseOptions,
+    book: &mut Bookkeeping<'_>,
+) -> Result<()> {
+    crate::cancel::checkpoint()?;
+    let mut todo: Vec<&ModelSpec> = Vec::new();
+    for (_, spec) in specs {
+        if !book.fits.contains_key(&spec.name()) && !todo.iter().any(|t| t.name() == spec.name()) {
+            todo.push(spec);
+        }
+    }
+    match todo.as_slice() {
+        [] => return Ok(()),
+        [one] => (book.progress)(&one.name()),
+        many => (book.progress)(&format!(
+            "{} candidates in parallel: {}",
+            many.len(),
+            many.iter().map(|s| s.name()).collect::<Vec<_>>().join("; ")
+        )),
+    }
+    let fitted: Vec<Result<Evaluated>> = crate::cancel::relayed(|relay| {
+        todo.par_iter()
+            .map(|spec| relay.run(|| evaluate(model, split, spec, options, Start::Cold)))
+            .collect()
+    });
+    crate::cancel::checkpoint()?;
+    for (spec, fit) in todo.iter().zip(fitted) {
+        match fit {
+            Ok(c) => {
+                book.health.merge(&c.cal.report.health);
+                book.fits.insert(spec.name(), Some(c));
+            }
+            Err(CalibError::TooFewPoses { .. }) => {
+                book.fits.insert(spec.name(), None);
+            }
+            Err(e) => return Err(e),
+        }
+    }
+    Ok(())
 }
 
 /// True when no parameter of `cause` in `cal` is determined on its own and differs from zero by
