@@ -8,10 +8,25 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
+# Creates the venv $1. Python's ensurepip fails now and then on a busy machine (once in a CI run,
+# the same command succeeding right after), so a failed attempt is removed and tried again.
+make_venv() {
+  local attempt
+  for attempt in 1 2 3; do
+    if python3 -m venv "$1"; then
+      return 0
+    fi
+    echo "python3 -m venv $1 failed (attempt $attempt of 3)" >&2
+    rm -rf "$1"
+    sleep 2
+  done
+  return 1
+}
+
 venv=".venv"
 if [ ! -x "$venv/bin/python" ] || ! cmp -s scripts/requirements.txt "$venv/.requirements"; then
   echo "== setting up the Python venv ($venv) from scripts/requirements.txt" >&2
-  python3 -m venv "$venv"
+  make_venv "$venv"
   "$venv/bin/pip" install --quiet --disable-pip-version-check -r scripts/requirements.txt
   cp scripts/requirements.txt "$venv/.requirements"
 fi
@@ -47,7 +62,7 @@ echo "== the Python package (python/): built on the test build's dependencies, c
 pyvenv="target/python-venv"
 if [ ! -x "$pyvenv/bin/python" ] || ! cmp -s python/requirements-test.txt "$pyvenv/.requirements"; then
   rm -rf "$pyvenv"
-  python3 -m venv "$pyvenv"
+  make_venv "$pyvenv"
   "$pyvenv/bin/pip" install --quiet --disable-pip-version-check -r python/requirements-test.txt
   # numpy, pandas and polars come from the main venv (a .pth line), which stays as it is.
   site=$("$pyvenv/bin/python" -c 'import sysconfig; print(sysconfig.get_paths()["purelib"])')

@@ -18,6 +18,20 @@
 //! Nielsen's update of `μ`) and steps by `D B z`. Restricting to `B` makes every step the minimum-norm
 //! (in scaled units) Gauss–Newton step.
 //!
+//! # Curved valleys: geodesic acceleration
+//! A fit that misses a large effect (the kinematic model on data with millimetres of joint
+//! compliance) walks a long, curved valley: the Gauss–Newton model predicts a step's decrease well
+//! only over a short way, the damping settles where half the predicted decrease is realised, and the
+//! solve creeps (75 iterations on 200 poses of the bench's data). Each step is therefore corrected by
+//! Transtrum and Sethna's geodesic acceleration ("Improvements to the Levenberg–Marquardt algorithm
+//! for nonlinear least-squares minimization", 2012): the residuals' second derivative along the
+//! damped step `v`, from one more residual evaluation at `x + 0.1 v`, gives the acceleration `a` with
+//! the same damped normal matrix, and the step taken is `v + a/2` when `2‖a‖ ≤ 0.75 ‖v‖` (else `v`).
+//! The decrease it is judged against stays the one the Gauss–Newton model predicts for `v`, and the
+//! stopping rule below is unchanged, so a solve stops at the same minimum to the same tolerance, in
+//! fewer iterations (32 instead of 75 on that fit). A solve that starts from normal equations handed
+//! over ([`SolveHints::initial`]) takes its first step without it (the Jacobian is not at hand).
+//!
 //! # Stopping: converged to the noise
 //! At each point the full Gauss–Newton step would lower `χ²` by `pred = gᵀ G⁻¹ g` (reduced gradient `g`,
 //! reduced normal matrix `G`), the squared length of the residual's projection onto the identifiable
@@ -79,6 +93,20 @@ pub trait LeastSquaresProblem {
         let g = j.tr_mul(&DVector::from_column_slice(&r));
         gradient.copy_from_slice(g.as_slice());
         r.iter().map(|v| v * v).sum()
+    }
+
+    /// `D Jᵀ w` (length `p`) for a vector `w` of `m` residual values, with the column-scaled Jacobian
+    /// at the trial point; the solver calls it with the trial point where it last called
+    /// [`LeastSquaresProblem::normal_equations`], with the same `scales`, so that problems may keep
+    /// that call's Jacobian. The default forms `J`.
+    fn scaled_jacobian_transpose_times(&mut self, scales: &[f64], w: &[f64], out: &mut [f64]) {
+        let (m, p) = (self.n_residuals(), self.n_params());
+        let mut j = DMatrix::zeros(m, p);
+        self.jacobian(&mut j);
+        let jtw = j.tr_mul(&DVector::from_column_slice(w));
+        for ((o, v), s) in out.iter_mut().zip(jtw.iter()).zip(scales) {
+            *o = v * s;
+        }
     }
 
     /// A square factor `R` (p × p) of the column-scaled Jacobian at the trial point, `RᵀR = D JᵀJ D`,
@@ -532,6 +560,7 @@ pub fn minimize_with<P: LeastSquaresProblem>(
                 ws,
                 &basis,
                 fresh,
+                hints.initial.is_none(),
                 cap,
                 &mut damping,
                 options,
@@ -600,6 +629,100 @@ impl Damping {
     }
 }
 
+/// Step of the finite difference along the step that gives the residuals' second directional
+/// derivative in [`accelerate`], relative to the step (Transtrum and Sethna's 0.1).
+const ACCELERATION_FD_STEP: f64 = 0.1;
+
+/// Largest ratio `2‖a‖ / ‖v‖` (Marquardt-scaled norms) of the acceleration `a` to the velocity `v`
+/// for which the accelerated step is taken (Transtrum and Sethna's 0.75); beyond it the second-order
+/// term is not small and the step is the damped Gauss–Newton step alone.
+const ACCELERATION_MAX_RATIO: f64 = 0.75;
+
+/// Buffers of [`accelerate`] for one solve.
+#[derive(Clone, Debug, Default)]
+struct Acceleration {
+    /// The residuals at the linearisation point, when `at_x`.
+    r0: Vec<f64>,
+    at_x: bool,
+    /// The residuals at the finite-difference point, then their difference from `r0`.
+    rh: Vec<f64>,
+    /// `D Jᵀ (rh − r0)` (p).
+    jtw: Vec<f64>,
+    /// The finite-difference step (physical units, p).
+    h_step: Vec<f64>,
+    /// No step (p zeros).
+    zero: Vec<f64>,
+}
+
+/// Geodesic acceleration (Transtrum and Sethna, 2012): with the damped Gauss–Newton step `v = D B z`
+/// in `step`, the residuals' second directional derivative `r_vv ≈ (2/h)((r(x + h v) − r(x))/h − J v)`
+/// gives the acceleration `a = −(Bᵀ D JᵀJ D B + μ diag)⁻¹ Bᵀ D Jᵀ r_vv` (the same factor `ch`), and
+/// the step becomes `D B (z + a/2)`: the second-order path along a curved valley, where the linear
+/// step leaves the valley after a short way. `Jᵀ r_vv` is computed as
+/// `(2/h²)(Jᵀ(r(x + h v) − r(x)) − h JᵀJ v)`, one residual evaluation and one product with the
+/// Jacobian that the normal equations left. Returns whether `step` was accelerated (not when
+/// `2‖a‖/‖z‖ > `[`ACCELERATION_MAX_RATIO`] or on non-finite values); leaves the trial point at `x`.
+#[allow(clippy::too_many_arguments)]
+fn accelerate<P: LeastSquaresProblem>(
+    problem: &mut P,
+    scales: &[f64],
+    b: &DMatrix<f64>,
+    ch: &nalgebra::Cholesky<f64, nalgebra::Dyn>,
+    gr: &DMatrix<f64>,
+    diag: &[f64],
+    z: &DVector<f64>,
+    step: &mut [f64],
+    acc: &mut Acceleration,
+    report: &mut MinimizationReport,
+) -> bool {
+    let (m, p) = (problem.n_residuals(), problem.n_params());
+    let h = ACCELERATION_FD_STEP;
+    acc.rh.resize(m, 0.0);
+    acc.jtw.resize(p, 0.0);
+    acc.h_step.resize(p, 0.0);
+    acc.r0.resize(m, 0.0);
+    acc.zero.resize(p, 0.0);
+    if !acc.at_x {
+        problem.set_params(&acc.zero);
+        problem.residuals(&mut acc.r0);
+        report.evaluations += 1;
+        acc.at_x = true;
+    }
+    for (d, s) in acc.h_step.iter_mut().zip(step.iter()) {
+        *d = h * s;
+    }
+    problem.set_params(&acc.h_step);
+    problem.residuals(&mut acc.rh);
+    report.evaluations += 1;
+    problem.set_params(&acc.zero);
+    for (w, r0) in acc.rh.iter_mut().zip(&acc.r0) {
+        *w -= r0;
+    }
+    if acc.rh.iter().any(|v| !v.is_finite()) {
+        return false;
+    }
+    problem.scaled_jacobian_transpose_times(scales, &acc.rh, &mut acc.jtw);
+    let jtw = DVector::from_column_slice(&acc.jtw);
+    let rhs = (b.tr_mul(&jtw) - gr * z * h) * (2.0 / (h * h));
+    let a = -ch.solve(&rhs);
+    let norm = |v: &DVector<f64>| {
+        v.iter()
+            .zip(diag)
+            .map(|(x, d)| d * x * x)
+            .sum::<f64>()
+            .sqrt()
+    };
+    let ratio = 2.0 * norm(&a) / norm(z);
+    if ratio.is_nan() || ratio > ACCELERATION_MAX_RATIO {
+        return false;
+    }
+    let v = b * (z + a * 0.5);
+    for ((s, v), d) in step.iter_mut().zip(v.iter()).zip(scales) {
+        *s = d * v;
+    }
+    true
+}
+
 /// Relative eigenvalue threshold of the scaled normal matrix for the starting subspace: rounding in
 /// `JᵀJ` leaves structural null eigenvalues near 1e-14 λ_max.
 const GRAM_RTOL: f64 = 1e-11;
@@ -629,6 +752,7 @@ fn iterate<P: LeastSquaresProblem>(
     ws: &mut LmWorkspace,
     b: &DMatrix<f64>,
     mut fresh: bool,
+    fresh_from_problem: bool,
     cap: usize,
     damping: &mut Damping,
     options: &LmOptions,
@@ -643,6 +767,10 @@ fn iterate<P: LeastSquaresProblem>(
     let mut step = vec![0.0; p];
     let Damping { mut mu, mut nu } = *damping;
     let start_iterations = report.iterations;
+    // The Jacobian of the normal equations at x is there for the acceleration (not when a solve
+    // starts from normal equations handed over in its hints).
+    let mut jacobian_at_x = !fresh || fresh_from_problem;
+    let mut accel = Acceleration::default();
     loop {
         // Asked to stop (crate::cancel): before the next normal equations, the costly part.
         if crate::cancel::checkpoint().is_err() {
@@ -653,6 +781,7 @@ fn iterate<P: LeastSquaresProblem>(
             fresh = false;
             report.cost_final
         } else {
+            jacobian_at_x = true;
             problem.normal_equations(scales, &mut ws.gram, &mut ws.gradient)
         };
         let finite = normal_equations_finite(cost, &ws.gram);
@@ -725,6 +854,12 @@ fn iterate<P: LeastSquaresProblem>(
             for k in 0..p {
                 step[k] = scales[k] * bz[k];
             }
+            // Geodesic acceleration (a second-order correction along the curved valley).
+            if jacobian_at_x {
+                accelerate(
+                    problem, scales, b, &ch, &gr, &diag, &z, &mut step, &mut accel, report,
+                );
+            }
             problem.set_params(&step);
             problem.residuals(&mut ws.residuals);
             report.evaluations += 1;
@@ -745,6 +880,8 @@ fn iterate<P: LeastSquaresProblem>(
             if trial.is_finite() && rho > 1e-4 {
                 problem.accept();
                 report.cost_final = trial;
+                accel.r0.clone_from(&ws.residuals);
+                accel.at_x = true;
                 mu *= (1.0f64 / 3.0).max(1.0 - (2.0 * rho - 1.0).powi(3));
                 nu = 2.0;
                 break;
@@ -760,5 +897,136 @@ fn iterate<P: LeastSquaresProblem>(
                 return;
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Residuals quadratic in `x ∈ R²`: `rᵢ(x) = cᵢ + gᵢᵀx + ½ xᵀHᵢx`, so that the second directional
+    /// derivative `vᵀHᵢv` is exact and the finite difference of [`accelerate`] has no truncation error.
+    struct Quadratic {
+        x: [f64; 2],
+        trial: [f64; 2],
+    }
+
+    const C: [f64; 3] = [0.3, -1.2, 0.8];
+    const G: [[f64; 2]; 3] = [[1.0, 0.5], [-0.4, 2.0], [0.7, -0.3]];
+    const H: [[[f64; 2]; 2]; 3] = [
+        [[0.2, 0.05], [0.05, -0.1]],
+        [[0.0, 0.3], [0.3, 0.1]],
+        [[-0.15, 0.0], [0.0, 0.25]],
+    ];
+
+    impl LeastSquaresProblem for Quadratic {
+        fn n_params(&self) -> usize {
+            2
+        }
+        fn n_residuals(&self) -> usize {
+            3
+        }
+        fn set_params(&mut self, step: &[f64]) {
+            self.trial = [self.x[0] + step[0], self.x[1] + step[1]];
+        }
+        fn accept(&mut self) {
+            self.x = self.trial;
+        }
+        fn residuals(&mut self, out: &mut [f64]) {
+            let x = self.trial;
+            for i in 0..3 {
+                let hx = [
+                    H[i][0][0] * x[0] + H[i][0][1] * x[1],
+                    H[i][1][0] * x[0] + H[i][1][1] * x[1],
+                ];
+                out[i] =
+                    C[i] + G[i][0] * x[0] + G[i][1] * x[1] + 0.5 * (x[0] * hx[0] + x[1] * hx[1]);
+            }
+        }
+        fn jacobian(&mut self, out: &mut DMatrix<f64>) {
+            let x = self.trial;
+            for i in 0..3 {
+                for c in 0..2 {
+                    out[(i, c)] = G[i][c] + H[i][c][0] * x[0] + H[i][c][1] * x[1];
+                }
+            }
+        }
+    }
+
+    /// The accelerated step against the acceleration computed by hand: `r_vv,i = vᵀHᵢv` and
+    /// `a = −(Bᵀ D JᵀJ D B + μ diag)⁻¹ Bᵀ D Jᵀ r_vv`, in a rotated subspace basis with column scales.
+    #[test]
+    fn the_acceleration_is_the_damped_solve_of_the_residuals_second_derivative() {
+        let mut prob = Quadratic {
+            x: [0.4, -0.7],
+            trial: [0.4, -0.7],
+        };
+        let scales = [1.0, 2.0];
+        let (cs, sn) = (0.6_f64, 0.8_f64);
+        let b = DMatrix::from_row_slice(2, 2, &[cs, -sn, sn, cs]);
+        let mut gram = DMatrix::zeros(2, 2);
+        let mut gradient = vec![0.0; 2];
+        prob.normal_equations(&scales, &mut gram, &mut gradient);
+        let gr = b.transpose() * &gram * &b;
+        let mu = 0.3;
+        let diag = vec![gr[(0, 0)], gr[(1, 1)]];
+        let mut damped = gr.clone();
+        for k in 0..2 {
+            damped[(k, k)] += mu * diag[k];
+        }
+        let ch = damped.clone().cholesky().expect("positive definite");
+        let z = DVector::from_vec(vec![0.05, -0.08]);
+        let bz = &b * &z;
+        let mut step: Vec<f64> = (0..2).map(|k| scales[k] * bz[k]).collect();
+        let v = step.clone();
+        let mut acc = Acceleration::default();
+        let mut report = MinimizationReport {
+            termination: TerminationReason::Converged,
+            iterations: 0,
+            evaluations: 0,
+            cost_initial: 0.0,
+            cost_final: 0.0,
+            predicted_decrease: 0.0,
+            n_residuals: 3,
+            n_params: 2,
+            rank: 2,
+            health: Health::new(),
+        };
+        let taken = accelerate(
+            &mut prob,
+            &scales,
+            &b,
+            &ch,
+            &gr,
+            &diag,
+            &z,
+            &mut step,
+            &mut acc,
+            &mut report,
+        );
+        assert!(taken, "a small second-order term is taken");
+        assert_eq!(report.evaluations, 2, "r(x) and r(x + h v)");
+        assert_eq!(prob.trial, prob.x, "the trial point is back at x");
+        // By hand.
+        let mut j = DMatrix::zeros(3, 2);
+        prob.jacobian(&mut j);
+        let rvv = DVector::from_fn(3, |i, _| {
+            (0..2)
+                .map(|r| (0..2).map(|c| v[r] * H[i][r][c] * v[c]).sum::<f64>())
+                .sum::<f64>()
+        });
+        let jtr = j.transpose() * rvv;
+        let djtr = DVector::from_fn(2, |k, _| scales[k] * jtr[k]);
+        let a = -damped.cholesky().unwrap().solve(&(b.transpose() * djtr));
+        let expected = &b * (&z + &a * 0.5);
+        for k in 0..2 {
+            let e = scales[k] * expected[k];
+            assert!(
+                (step[k] - e).abs() <= 1e-12 * e.abs().max(1e-3),
+                "step[{k}] = {} against {e}",
+                step[k]
+            );
+        }
+        assert!(a.norm() > 1e-3 * z.norm(), "the test sees a correction");
     }
 }

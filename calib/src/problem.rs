@@ -128,6 +128,18 @@ pub struct KinematicProblem<'a> {
     campaign: Vec<usize>,
     /// Whether a joint or extension parameter is active (else the joint columns are not needed).
     joint_columns: bool,
+    /// The weighted, column-scaled Jacobian of the active parameters at the point of the last
+    /// [`LeastSquaresProblem::normal_equations`] (one row of `p` per residual, row-major), for
+    /// [`LeastSquaresProblem::scaled_jacobian_transpose_times`] and, while the trial point has not
+    /// moved from there ([`Self::kept_jacobian`]), the rank decision.
+    jac: Vec<f64>,
+    /// The column scales of `jac`.
+    jac_scales: Vec<f64>,
+    /// Whether `jac` is the Jacobian at the linearisation point (made there, and no step accepted
+    /// since).
+    jac_at_lin: bool,
+    /// Whether the trial point is the linearisation point (the last step set was zero).
+    trial_at_lin: bool,
 }
 
 /// Measurement rows per parallel work item. The partial sums of the normal equations are added in
@@ -224,7 +236,21 @@ impl<'a> KinematicProblem<'a> {
             joint_columns,
             layout,
             campaign,
+            jac: Vec::new(),
+            jac_scales: Vec::new(),
+            jac_at_lin: false,
+            trial_at_lin: true,
         }
+    }
+
+    /// The kept `J D` (row-major, one row of `p` per residual) when it is the Jacobian at the trial
+    /// point with the column scales `scales`: the same numbers a new evaluation would give.
+    fn kept_jacobian(&self, scales: &[f64]) -> Option<&[f64]> {
+        let fresh = self.trial_at_lin
+            && self.jac_at_lin
+            && self.jac_scales == scales
+            && self.jac.len() == self.n_residuals() * self.active.len();
+        fresh.then_some(&self.jac[..])
     }
 
     /// The parameter layout.
@@ -274,6 +300,27 @@ impl<'a> KinematicProblem<'a> {
         (0..chunks)
             .into_par_iter()
             .map(|c| work(this, c, &mut this.scratch()))
+            .collect()
+    }
+
+    /// [`Self::map_chunks`] with `dst`, the chunk's part of `out` (`width` values per row), handed to
+    /// `work` as well.
+    fn map_chunks_into<T: Send>(
+        &mut self,
+        out: &mut [f64],
+        width: usize,
+        work: impl Fn(&Self, usize, &mut [f64], &mut RowScratch) -> T + Sync,
+    ) -> Vec<T> {
+        if self.obs.len() <= CHUNK_ROWS {
+            let mut ws = std::mem::replace(&mut self.ws, RowScratch::new(0, 0, 0, 0));
+            let out = vec![work(self, 0, out, &mut ws)];
+            self.ws = ws;
+            return out;
+        }
+        let this = &*self;
+        out.par_chunks_mut(CHUNK_ROWS * width)
+            .enumerate()
+            .map(|(c, dst)| work(this, c, dst, &mut this.scratch()))
             .collect()
     }
 
@@ -401,7 +448,14 @@ impl<'a> KinematicProblem<'a> {
     /// `Bᵀ`, p × rows) and added to the normal matrix as one product `Bᵀ B` (a cache-blocked matrix
     /// product instead of a pass over the normal matrix per measurement); every entry of the
     /// matrix is filled (the lower triangle is what is read).
-    fn normal_part(&self, c: usize, scales: &[f64], ws: &mut RowScratch, part: &mut NormalPart) {
+    fn normal_part(
+        &self,
+        c: usize,
+        scales: &[f64],
+        ws: &mut RowScratch,
+        part: &mut NormalPart,
+        jac: &mut [f64],
+    ) {
         let d = self.obs.dim();
         let np = self.layout.len();
         let p = self.active.len();
@@ -412,6 +466,7 @@ impl<'a> KinematicProblem<'a> {
             }
             return;
         }
+        let first = rows.start;
         let width = NORMAL_BLOCK_ROWS * d;
         let mut bt = DMatrix::<f64>::zeros(p, width);
         let mut b = DMatrix::<f64>::zeros(width, p);
@@ -424,6 +479,7 @@ impl<'a> KinematicProblem<'a> {
         };
         for r in rows {
             self.gather_row(r, d, np, p, scales, ws, part);
+            jac[(r - first) * d * p..(r - first + 1) * d * p].copy_from_slice(&ws.rows[..d * p]);
             for row in 0..d {
                 bt.column_mut(filled)
                     .copy_from_slice(&ws.rows[row * p..(row + 1) * p]);
@@ -565,7 +621,9 @@ impl<'a> KinematicProblem<'a> {
                     .into_iter()
                     .zip(jac)
                     .zip(&count)
-                    .map(|((part, j), &m)| (part, (m > 0).then(|| j.qr().r())))
+                    .map(|((part, mut j), &m)| {
+                        (part, (m > 0).then(|| crate::linalg::householder_r(&mut j)))
+                    })
                     .collect()
             })
             .collect();
@@ -616,6 +674,7 @@ impl LeastSquaresProblem for KinematicProblem<'_> {
     }
 
     fn set_params(&mut self, step: &[f64]) {
+        self.trial_at_lin = step.iter().all(|s| *s == 0.0);
         copy_params(&mut self.trial, &self.lin);
         self.step_full.fill(0.0);
         for (&k, &s) in self.active.iter().zip(step) {
@@ -627,6 +686,8 @@ impl LeastSquaresProblem for KinematicProblem<'_> {
 
     fn accept(&mut self) {
         copy_params(&mut self.lin, &self.trial);
+        self.jac_at_lin &= self.trial_at_lin;
+        self.trial_at_lin = true;
     }
 
     fn residuals(&mut self, out: &mut [f64]) {
@@ -673,6 +734,30 @@ impl LeastSquaresProblem for KinematicProblem<'_> {
         let np = self.layout.len();
         let p = self.active.len();
         let m = self.obs.len() * d;
+        if let Some(jd) = self.kept_jacobian(scales) {
+            // The same matrices as below, from the Jacobian the last normal equations left.
+            if !crate::linalg::is_tall(m, p) {
+                let mut sq = DMatrix::zeros(m.max(p), p);
+                sq.view_mut((0, 0), (m, p))
+                    .copy_from(&DMatrix::from_row_slice(m, p, jd));
+                return if m > p {
+                    crate::linalg::householder_r(&mut sq)
+                } else {
+                    sq
+                };
+            }
+            let block = crate::linalg::tsqr_block_rows(p);
+            let factors: Vec<DMatrix<f64>> = (0..m.div_ceil(block))
+                .into_par_iter()
+                .map(|b| {
+                    let (first, last) = (b * block, ((b + 1) * block).min(m));
+                    let mut out =
+                        DMatrix::from_row_slice(last - first, p, &jd[first * p..last * p]);
+                    crate::linalg::householder_r(&mut out)
+                })
+                .collect();
+            return crate::linalg::stacked_r_factor(&factors, p);
+        }
         if !crate::linalg::is_tall(m, p) {
             let mut j = DMatrix::zeros(m, p);
             self.jacobian(&mut j);
@@ -700,10 +785,30 @@ impl LeastSquaresProblem for KinematicProblem<'_> {
                         }
                     }
                 }
-                out.qr().r()
+                crate::linalg::householder_r(&mut out)
             })
             .collect();
         crate::linalg::stacked_r_factor(&factors, p)
+    }
+
+    /// From the Jacobian kept by the last [`LeastSquaresProblem::normal_equations`] (with the same
+    /// `scales`), which the solver calls with the trial point back at that call's point.
+    fn scaled_jacobian_transpose_times(&mut self, scales: &[f64], w: &[f64], out: &mut [f64]) {
+        let p = self.active.len();
+        debug_assert_eq!(self.jac.len(), w.len() * p, "normal equations first");
+        let _ = scales;
+        out.fill(0.0);
+        if p == 0 || self.jac.len() != w.len() * p {
+            return;
+        }
+        let jt = nalgebra::DMatrixView::from_slice(&self.jac, p, w.len());
+        let mut o = nalgebra::DVectorViewMut::from_slice(out, p);
+        o.gemv(
+            1.0,
+            &jt,
+            &nalgebra::DVectorView::from_slice(w, w.len()),
+            0.0,
+        );
     }
 
     fn normal_equations(
@@ -718,11 +823,17 @@ impl LeastSquaresProblem for KinematicProblem<'_> {
             gradient: vec![0.0; p],
             gram: vec![0.0; p * p],
         };
-        let parts = self.map_chunks(|this, c, ws| {
+        let mut jac = std::mem::take(&mut self.jac);
+        jac.resize(self.n_residuals() * p, 0.0);
+        self.jac_scales.clear();
+        self.jac_scales.extend_from_slice(scales);
+        self.jac_at_lin = self.trial_at_lin;
+        let parts = self.map_chunks_into(&mut jac, self.obs.dim() * p, |this, c, dst, ws| {
             let mut part = empty();
-            this.normal_part(c, scales, ws, &mut part);
+            this.normal_part(c, scales, ws, &mut part, dst);
             part
         });
+        self.jac = jac;
         // Added in chunk order: the same sums on any number of threads (one chunk: row order).
         let mut parts = parts.into_iter();
         let mut total = parts.next().unwrap_or_else(empty);

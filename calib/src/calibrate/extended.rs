@@ -137,7 +137,27 @@ pub(super) fn calibrate_extended(
         } else {
             0.0
         };
-        let next = calibrate_with(model, train, test, options, Some(&settings), &at, None)?;
+        // A fit that started at the same model's solution elsewhere (a fold, the refit of a
+        // screened model on every pose) refits from its last refit, in the basin it started in; a
+        // fit from the closed form refits from the closed form (a refit started at the one before
+        // can settle in another local minimum, see `diagnose::Start`).
+        let refit_start = warm.map(|w| WarmStart {
+            before: &cal.before,
+            physical: &cal.params,
+            extensions: &cal.layout.extensions,
+            lean: w.lean,
+            payload_com_m: Some(settings.payload_com_m),
+            shared: None,
+        });
+        let next = calibrate_with(
+            model,
+            train,
+            test,
+            options,
+            Some(&settings),
+            &at,
+            refit_start,
+        )?;
         let change = next
             .params
             .extension
