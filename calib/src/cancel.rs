@@ -5,10 +5,11 @@
 //! [`crate::diagnose::diagnose`]. Once the check says stop, every later checkpoint on that thread
 //! says so too (the answer is kept), and the work returns [`CalibError::Cancelled`].
 //!
-//! The check belongs to the calling thread: the loops that poll it run there (the rows of one
-//! evaluation may run on rayon's threads, but the loop around them does not). Work run without a
-//! check (the command line, the tests) is never cancelled, and a checkpoint then costs one
-//! thread-local read.
+//! The check belongs to the calling thread (Python runs its signal handlers on the main thread
+//! only). Work whose loops run on rayon's threads (the candidate fits of a diagnosis round, the
+//! cross-validation folds) goes through [`relayed`]: the calling thread keeps polling its check and
+//! each part polls a [`Relay`] that carries the answer. Work run without a check (the command line,
+//! the tests) is never cancelled, and a checkpoint then costs one thread-local read.
 //!
 //! ```
 //! use calib::cancel::{checkpoint, with_check};
