@@ -96,12 +96,17 @@ impl Relay {
 /// its next checkpoint, and the calling thread is stopped too when `work` returns. Without a check
 /// on the calling thread (the command line, the tests), `work` runs right there.
 ///
+/// Called on one of rayon's threads (a relayed part that spreads its own work), `work` runs right
+/// there too: a pool thread that waited would hold a thread its own parts may need (two of them
+/// waiting on a two-thread pool would wait for ever). Its parts then see a stop said before, not
+/// one said while they run; the part around them sees it at its next checkpoint.
+///
 /// A part stolen by a rayon thread while it waits inside a relayed part runs under that part's
 /// check: two independent works on the pool at once (two Python threads) can see each other's
 /// stop.
 pub fn relayed<R: Send>(work: impl FnOnce(&Relay) -> R + Send) -> R {
     let relay = Relay(Arc::new(AtomicBool::new(stopped())));
-    if CHECKS.with(|c| c.borrow().is_empty()) {
+    if CHECKS.with(|c| c.borrow().is_empty()) || rayon::current_thread_index().is_some() {
         return work(&relay);
     }
     let caller = std::thread::current();
@@ -194,6 +199,35 @@ mod tests {
         assert_eq!(stopped_parts, 4);
         assert_eq!(calls.get(), 3);
         assert!(!stopped());
+    }
+
+    #[test]
+    fn relayed_work_inside_relayed_parts_does_not_wait_for_the_pool() {
+        use rayon::prelude::*;
+        // Every pool thread runs a relayed part that relays work of its own: with the pool's
+        // threads all waiting this would never end.
+        let n = rayon::current_num_threads() * 2;
+        let total: usize = with_check(
+            || false,
+            || {
+                relayed(|outer| {
+                    (0..n)
+                        .into_par_iter()
+                        .map(|_| {
+                            outer.run(|| {
+                                relayed(|inner| {
+                                    (0..4)
+                                        .into_par_iter()
+                                        .map(|k| inner.run(|| k))
+                                        .sum::<usize>()
+                                })
+                            })
+                        })
+                        .sum()
+                })
+            },
+        );
+        assert_eq!(total, n * 6);
     }
 
     #[test]
