@@ -715,10 +715,18 @@ fn one_gross_error_is_excluded_and_named_and_an_impossible_value_is_refused() {
         s(&d.join("m.json")),
     ]);
     assert_eq!(c, Some(0), "{e}");
-    assert!(
-        e.contains("warning: row 41 (pose 40) excluded from the fit as a gross error: 1000."),
-        "{e}"
-    );
+    // The row is 1 m off plus its noise (iiwa7_kinematic's tracker: about 15 µm per axis at this
+    // range) and the other rows' prediction error (a few µm): within 0.1 mm of 1 m, about 5 σ. (Before
+    // the solver's geodesic acceleration the fit before the exclusion stopped in another minimum and
+    // the refit after it at χ²/dof = 227, 0.44 mm off, which the text "1000." then happened to match.)
+    let prefix = "warning: row 41 (pose 40) excluded from the fit as a gross error: ";
+    let off_mm: f64 = e
+        .split(prefix)
+        .nth(1)
+        .and_then(|rest| rest.split(" mm").next())
+        .and_then(|v| v.parse().ok())
+        .unwrap_or_else(|| panic!("no exclusion of row 41 in:\n{e}"));
+    assert!((off_mm - 1000.0).abs() < 0.1, "{off_mm} mm off\n{e}");
     assert!(!e.contains("did not converge"), "{e}");
     // The writer refuses such a table, so edit the text.
     let text = std::fs::read_to_string(&bad).unwrap();

@@ -116,7 +116,16 @@ pub(super) fn calibrate_extended(
     warm: Option<WarmStart<'_>>,
 ) -> Result<Calibration> {
     let mut settings = settings.clone();
-    let mut cal = calibrate_with(model, train, test, options, Some(&settings), &[], warm)?;
+    let mut cal = calibrate_with(
+        model,
+        train,
+        test,
+        options,
+        Some(&settings),
+        &[],
+        warm,
+        None,
+    )?;
     if !settings.needs_equilibrium() {
         return Ok(cal);
     }
@@ -157,6 +166,8 @@ pub(super) fn calibrate_extended(
             Some(&settings),
             &at,
             refit_start,
+            // The base-and-target fit (nominal joints, extensions at zero) is the first fit's.
+            Some((&cal.before, &cal.report.before)),
         )?;
         let change = next
             .params

@@ -163,7 +163,7 @@ pub fn calibrate(
     test: Option<&Dataset<'_>>,
     options: &CalibrationOptions,
 ) -> Result<Calibration> {
-    calibrate_with(model, train, test, options, None, &[], None)
+    calibrate_with(model, train, test, options, None, &[], None, None)
 }
 
 /// Calibrates the model `spec` (kinematic, extensions identified jointly with it, then an optional
@@ -302,7 +302,7 @@ pub(crate) fn calibrate_model_from(
     fold: Option<WarmStart<'_>>,
 ) -> Result<Calibration> {
     let mut cal = if spec.causes.is_empty() {
-        calibrate_with(model, train, test, options, None, &[], fold)?
+        calibrate_with(model, train, test, options, None, &[], fold, None)?
     } else {
         let mut settings = ExtensionSettings::for_data(
             model,
@@ -372,6 +372,11 @@ fn check_campaign_poses(obs: &Observations, name: &str) -> Result<()> {
     Ok(())
 }
 
+/// The calibration of `train` (judged on `test`) with the extensions `extensions`, their torques at
+/// the extension values `at`, starting at `fold` when given ([`WarmStart`]). `same_before` hands over
+/// the base-and-target fit of an earlier calibration of the same rows (an equilibrium refit: that fit
+/// uses nominal joints and every extension at zero, so it does not change between refits).
+#[allow(clippy::too_many_arguments)]
 fn calibrate_with(
     model: &Model,
     train: &Dataset<'_>,
@@ -380,6 +385,7 @@ fn calibrate_with(
     extensions: Option<&ExtensionSettings>,
     at: &[f64],
     fold: Option<WarmStart<'_>>,
+    same_before: Option<(&KinematicParams, &FitStage)>,
 ) -> Result<Calibration> {
     // A lean fit: no training statistics or outlier list in its report.
     let lean = fold.is_some_and(|f| f.lean);
@@ -465,35 +471,42 @@ fn calibrate_with(
     let mut warnings = Vec::new();
 
     // Before: base and target only.
-    let bt = layout.base_and_target();
-    let bt_scales: Vec<f64> = bt.iter().map(|&k| scales[k]).collect();
-    let mut ws = LmWorkspace::new(obs.len() * dim, bt.len());
-    let mut prob = KinematicProblem::new(model, &obs, start, bt);
-    let hints = match warm.and_then(|f| f.shared) {
-        Some(s) => s.before.hints(bt_scales.len()),
-        None => SolveHints::default(),
+    let (before_params, before) = match same_before {
+        Some((params, stage)) => (params.clone(), stage.clone()),
+        None => {
+            let bt = layout.base_and_target();
+            let bt_scales: Vec<f64> = bt.iter().map(|&k| scales[k]).collect();
+            let mut ws = LmWorkspace::new(obs.len() * dim, bt.len());
+            let mut prob = KinematicProblem::new(model, &obs, start, bt);
+            let hints = match warm.and_then(|f| f.shared) {
+                Some(s) => s.before.hints(bt_scales.len()),
+                None => SolveHints::default(),
+            };
+            let (before_report, _) =
+                minimize_with(&mut prob, &bt_scales, &options.lm, &mut ws, &hints);
+            let before_params = prob.into_params();
+            crate::cancel::checkpoint()?;
+            let before = FitStage {
+                parameters: "tracker-to-base transform and target (nominal joints)".into(),
+                train: if lean {
+                    Default::default()
+                } else {
+                    residual_stats(model, &before_params, &obs)
+                },
+                test: test_obs
+                    .as_ref()
+                    .map(|t| residual_stats(model, &before_params, t)),
+                solver: before_report,
+            };
+            (before_params, before)
+        }
     };
-    let (before_report, _) = minimize_with(&mut prob, &bt_scales, &options.lm, &mut ws, &hints);
-    let before_params = prob.into_params();
-    crate::cancel::checkpoint()?;
-    if !before_report.was_successful() {
+    if !before.solver.was_successful() {
         warnings.push(format!(
             "the base-and-target fit did not converge ({})",
-            before_report.termination
+            before.solver.termination
         ));
     }
-    let before = FitStage {
-        parameters: "tracker-to-base transform and target (nominal joints)".into(),
-        train: if lean {
-            Default::default()
-        } else {
-            residual_stats(model, &before_params, &obs)
-        },
-        test: test_obs
-            .as_ref()
-            .map(|t| residual_stats(model, &before_params, t)),
-        solver: before_report,
-    };
 
     // After: everything, optionally with IRLS.
     let all: Vec<usize> = (0..p).collect();
