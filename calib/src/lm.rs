@@ -100,13 +100,7 @@ pub trait LeastSquaresProblem {
     /// [`LeastSquaresProblem::normal_equations`], with the same `scales`, so that problems may keep
     /// that call's Jacobian. The default forms `J`.
     fn scaled_jacobian_transpose_times(&mut self, scales: &[f64], w: &[f64], out: &mut [f64]) {
-        let (m, p) = (self.n_residuals(), self.n_params());
-        let mut j = DMatrix::zeros(m, p);
-        self.jacobian(&mut j);
-        let jtw = j.tr_mul(&DVector::from_column_slice(w));
-        for ((o, v), s) in out.iter_mut().zip(jtw.iter()).zip(scales) {
-            *o = v * s;
-        }
+        formed_jacobian_transpose_times(self, scales, w, out);
     }
 
     /// A square factor `R` (p × p) of the column-scaled Jacobian at the trial point, `RᵀR = D JᵀJ D`,
@@ -119,6 +113,23 @@ pub trait LeastSquaresProblem {
         let mut j = DMatrix::zeros(m, p);
         self.jacobian(&mut j);
         Subspace::square_factor(&j, scales)
+    }
+}
+
+/// [`LeastSquaresProblem::scaled_jacobian_transpose_times`] by forming `J` at the trial point (the
+/// default, and the fallback of problems that keep the Jacobian).
+pub fn formed_jacobian_transpose_times<P: LeastSquaresProblem + ?Sized>(
+    problem: &mut P,
+    scales: &[f64],
+    w: &[f64],
+    out: &mut [f64],
+) {
+    let (m, p) = (problem.n_residuals(), problem.n_params());
+    let mut j = DMatrix::zeros(m, p);
+    problem.jacobian(&mut j);
+    let jtw = j.tr_mul(&DVector::from_column_slice(w));
+    for ((o, v), s) in out.iter_mut().zip(jtw.iter()).zip(scales) {
+        *o = v * s;
     }
 }
 

@@ -734,43 +734,31 @@ impl LeastSquaresProblem for KinematicProblem<'_> {
         let np = self.layout.len();
         let p = self.active.len();
         let m = self.obs.len() * d;
-        if let Some(jd) = self.kept_jacobian(scales) {
-            // The same matrices as below, from the Jacobian the last normal equations left.
-            if !crate::linalg::is_tall(m, p) {
-                let mut sq = DMatrix::zeros(m.max(p), p);
-                sq.view_mut((0, 0), (m, p))
-                    .copy_from(&DMatrix::from_row_slice(m, p, jd));
-                return if m > p {
-                    crate::linalg::householder_r(&mut sq)
-                } else {
-                    sq
-                };
-            }
-            let block = crate::linalg::tsqr_block_rows(p);
-            let factors: Vec<DMatrix<f64>> = (0..m.div_ceil(block))
-                .into_par_iter()
-                .map(|b| {
-                    let (first, last) = (b * block, ((b + 1) * block).min(m));
-                    let mut out =
-                        DMatrix::from_row_slice(last - first, p, &jd[first * p..last * p]);
-                    crate::linalg::householder_r(&mut out)
-                })
-                .collect();
-            return crate::linalg::stacked_r_factor(&factors, p);
-        }
         if !crate::linalg::is_tall(m, p) {
+            if let Some(jd) = self.kept_jacobian(scales) {
+                // Already scaled: unit scales multiply by 1, the same numbers.
+                let j = DMatrix::from_row_slice(m, p, jd);
+                return crate::lm::Subspace::square_factor(&j, &vec![1.0; p]);
+            }
             let mut j = DMatrix::zeros(m, p);
             self.jacobian(&mut j);
             return crate::lm::Subspace::square_factor(&j, scales);
         }
         // The blocks of rows of the tall-skinny QR, each made from the measurements it overlaps: the
         // same matrices as cutting the whole Jacobian, without forming it.
+        // With the Jacobian the last normal equations left, the blocks are copied from it.
+        let kept = self.kept_jacobian(scales);
         let block = crate::linalg::tsqr_block_rows(p);
         let this = &*self;
         let factors: Vec<DMatrix<f64>> = (0..m.div_ceil(block))
             .into_par_iter()
             .map(|b| {
                 let (first, last) = (b * block, ((b + 1) * block).min(m));
+                if let Some(jd) = kept {
+                    let mut out =
+                        DMatrix::from_row_slice(last - first, p, &jd[first * p..last * p]);
+                    return crate::linalg::householder_r(&mut out);
+                }
                 let mut ws = this.scratch();
                 let mut out = DMatrix::zeros(last - first, p);
                 for r in first / d..last.div_ceil(d) {
@@ -791,24 +779,22 @@ impl LeastSquaresProblem for KinematicProblem<'_> {
         crate::linalg::stacked_r_factor(&factors, p)
     }
 
-    /// From the Jacobian kept by the last [`LeastSquaresProblem::normal_equations`] (with the same
-    /// `scales`), which the solver calls with the trial point back at that call's point.
+    /// From the Jacobian kept by the last [`LeastSquaresProblem::normal_equations`] when the trial
+    /// point is still there with the same `scales` (how the solver calls it); else formed anew.
     fn scaled_jacobian_transpose_times(&mut self, scales: &[f64], w: &[f64], out: &mut [f64]) {
         let p = self.active.len();
-        debug_assert_eq!(self.jac.len(), w.len() * p, "normal equations first");
-        let _ = scales;
-        out.fill(0.0);
-        if p == 0 || self.jac.len() != w.len() * p {
+        if let Some(jd) = self.kept_jacobian(scales) {
+            let jt = nalgebra::DMatrixView::from_slice(jd, p, w.len());
+            let mut o = nalgebra::DVectorViewMut::from_slice(out, p);
+            o.gemv(
+                1.0,
+                &jt,
+                &nalgebra::DVectorView::from_slice(w, w.len()),
+                0.0,
+            );
             return;
         }
-        let jt = nalgebra::DMatrixView::from_slice(&self.jac, p, w.len());
-        let mut o = nalgebra::DVectorViewMut::from_slice(out, p);
-        o.gemv(
-            1.0,
-            &jt,
-            &nalgebra::DVectorView::from_slice(w, w.len()),
-            0.0,
-        );
+        crate::lm::formed_jacobian_transpose_times(self, scales, w, out);
     }
 
     fn normal_equations(

@@ -188,7 +188,7 @@ pub fn calibrate_model(
 /// Where a fit starts when a nearby calibration of the same model is known, instead of the closed-form
 /// start: a cross-validation fold's fit ([`validation::cross_validate`]) at the calibration on every
 /// pose, and diagnose's refit on every pose at its fit on a subsample (the first fit of an
-/// extended model; its equilibrium refits start from the closed form). The minimum
+/// extended model; each of its equilibrium refits then starts at the refit before). The minimum
 /// lies within a few standard deviations of the start: Levenberg–Marquardt from there reaches the
 /// same minimum as from the closed-form start (the convergence test is the same), in fewer
 /// iterations, and without the Kabsch start. (Not the solution of another model: an extended model
