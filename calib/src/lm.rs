@@ -359,6 +359,27 @@ impl Subspace {
             .count()
     }
 
+    /// The length of the step `delta` (physical units, the columns' order) in standard deviations
+    /// of the fit: `‖S Vᵣᵀ D⁻¹ δ‖ / √variance_factor`, the change of the weighted fitted values that
+    /// the step makes along the identifiable directions, against the noise the residuals show (1: the
+    /// step moves the fit by one standard deviation; [`Subspace::covariance`] is a generalised inverse
+    /// of this metric). Unidentifiable directions and frozen columns count nothing.
+    pub fn step_in_sigmas(&self, delta: &[f64], variance_factor: f64) -> f64 {
+        let mut sum = 0.0;
+        for c in 0..self.rank {
+            let along: f64 = self
+                .scales
+                .iter()
+                .zip(delta)
+                .enumerate()
+                .filter(|(_, (s, _))| **s != 0.0)
+                .map(|(k, (s, d))| self.v[(k, c)] * d / s)
+                .sum();
+            sum += (self.singular_values[c] * along).powi(2);
+        }
+        (sum / variance_factor).sqrt()
+    }
+
     /// Covariance of the step parameters in physical units, `s² D V_r Σ_r⁻² V_rᵀ D` (the pseudo-inverse of
     /// the weighted normal matrix in the identifiable subspace), for a variance factor `s²`.
     pub fn covariance(&self, variance_factor: f64) -> DMatrix<f64> {
@@ -914,6 +935,38 @@ fn iterate<P: LeastSquaresProblem>(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// `step_in_sigmas` is `‖J δ‖ / √variance_factor` for an identifiable step (the change of the
+    /// weighted residuals it makes, computed directly), and 0 along a null direction (two equal
+    /// columns: `δ = eₐ − e_b` changes nothing).
+    #[test]
+    fn step_in_sigmas_is_the_change_of_the_residuals_in_noise_units() {
+        let (m, p) = (12, 4);
+        let mut j = DMatrix::from_fn(m, p, |r, c| {
+            ((r * 7 + c * 3) % 11) as f64 - 5.0 + 0.1 * c as f64
+        });
+        let scales = [0.5, 2.0, 1e-3, 1.0];
+        let sub = Subspace::analyze(&j, &scales, 1e-8, 0.0);
+        assert_eq!(sub.rank, p);
+        let delta = [0.01, -0.02, 3e-5, 0.004];
+        let direct = (&j * DVector::from_column_slice(&delta)).norm();
+        let vf = 2.5;
+        let got = sub.step_in_sigmas(&delta, vf);
+        assert!(
+            (got - direct / vf.sqrt()).abs() < 1e-12 * direct,
+            "{got} against {}",
+            direct / vf.sqrt()
+        );
+        // Column 3 equal to column 1 (same scale): e₁ − e₃ lies in the null space.
+        let c1 = j.column(1).into_owned();
+        j.set_column(3, &c1);
+        let scales = [0.5, 2.0, 1e-3, 2.0];
+        let sub = Subspace::analyze(&j, &scales, 1e-8, 0.0);
+        assert_eq!(sub.rank, p - 1);
+        let null = [0.0, 0.3, 0.0, -0.3];
+        let moved = sub.step_in_sigmas(&null, 1.0);
+        assert!(moved < 1e-12, "{moved}");
+    }
 
     /// Residuals quadratic in `x ∈ R²`: `rᵢ(x) = cᵢ + gᵢᵀx + ½ xᵀHᵢx`, so that the second directional
     /// derivative `vᵀHᵢv` is exact and the finite difference of [`accelerate`] has no truncation error.

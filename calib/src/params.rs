@@ -11,7 +11,7 @@
 //! layout of a table without a `campaign` column.
 
 use crate::extensions::ExtensionParam;
-use crate::lie3::exp_rotation;
+use crate::lie3::{exp_rotation, log_rotation};
 use crate::units::Unit;
 use nalgebra::{DVector, Matrix3, Vector3, Vector6};
 use sim::lie::{Pose, exp_twist, log_pose};
@@ -602,6 +602,54 @@ impl KinematicParams {
         log_pose(&self.joint_error[i])
     }
 
+    /// The step (physical units, [`ParamLayout`] order) that [`KinematicParams::retract`] applies to
+    /// `self` to reach `other`, both laid out by `layout`: `log(G'ᵢ Gᵢ⁻¹)` per joint,
+    /// `log(T' T⁻¹)` per tracker registration, `log(Rᵀ R')` per target rotation, and the differences
+    /// of the zero offsets, target positions and extension values.
+    pub fn difference(&self, layout: &ParamLayout, other: &KinematicParams) -> Vec<f64> {
+        let mut step = vec![0.0; layout.len()];
+        let mut put = |k: usize, v: &[f64]| step[k..k + v.len()].copy_from_slice(v);
+        for i in 0..layout.n_joints {
+            let d = log_pose(&(other.joint_error[i] * self.joint_error[i].inverse()));
+            put(layout.joint_twist(i), d.as_slice());
+            put(
+                layout.zero_offset(i),
+                &[other.zero_offset[i] - self.zero_offset[i]],
+            );
+        }
+        let d = log_pose(&(other.t_tracker_base * self.t_tracker_base.inverse()));
+        put(layout.base(), d.as_slice());
+        put(
+            layout.target_position(),
+            (other.p_flange_target - self.p_flange_target).as_slice(),
+        );
+        if let (Some(o), Some(r), Some(r2)) = (
+            layout.target_orientation(),
+            self.r_flange_target.as_ref(),
+            other.r_flange_target.as_ref(),
+        ) {
+            put(o, log_rotation(&(r.transpose() * r2)).as_slice());
+        }
+        for (c, (a, b)) in self.campaigns.iter().zip(&other.campaigns).enumerate() {
+            let d = log_pose(&(b.t_tracker_base * a.t_tracker_base.inverse()));
+            put(layout.campaign_base(c + 1), d.as_slice());
+            if let (Some(p), Some(p2)) = (a.p_flange_target, b.p_flange_target) {
+                put(layout.campaign_target_position(c + 1), (p2 - p).as_slice());
+            }
+            if let (Some(r), Some(r2), Some(o)) = (
+                a.r_flange_target.as_ref(),
+                b.r_flange_target.as_ref(),
+                layout.campaign_target_orientation(c + 1),
+            ) {
+                put(o, log_rotation(&(r.transpose() * r2)).as_slice());
+            }
+        }
+        for (e, (a, b)) in self.extension.iter().zip(&other.extension).enumerate() {
+            put(layout.extension(e), &[b - a]);
+        }
+        step
+    }
+
     /// Applies a step (physical units, [`ParamLayout`] order): `Gᵢ ← exp([Δξᵢ]) Gᵢ`, `δqᵢ += Δδqᵢ`,
     /// `T_tracker_base ← exp([β]) T_tracker_base`, `p_flange += Δp`, `R_flange_target ← R exp([ρ])`.
     pub fn retract(&mut self, layout: &ParamLayout, step: &[f64]) {
@@ -649,5 +697,51 @@ impl KinematicParams {
         {
             *x += d;
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::rngs::StdRng;
+    use rand::{RngExt, SeedableRng};
+
+    /// `difference` inverts `retract`: for random points and steps (joint, base and target motions,
+    /// two campaigns with their own targets, orientation, extensions), `a.retract(a.difference(b))`
+    /// is `b` and the difference of a retracted step is the step.
+    #[test]
+    fn difference_inverts_retract() {
+        let model = sim::robots::load_builtin("iiwa7").unwrap();
+        let mut rng = StdRng::seed_from_u64(11);
+        let compliance = |joint: usize| ExtensionParam {
+            cause: crate::extensions::Cause::ALL[0],
+            term: crate::extensions::Term::JointAngle { joint },
+            quantity: "compliance",
+            unit: Unit::RadianPerNewtonMetre,
+            scale: 1e-5,
+        };
+        let ext = vec![compliance(1), compliance(3)];
+        let start = KinematicParams::nominal(model.nq(), true)
+            .with_campaigns(&[0, 4], &[Pose::identity()], true)
+            .with_extension(vec![0.0; 2]);
+        let layout = ParamLayout::for_params(&model, &start, ext);
+        let mut step = |scale: f64| -> Vec<f64> {
+            (0..layout.len())
+                .map(|_| rng.random_range(-scale..scale))
+                .collect()
+        };
+        let mut a = start.clone();
+        a.retract(&layout, &step(0.3));
+        let d = step(0.05);
+        let mut b = a.clone();
+        b.retract(&layout, &d);
+        let back = a.difference(&layout, &b);
+        for (k, (x, y)) in back.iter().zip(&d).enumerate() {
+            assert!((x - y).abs() < 1e-12, "{}: {x} against {y}", layout.name(k));
+        }
+        let mut c = a.clone();
+        c.retract(&layout, &back);
+        let again = b.difference(&layout, &c);
+        assert!(again.iter().all(|v| v.abs() < 1e-12), "{again:?}");
     }
 }

@@ -268,6 +268,50 @@ impl<'a> KinematicProblem<'a> {
         &self.lin
     }
 
+    /// `D Jᵀ W` (active parameters × `w.len()`): the scaled Jacobian of the weighted residuals at the
+    /// trial point, transposed, times each of the columns `w` (each as long as the residuals), in one
+    /// pass over the rows in parallel chunks, without forming `J`; summed in chunk order (the same
+    /// sums on any number of threads).
+    pub fn scaled_jacobian_transpose_times_columns(
+        &mut self,
+        scales: &[f64],
+        w: &[&[f64]],
+    ) -> DMatrix<f64> {
+        let (d, np, p, k) = (
+            self.obs.dim(),
+            self.layout.len(),
+            self.active.len(),
+            w.len(),
+        );
+        let parts = self.map_chunks(|this, c, ws| {
+            let mut out = DMatrix::zeros(p, k);
+            let mut part = NormalPart {
+                cost: 0.0,
+                gradient: vec![0.0; p],
+                gram: Vec::new(),
+            };
+            for r in c * CHUNK_ROWS..((c + 1) * CHUNK_ROWS).min(this.obs.len()) {
+                this.gather_row(r, d, np, p, scales, ws, &mut part);
+                for row in 0..d {
+                    let jr = &ws.rows[row * p..(row + 1) * p];
+                    for (col, wc) in w.iter().enumerate() {
+                        let x = wc[r * d + row];
+                        if x != 0.0 {
+                            out.column_mut(col)
+                                .iter_mut()
+                                .zip(jr)
+                                .for_each(|(o, j)| *o += j * x);
+                        }
+                    }
+                }
+            }
+            out
+        });
+        parts
+            .into_iter()
+            .fold(DMatrix::zeros(p, k), |acc, part| acc + part)
+    }
+
     /// Consumes the problem, returning the linearisation point.
     pub fn into_params(self) -> KinematicParams {
         self.lin

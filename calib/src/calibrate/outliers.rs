@@ -36,6 +36,16 @@ pub(super) fn normalised_norms(norms: &[f64], weights: &[f64], d: usize) -> Vec<
     raw.iter().map(|v| v / scale).collect()
 }
 
+/// Gives the rows of `excluded` (1-based table rows) weight 0 in `obs`, as the fit that excluded
+/// them did.
+pub(super) fn exclude(obs: &mut Observations, excluded: &[Outlier]) {
+    for o in excluded {
+        if let Some(r) = obs.source_row.iter().position(|&s| s + 1 == o.row) {
+            obs.weight[r] = 0.0;
+        }
+    }
+}
+
 /// Rows of `obs` whose normalised residual norm at `params` exceeds `threshold` (see
 /// [`super::CalibrationOptions::outlier_threshold`]), worst first. A row must also exceed a tenth of
 /// the threshold in units of its own σ: residuals at rounding level (noise-free data) are no outliers

@@ -1178,7 +1178,10 @@ fn invalid_finding(sel: &Selection, options: &DiagnoseOptions) -> Option<Rejecte
 }
 
 /// The models of a selection made on a subsample (`steps`, kinematic first), each refitted on every
-/// pose of `split`, starting at its fit on the subsample (`fits` by name; `kinematic` for the first).
+/// pose of `split`, starting at its fit on the subsample (`fits` by name; `kinematic` for the first):
+/// `kinematic_every_pose` for the kinematic model (refitted beside the screening), the others here.
+/// The refits are independent of each other and run in parallel ([`fit_candidates`]' way: results in
+/// the order of `steps`, the first error returned, a caller's cancellation relayed to the fits).
 #[allow(clippy::too_many_arguments)]
 fn confirm_on_every_pose(
     model: &Model,
@@ -1186,25 +1189,49 @@ fn confirm_on_every_pose(
     steps: &[Step],
     fits: &BTreeMap<String, Option<Evaluated>>,
     kinematic: &Evaluated,
+    kinematic_every_pose: Evaluated,
     options: &DiagnoseOptions,
     progress: &mut dyn FnMut(&str),
     health: &mut Health,
 ) -> Result<Vec<Evaluated>> {
-    let mut out: Vec<Evaluated> = Vec::with_capacity(steps.len());
-    for step in steps {
-        crate::cancel::checkpoint()?;
-        let name = step.model.name();
-        progress(&format!("{name} (every pose)"));
-        let screened = match fits.get(&name) {
-            Some(Some(c)) => c,
-            _ => kinematic,
-        };
-        let start = if screened.spec == step.model {
-            Start::Same(screened)
-        } else {
-            Start::Cold
-        };
-        let e = evaluate(model, split, &step.model, options, start)?;
+    crate::cancel::checkpoint()?;
+    health.merge(&kinematic_every_pose.cal.report.health);
+    let starts: Vec<(&ModelSpec, Start<'_>)> = steps[1..]
+        .iter()
+        .map(|step| {
+            let screened = match fits.get(&step.model.name()) {
+                Some(Some(c)) => c,
+                _ => kinematic,
+            };
+            let start = if screened.spec == step.model {
+                Start::Same(screened)
+            } else {
+                Start::Cold
+            };
+            (&step.model, start)
+        })
+        .collect();
+    if !starts.is_empty() {
+        progress(&format!(
+            "{} (every pose)",
+            starts
+                .iter()
+                .map(|(m, _)| m.name())
+                .collect::<Vec<_>>()
+                .join("; ")
+        ));
+    }
+    let fitted: Vec<Result<Evaluated>> = crate::cancel::relayed(|relay| {
+        starts
+            .par_iter()
+            .map(|(spec, start)| relay.run(|| evaluate(model, split, spec, options, *start)))
+            .collect()
+    });
+    crate::cancel::checkpoint()?;
+    let mut out = Vec::with_capacity(steps.len());
+    out.push(kinematic_every_pose);
+    for e in fitted {
+        let e = e?;
         health.merge(&e.cal.report.health);
         out.push(e);
     }
@@ -1295,37 +1322,74 @@ pub fn diagnose_with_progress(
     let mut round = 0;
     let mut fits = std::collections::BTreeMap::new();
     let mut rival_probes = std::collections::BTreeMap::new();
+    // Screened on a subsample: the kinematic model (the first step of every selection) is refitted
+    // on every pose on a thread of its own while the candidates are screened, where the rounds leave
+    // cores idle (a round waits for its slowest candidate). A selection that fails or is cancelled
+    // stops it at its next checkpoint.
+    let stop_every_pose = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+    let (selection, kinematic_every_pose) = std::thread::scope(|scope| {
+        let every_pose = sub.as_ref().map(|_| {
+            progress("kinematic (every pose, beside the screening)");
+            let stop = stop_every_pose.clone();
+            let (split, kinematic) = (&split, &kinematic);
+            scope.spawn(move || {
+                crate::cancel::with_check(
+                    move || stop.load(std::sync::atomic::Ordering::Relaxed),
+                    || {
+                        evaluate(
+                            model,
+                            split,
+                            &ModelSpec::kinematic(),
+                            options,
+                            Start::Same(kinematic),
+                        )
+                    },
+                )
+            })
+        });
+        let selection = (|| -> Result<Selection> {
+            loop {
+                let candidates: Vec<Cause> = usable
+                    .iter()
+                    .copied()
+                    .filter(|c| rejected.iter().all(|r| r.cause != *c))
+                    .collect();
+                let sel = select(
+                    model,
+                    screen,
+                    kinematic.clone(),
+                    &candidates,
+                    options,
+                    &mut Bookkeeping {
+                        round: &mut round,
+                        trials: &mut trials,
+                        health: &mut health,
+                        progress,
+                        fits: &mut fits,
+                        rivals: &mut rival_probes,
+                    },
+                )?;
+                match invalid_finding(&sel, options) {
+                    None => return Ok(sel),
+                    Some(r) => rejected.push(r),
+                }
+            }
+        })();
+        if selection.is_err() {
+            stop_every_pose.store(true, std::sync::atomic::Ordering::Relaxed);
+        }
+        let kinematic_every_pose = every_pose.map(|h| match h.join() {
+            Ok(fit) => fit,
+            Err(panic) => std::panic::resume_unwind(panic),
+        });
+        (selection, kinematic_every_pose)
+    });
     let Selection {
         current,
         steps,
         mut findings,
         companions,
-    } = loop {
-        let candidates: Vec<Cause> = usable
-            .iter()
-            .copied()
-            .filter(|c| rejected.iter().all(|r| r.cause != *c))
-            .collect();
-        let sel = select(
-            model,
-            screen,
-            kinematic.clone(),
-            &candidates,
-            options,
-            &mut Bookkeeping {
-                round: &mut round,
-                trials: &mut trials,
-                health: &mut health,
-                progress,
-                fits: &mut fits,
-                rivals: &mut rival_probes,
-            },
-        )?;
-        match invalid_finding(&sel, options) {
-            None => break sel,
-            Some(r) => rejected.push(r),
-        }
-    };
+    } = selection?;
     // Screened on a subsample: the adopted models refitted on every pose, and the findings' figures
     // from those fits.
     let (current, steps, kinematic) = match &sub {
@@ -1337,6 +1401,7 @@ pub fn diagnose_with_progress(
                 &steps,
                 &fits,
                 &kinematic,
+                kinematic_every_pose.expect("fitted beside the screening")?,
                 options,
                 progress,
                 &mut health,
