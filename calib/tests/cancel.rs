@@ -84,3 +84,40 @@ fn a_stop_ends_the_diagnosis() {
     assert!(matches!(r, Err(CalibError::Cancelled)));
     assert_eq!(calls.get(), 3);
 }
+
+/// A diagnosis screened on a subsample refits the kinematic model on every pose on a thread of its
+/// own beside the screening: a stop at any check ends it with `Cancelled` (that thread stopped and
+/// joined: the call returns), and a check that never stops changes nothing. (While rounds run on
+/// rayon's threads the calling thread polls its check every 20 ms, so how many checks a diagnosis
+/// makes depends on timing: a stop at a late check may come after the last one, and the diagnosis
+/// then ends as without it.)
+#[test]
+fn a_stop_ends_a_screened_diagnosis_and_its_every_pose_refit() {
+    let (model, t) = table();
+    let options = DiagnoseOptions {
+        screen_poses: 30,
+        ..DiagnoseOptions::default()
+    };
+    let plain = diagnose(&model, &t, "ur5", &options).unwrap();
+    assert!(plain.screening.is_some(), "screened on a subsample");
+    let json = serde_json::to_string(&plain).unwrap();
+    let (never, calls) = stop_at(usize::MAX);
+    let polled = with_check(never, || diagnose(&model, &t, "ur5", &options)).unwrap();
+    assert_eq!(serde_json::to_string(&polled).unwrap(), json);
+    let total = calls.get();
+    assert!(total >= 8, "{total} checks");
+    let mut cancelled = 0;
+    for k in 0..8 {
+        let n = 1 + k * (total - 1) / 8;
+        let (check, calls) = stop_at(n);
+        match with_check(check, || diagnose(&model, &t, "ur5", &options)) {
+            Err(CalibError::Cancelled) => {
+                cancelled += 1;
+                assert_eq!(calls.get(), n, "stopped at check {n}, asked again after");
+            }
+            Ok(d) => assert_eq!(serde_json::to_string(&d).unwrap(), json, "stop at check {n}"),
+            Err(e) => panic!("stop at check {n}: {e}"),
+        }
+    }
+    assert!(cancelled >= 4, "{cancelled} of 8 stops ended the diagnosis");
+}
