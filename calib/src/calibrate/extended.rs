@@ -218,12 +218,15 @@ pub(super) fn calibrate_extended(
         // A fit that started at the same model's solution elsewhere (a fold, the refit of a
         // screened model on every pose) refits from its last refit, in the basin it started in; a
         // fit from the closed form refits from the closed form (a refit started at the one before
-        // can settle in another local minimum, see `diagnose::Start`).
-        let refit_start = warm.map(|w| WarmStart {
+        // can settle in another local minimum while the equilibrium still moves, see
+        // `diagnose::Start`) until a refit moved it by less than one standard deviation: the
+        // minimum then lies within that of the last refit's.
+        let near = last_move.is_some_and(|m| m < 1.0);
+        let refit_start = (warm.is_some() || near).then(|| WarmStart {
             before: &cal.before,
             physical: &cal.params,
             extensions: &cal.layout.extensions,
-            lean: w.lean,
+            lean: warm.is_some_and(|w| w.lean),
             payload_com_m: Some(settings.payload_com_m),
             shared: None,
         });
