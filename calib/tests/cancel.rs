@@ -115,7 +115,11 @@ fn a_stop_ends_a_screened_diagnosis_and_its_every_pose_refit() {
                 cancelled += 1;
                 assert_eq!(calls.get(), n, "stopped at check {n}, asked again after");
             }
-            Ok(d) => assert_eq!(serde_json::to_string(&d).unwrap(), json, "stop at check {n}"),
+            Ok(d) => assert_eq!(
+                serde_json::to_string(&d).unwrap(),
+                json,
+                "stop at check {n}"
+            ),
             Err(e) => panic!("stop at check {n}: {e}"),
         }
     }
