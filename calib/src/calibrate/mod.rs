@@ -539,14 +539,7 @@ fn calibrate_with(
                     final_norms = Some(norms);
                     break;
                 }
-                for o in &gross {
-                    let r = obs
-                        .source_row
-                        .iter()
-                        .position(|&s| s + 1 == o.row)
-                        .expect("an outlier is a row of the observations");
-                    obs.weight[r] = 0.0;
-                }
+                outliers::exclude(&mut obs, &gross);
                 excluded.extend(gross);
                 let first = out.0.clone();
                 let mut prob = KinematicProblem::new(model, &obs, params.clone(), all.clone());
