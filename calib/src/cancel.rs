@@ -82,6 +82,18 @@ const RELAY_POLL: std::time::Duration = std::time::Duration::from_millis(20);
 pub struct Relay(Arc<AtomicBool>);
 
 impl Relay {
+    /// A relay that starts as this thread's check stands ([`stopped`]); [`relayed`] feeds it from
+    /// the calling thread's check, other callers by [`Relay::stop`] (work on a thread of its own
+    /// beside theirs, stopped when they give up).
+    pub(crate) fn new() -> Self {
+        Relay(Arc::new(AtomicBool::new(stopped())))
+    }
+
+    /// Says stop to the work under this relay, at its next checkpoint.
+    pub(crate) fn stop(&self) {
+        self.0.store(true, Ordering::Relaxed);
+    }
+
     /// Runs `work` (on any thread) with a check that says stop once the calling thread's check of
     /// [`relayed`] said so.
     pub fn run<R>(&self, work: impl FnOnce() -> R) -> R {
@@ -105,7 +117,7 @@ impl Relay {
 /// check: two independent works on the pool at once (two Python threads) can see each other's
 /// stop.
 pub fn relayed<R: Send>(work: impl FnOnce(&Relay) -> R + Send) -> R {
-    let relay = Relay(Arc::new(AtomicBool::new(stopped())));
+    let relay = Relay::new();
     if CHECKS.with(|c| c.borrow().is_empty()) || rayon::current_thread_index().is_some() {
         return work(&relay);
     }
@@ -118,7 +130,7 @@ pub fn relayed<R: Send>(work: impl FnOnce(&Relay) -> R + Send) -> R {
         });
         while !running.is_finished() {
             if checkpoint().is_err() {
-                relay.0.store(true, Ordering::Relaxed);
+                relay.stop();
             }
             std::thread::park_timeout(RELAY_POLL);
         }

@@ -181,7 +181,7 @@ pub fn householder_r(a: &mut DMatrix<f64>) -> DMatrix<f64> {
 
 /// `xᵀy` with four partial sums (a single running sum is bound by the latency of each addition).
 #[inline]
-fn dot(x: &[f64], y: &[f64]) -> f64 {
+pub(crate) fn dot(x: &[f64], y: &[f64]) -> f64 {
     let n = x.len().min(y.len());
     let (xh, xt) = x[..n].split_at(n - n % 4);
     let (yh, yt) = y[..n].split_at(n - n % 4);

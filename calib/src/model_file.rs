@@ -272,11 +272,7 @@ impl CalibratedModel {
     /// The file form of a calibration of `robot`.
     pub fn new(robot: &Robot, cal: &Calibration) -> Self {
         let p = &cal.params;
-        let vf = if cal.report.chi2_per_dof.is_finite() {
-            cal.report.chi2_per_dof
-        } else {
-            1.0
-        };
+        let vf = cal.report.variance_factor();
         CalibratedModel {
             format: FORMAT.into(),
             format_version: FORMAT_VERSION,

@@ -34,12 +34,6 @@ fn distance_left(moved: f64, before: Option<f64>) -> f64 {
     }
 }
 
-/// The variance factor of `cal`'s covariance: `χ²/dof`, or 1 without degrees of freedom left.
-fn variance_factor(cal: &Calibration) -> f64 {
-    let v = cal.report.chi2_per_dof;
-    if v.is_finite() && v > 0.0 { v } else { 1.0 }
-}
-
 /// One Gauss–Newton step (m) for the payload's centre of mass in the flange frame, taken jointly with
 /// every other parameter at `cal`: the weighted least-squares step of the stacked Jacobian
 /// `[J D, J_c s_c]` (the analytic Jacobian, scaled, and forward differences of 1 mm of the residuals
@@ -126,7 +120,7 @@ fn payload_com_step(
     };
     let y = u_t(0);
     let ys: Vec<DVector<f64>> = (1..4).map(u_t).collect();
-    let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();
+    let dot = crate::linalg::dot;
     let mut k = nalgebra::Matrix3::zeros();
     let mut h = Vector3::zeros();
     for a in 0..3 {
@@ -250,9 +244,11 @@ pub(super) fn calibrate_extended(
             .map(|((a, b), p)| (a - b).abs() / p.scale)
             .fold(0.0, f64::max);
         // The refit's move in standard deviations of the fit (every parameter).
+        // (An exact fit, χ² = 0, measures it in units of the noise model.)
+        let vf = next.report.variance_factor();
         let moved_sigmas = next.subspace.step_in_sigmas(
             &cal.params.difference(&next.layout, &next.params),
-            variance_factor(&next),
+            if vf > 0.0 { vf } else { 1.0 },
         );
         health.merge(&next.report.health);
         cal = next;

@@ -145,6 +145,16 @@ impl CalibrationReport {
         self.after.solver.was_successful()
     }
 
+    /// The variance factor of the covariance: `χ²/dof`, or 1 without degrees of freedom left (then
+    /// the standard deviations assume the noise model is exact).
+    pub fn variance_factor(&self) -> f64 {
+        if self.chi2_per_dof.is_finite() {
+            self.chi2_per_dof
+        } else {
+            1.0
+        }
+    }
+
     /// The report as text for a terminal.
     pub fn text(&self) -> String {
         let mut s = String::new();

@@ -1113,11 +1113,8 @@ fn fit_candidates(
             many.iter().map(|s| s.name()).collect::<Vec<_>>().join("; ")
         )),
     }
-    let fitted: Vec<Result<Evaluated>> = crate::cancel::relayed(|relay| {
-        todo.par_iter()
-            .map(|spec| relay.run(|| evaluate(model, split, spec, options, Start::Cold)))
-            .collect()
-    });
+    let jobs: Vec<(&ModelSpec, Start<'_>)> = todo.iter().map(|s| (*s, Start::Cold)).collect();
+    let fitted = evaluate_in_parallel(model, split, &jobs, options);
     crate::cancel::checkpoint()?;
     for (spec, fit) in todo.iter().zip(fitted) {
         match fit {
@@ -1132,6 +1129,22 @@ fn fit_candidates(
         }
     }
     Ok(())
+}
+
+/// [`evaluate`] of each `(spec, start)` of `jobs`, in parallel on rayon's threads, results in the
+/// order of `jobs` (each fit is deterministic and independent of the others: the same results on any
+/// number of threads); a caller's cancellation check ([`crate::cancel`]) is relayed to the fits.
+fn evaluate_in_parallel(
+    model: &Model,
+    split: &Split<'_>,
+    jobs: &[(&ModelSpec, Start<'_>)],
+    options: &DiagnoseOptions,
+) -> Vec<Result<Evaluated>> {
+    crate::cancel::relayed(|relay| {
+        jobs.par_iter()
+            .map(|(spec, start)| relay.run(|| evaluate(model, split, spec, options, *start)))
+            .collect()
+    })
 }
 
 /// True when no parameter of `cause` in `cal` is determined on its own and differs from zero by
@@ -1221,12 +1234,7 @@ fn confirm_on_every_pose(
                 .join("; ")
         ));
     }
-    let fitted: Vec<Result<Evaluated>> = crate::cancel::relayed(|relay| {
-        starts
-            .par_iter()
-            .map(|(spec, start)| relay.run(|| evaluate(model, split, spec, options, *start)))
-            .collect()
-    });
+    let fitted = evaluate_in_parallel(model, split, &starts, options);
     crate::cancel::checkpoint()?;
     let mut out = Vec::with_capacity(steps.len());
     out.push(kinematic_every_pose);
@@ -1326,25 +1334,21 @@ pub fn diagnose_with_progress(
     // on every pose on a thread of its own while the candidates are screened, where the rounds leave
     // cores idle (a round waits for its slowest candidate). A selection that fails or is cancelled
     // stops it at its next checkpoint.
-    let stop_every_pose = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+    let every_pose_relay = crate::cancel::Relay::new();
     let (selection, kinematic_every_pose) = std::thread::scope(|scope| {
         let every_pose = sub.as_ref().map(|_| {
             progress("kinematic (every pose, beside the screening)");
-            let stop = stop_every_pose.clone();
-            let (split, kinematic) = (&split, &kinematic);
+            let (split, kinematic, relay) = (&split, &kinematic, &every_pose_relay);
             scope.spawn(move || {
-                crate::cancel::with_check(
-                    move || stop.load(std::sync::atomic::Ordering::Relaxed),
-                    || {
-                        evaluate(
-                            model,
-                            split,
-                            &ModelSpec::kinematic(),
-                            options,
-                            Start::Same(kinematic),
-                        )
-                    },
-                )
+                relay.run(|| {
+                    evaluate(
+                        model,
+                        split,
+                        &ModelSpec::kinematic(),
+                        options,
+                        Start::Same(kinematic),
+                    )
+                })
             })
         });
         let selection = (|| -> Result<Selection> {
@@ -1376,7 +1380,7 @@ pub fn diagnose_with_progress(
             }
         })();
         if selection.is_err() {
-            stop_every_pose.store(true, std::sync::atomic::Ordering::Relaxed);
+            every_pose_relay.stop();
         }
         let kinematic_every_pose = every_pose.map(|h| match h.join() {
             Ok(fit) => fit,
