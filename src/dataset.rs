@@ -11,7 +11,7 @@
 //!
 //! * `D/scenario.toml`: the scenario text;
 //! * `D/train.parquet`, `D/test.parquet`: the measurement contract, split by pose
-//!   (`calib::stats::split_by_pose` with the suite's test fraction and split seed);
+//!   (`calib::model::stats::split_by_pose` with the suite's test fraction and split seed);
 //! * `D/measurements.parquet`: all rows (train ∪ test), `D/truth.parquet` (per row, in the order of
 //!   `measurements.parquet`; join on `pose`) and `D/truth.json`, as `robocal generate` writes them;
 //!
@@ -168,7 +168,8 @@ fn write_suite_into(suite: &Suite, out: &Path) -> Result<Vec<FileEntry>, CliErro
         // The file was written a moment ago: failing to read it back is a runtime failure.
         let table = sim::measurement_table::read(&all_path)
             .map_err(|e| CliError::Runtime(e.to_string()))?;
-        let (train, test) = calib::stats::split_by_pose(&table, d.test_fraction, d.split_seed);
+        let (train, test) =
+            calib::model::stats::split_by_pose(&table, d.test_fraction, d.split_seed);
         for (name, rows) in [("train.parquet", &train), ("test.parquet", &test)] {
             let p = dir.join(name);
             sim::measurement_table::write(&p, &table.select_rows(rows))?;
@@ -197,7 +198,7 @@ fn write_suite_into(suite: &Suite, out: &Path) -> Result<Vec<FileEntry>, CliErro
             "rows": summary.rows,
             "noise_scale": summary.noise_scale,
             "split": {
-                "rule": "calib::stats::split_by_pose (robocal calibrate --test-fraction F --seed S)",
+                "rule": "calib::model::stats::split_by_pose (robocal calibrate --test-fraction F --seed S)",
                 "test_fraction": d.test_fraction, "seed": d.split_seed,
                 "train_rows": train.len(), "test_rows": test.len(),
                 "train_poses": poses_of(&train), "test_poses": poses_of(&test),

@@ -1,10 +1,10 @@
 //! `diagnose --report DIR`: plots of the residual against each cause's regressor before and after the
 //! cause was adopted, error histograms, and a one-page summary (`index.html`, also `summary.md`), drawn
-//! from the numbers the diagnosis keeps ([`calib::diagnose::report::PlotData`]).
+//! from the numbers the diagnosis keeps ([`calib::select::diagnose::report::PlotData`]).
 
 use crate::error::CliError;
-use calib::diagnose::Diagnosis;
-use calib::diagnose::report::{PlotData, RegressorPlot};
+use calib::select::diagnose::Diagnosis;
+use calib::select::diagnose::report::{PlotData, RegressorPlot};
 use plot::{Plot, Series, Style, histogram_svg};
 use sim::io::write_atomic;
 use std::path::Path;

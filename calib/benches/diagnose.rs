@@ -4,7 +4,7 @@
 //! compliance on two joints and gear backlash (so that two rounds adopt a cause and a third tries the
 //! rest), plus the unexplained-structure probes and learned models.
 
-use calib::diagnose::{DiagnoseOptions, diagnose};
+use calib::select::diagnose::{DiagnoseOptions, diagnose};
 use criterion::{Criterion, criterion_group, criterion_main};
 use sim::scenario::{Overrides, Scenario};
 use std::hint::black_box;

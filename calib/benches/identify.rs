@@ -5,7 +5,7 @@
 #[path = "../tests/common/mod.rs"]
 mod common;
 
-use calib::calibrate::{CalibrationOptions, Dataset, calibrate};
+use calib::fit::{CalibrationOptions, Dataset, FitRequest, fit};
 use criterion::{Criterion, criterion_group, criterion_main};
 use rand::SeedableRng;
 use sim::robots;
@@ -20,7 +20,7 @@ fn bench(c: &mut Criterion) {
     let data = Dataset::all(&table, "bench");
     let options = CalibrationOptions::default();
     c.bench_function("iiwa7/identify_200_positions", |b| {
-        b.iter(|| black_box(calibrate(&model, &data, None, &options).unwrap()))
+        b.iter(|| black_box(fit(&model, &data, &FitRequest::kinematic(&options)).unwrap()))
     });
 }
 

@@ -2,7 +2,7 @@
 //! degrees 1–3 and the λ grid; "kernel" over the length-scale × λ grid) from 400 and 1000 poses, and
 //! one prediction.
 
-use calib::learned;
+use calib::model::learned;
 use criterion::{Criterion, criterion_group, criterion_main};
 use nalgebra::Vector3;
 use rand::rngs::StdRng;

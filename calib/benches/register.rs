@@ -4,8 +4,8 @@
 #[path = "../tests/common/mod.rs"]
 mod common;
 
-use calib::calibrate::{CalibrationOptions, Dataset, calibrate};
-use calib::register::{RegisterOptions, register};
+use calib::fit::register::{RegisterOptions, register};
+use calib::fit::{CalibrationOptions, Dataset, FitRequest, fit};
 use criterion::{Criterion, criterion_group, criterion_main};
 use rand::SeedableRng;
 use sim::robots;
@@ -18,11 +18,10 @@ fn bench(c: &mut Criterion) {
         let truth = common::Truth::random(&model, false, &mut g);
         let configs = common::random_configs(&model, 200, &mut g);
         let table = common::table(&model, &truth, &configs, 1e-5, 0.0, &mut g);
-        let cal = calibrate(
+        let cal = fit(
             &model,
             &Dataset::all(&table, "bench"),
-            None,
-            &CalibrationOptions::default(),
+            &FitRequest::kinematic(&CalibrationOptions::default()),
         )
         .unwrap();
         let moved = common::moved_tracker(&truth, &mut g);

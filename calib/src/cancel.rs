@@ -1,8 +1,8 @@
 //! Cooperative cancellation of long work (a calibration, a diagnosis): a caller that can be
 //! interrupted (the Python package on Ctrl-C) runs the work inside [`with_check`], and the long loops
 //! poll [`checkpoint`] between steps: the Levenberg–Marquardt iterations ([`crate::lm::minimize`]),
-//! the stages of [`crate::calibrate::calibrate_model`] and each candidate fit of
-//! [`crate::diagnose::diagnose`]. Once the check says stop, every later checkpoint on that thread
+//! the stages of [`crate::fit::calibrate_model`] and each candidate fit of
+//! [`crate::select::diagnose::diagnose`]. Once the check says stop, every later checkpoint on that thread
 //! says so too (the answer is kept), and the work returns [`CalibError::Cancelled`].
 //!
 //! The check belongs to the calling thread (Python runs its signal handlers on the main thread

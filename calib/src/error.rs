@@ -33,6 +33,9 @@ pub enum CalibError {
     TooFewPoses {
         /// File (and subset, e.g. `training set`) the poses come from.
         context: String,
+        /// Which part of the file's rows: a validation fit's (a fold, a split's training part) or
+        /// the fit of every pose.
+        part: crate::part::Part,
         /// Robot name.
         robot: String,
         /// Joints of the robot.

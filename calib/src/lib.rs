@@ -61,7 +61,7 @@
 //!
 //! ## End to end
 //! ```
-//! use calib::calibrate::{CalibrationOptions, Dataset, calibrate};
+//! use calib::fit::{CalibrationOptions, Dataset, FitRequest, fit};
 //! use sim::measurement_table::{MeasurementTable, OptionalColumns, Row};
 //! use sim::{Data, flange_pose, robots};
 //!
@@ -79,7 +79,7 @@
 //!     let p = flange_pose(&real, &mut data, &q) * nalgebra::Point3::new(0.0, 0.03, 0.05);
 //!     table.push_row(&Row { pose: k, q: &q, position: [p.x + 1.0, p.y, p.z], ..Row::default() }).unwrap();
 //! }
-//! let cal = calibrate(&model, &Dataset::all(&table, "example"), None, &CalibrationOptions::default()).unwrap();
+//! let cal = fit(&model, &Dataset::all(&table, "example"), &FitRequest::kinematic(&CalibrationOptions::default())).unwrap();
 //! assert!(cal.report.was_successful());
 //! assert!(cal.report.before.train.max_m > 1e-4);   // the nominal model misses by 0.1 mm and more
 //! assert!(cal.report.after.train.max_m < 1e-9);    // the calibrated one explains the data exactly
@@ -87,32 +87,23 @@
 //! ```
 #![warn(missing_docs)]
 
-pub mod calibrate;
+// The ground floor: numbers, errors and the solver, which know nothing of robots' causes.
 pub mod cancel;
-pub mod chain;
-pub mod diagnose;
 pub mod error;
-pub mod extensions;
 pub mod health;
-pub mod identifiability;
 pub mod io;
-pub mod learned;
 pub mod lie3;
 pub mod linalg;
 pub mod lm;
-pub mod model_file;
-pub mod observations;
-pub mod params;
-pub mod physical_row;
-pub mod plan;
-pub mod predict;
-pub mod problem;
-pub mod register;
-pub mod robot;
-pub mod stats;
+pub mod part;
 pub mod units;
-pub mod urdf_export;
 
-pub use calibrate::{Calibration, CalibrationOptions, CalibrationReport, Dataset, calibrate};
+// The four floors, each importing only from the floors below it (`scripts/check_floors.py`).
+pub mod fit;
+pub mod model;
+pub mod select;
+pub mod validate;
+
 pub use error::{CalibError, Result};
-pub use model_file::{CalibratedModel, Predictor};
+pub use fit::{Calibration, CalibrationOptions, CalibrationReport, Dataset, FitRequest, fit};
+pub use model::file::{CalibratedModel, Predictor};

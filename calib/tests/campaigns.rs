@@ -6,14 +6,14 @@
 
 mod common;
 
-use calib::calibrate::validation::{cross_validate, cross_validate_warm, fold_calibrations};
-use calib::calibrate::{CalibrationOptions, Dataset, calibrate, calibrate_model};
-use calib::chain::{Chain, ChainScratch};
-use calib::extensions::ModelSpec;
-use calib::params::{KinematicParams, ParamLayout};
-use calib::predict::Prediction;
-use calib::problem::{NoiseModel, Observations};
-use calib::register::{RegisterOptions, register};
+use calib::fit::problem::{NoiseModel, Observations};
+use calib::fit::register::{RegisterOptions, register};
+use calib::fit::{CalibrationOptions, Dataset, FitRequest, fit};
+use calib::model::chain::{Chain, ChainScratch};
+use calib::model::params::{KinematicParams, ParamLayout};
+use calib::model::predict::Prediction;
+use calib::model::spec::ModelSpec;
+use calib::validate::{cross_validate, fold_calibrations};
 use common::{Truth, concat, moved_tracker, random_configs, with_campaign};
 use nalgebra::{DMatrix, DVector, Matrix6, Vector6};
 use rand::SeedableRng;
@@ -120,7 +120,12 @@ fn two_campaigns_share_the_robot_and_both_registrations_are_within_sigma() {
             &with_campaign(&noisy(&model, &a, &qa, &mut g), 3),
             &with_campaign(&noisy(&model, &b, &qb, &mut g), 8),
         );
-        let cal = calibrate(&model, &Dataset::all(&table, "two"), None, &options).unwrap();
+        let cal = fit(
+            &model,
+            &Dataset::all(&table, "two"),
+            &FitRequest::kinematic(&options),
+        )
+        .unwrap();
         assert!(cal.report.was_successful(), "rep {rep}");
         assert!(cal.report.health.is_clean(), "{}", cal.report.health);
         assert_eq!(cal.params.campaign_ids, vec![3, 8]);
@@ -173,11 +178,10 @@ fn register_recovers_a_moved_tracker_within_its_predicted_sigma() {
         // The robot known exactly (noise-free calibration): the registration alone is uncertain.
         let qa = random_configs(&model, 60, &mut g);
         let train = common::table(&model, &a, &qa, 0.0, 0.0, &mut g);
-        let cal = calibrate(
+        let cal = fit(
             &model,
             &Dataset::all(&train, "a"),
-            None,
-            &CalibrationOptions::default(),
+            &FitRequest::kinematic(&CalibrationOptions::default()),
         )
         .unwrap();
         let b = moved_tracker(&a, &mut g);
@@ -246,20 +250,16 @@ fn a_campaign_column_with_one_value_gives_exactly_the_result_of_no_column() {
         "kinematic+learned:adjoint",
     ] {
         let spec: ModelSpec = spec.parse().unwrap();
-        let a = calibrate_model(
+        let a = fit(
             &model,
             &Dataset::all(&plain, "d"),
-            Some(&Dataset::all(&test_plain, "t")),
-            &spec,
-            &options,
+            &FitRequest::new(&spec, &options).judged_on(Some(&Dataset::all(&test_plain, "t"))),
         )
         .unwrap();
-        let b = calibrate_model(
+        let b = fit(
             &model,
             &Dataset::all(&tagged, "d"),
-            Some(&Dataset::all(&test_tagged, "t")),
-            &spec,
-            &options,
+            &FitRequest::new(&spec, &options).judged_on(Some(&Dataset::all(&test_tagged, "t"))),
         )
         .unwrap();
         let what = spec.name();
@@ -311,19 +311,19 @@ fn a_campaign_column_with_one_value_gives_exactly_the_result_of_no_column() {
     let va = cross_validate(
         &model,
         &Dataset::all(&plain, "d"),
-        &ModelSpec::kinematic(),
-        &options,
+        &FitRequest::new(&ModelSpec::kinematic(), &options),
         5,
         1,
+        None,
     )
     .unwrap();
     let vb = cross_validate(
         &model,
         &Dataset::all(&tagged, "d"),
-        &ModelSpec::kinematic(),
-        &options,
+        &FitRequest::new(&ModelSpec::kinematic(), &options),
         5,
         1,
+        None,
     )
     .unwrap();
     assert_eq!(va, vb);
@@ -342,13 +342,12 @@ fn the_all_pose_model_meets_its_predicted_accuracy_and_the_folds_agree_with_a_tr
         let truth = Truth::random(&model, false, &mut g);
         let table = noisy(&model, &truth, &random_configs(&model, 150, &mut g), &mut g);
         let data = Dataset::all(&table, "all");
-        let cal = calibrate(&model, &data, None, &options).unwrap();
+        let cal = fit(&model, &data, &FitRequest::kinematic(&options)).unwrap();
         assert!(cal.report.was_successful(), "rep {rep}");
         // Held-out poses against the noise-free truth: the error the covariance predicts.
         let held = random_configs(&model, 100, &mut g);
         for q in &held {
-            let (p, _, jq) =
-                calib::calibrate::prediction_and_jacobian(&model, &cal.params, q).unwrap();
+            let (p, _, jq) = calib::fit::prediction_and_jacobian(&model, &cal.params, q).unwrap();
             let (pt, _) = truth.target(&model, q);
             err2 += (p - pt).norm_squared();
             let jp = jq.rows(0, 3);
@@ -359,7 +358,15 @@ fn the_all_pose_model_meets_its_predicted_accuracy_and_the_folds_agree_with_a_tr
             continue;
         }
         // The 5-fold estimate against a true held-out set measured like the data.
-        let v = cross_validate(&model, &data, &ModelSpec::kinematic(), &options, 5, rep).unwrap();
+        let v = cross_validate(
+            &model,
+            &data,
+            &FitRequest::new(&ModelSpec::kinematic(), &options),
+            5,
+            rep,
+            None,
+        )
+        .unwrap();
         let test = noisy(&model, &truth, &random_configs(&model, 300, &mut g), &mut g);
         let obs = Observations::from_table(
             &test,
@@ -419,15 +426,19 @@ fn per_campaign_targets_follow_a_reseated_reflector() {
         &with_campaign(&noisy(&model, &b, &qb, &mut g), 2),
     );
     let data = Dataset::all(&table, "reseated");
-    let shared = calibrate(&model, &data, None, &CalibrationOptions::default()).unwrap();
-    let own = calibrate(
+    let shared = fit(
         &model,
         &data,
-        None,
-        &CalibrationOptions {
+        &FitRequest::kinematic(&CalibrationOptions::default()),
+    )
+    .unwrap();
+    let own = fit(
+        &model,
+        &data,
+        &FitRequest::kinematic(&CalibrationOptions {
             per_campaign_target: true,
             ..CalibrationOptions::default()
-        },
+        }),
     )
     .unwrap();
     let (rs, ro) = (
@@ -475,9 +486,18 @@ fn warm_folds_reach_the_cold_folds_minima_and_do_not_depend_on_the_thread_count(
     let spec = ModelSpec::kinematic();
     for (what, table) in [("one campaign", &one), ("two campaigns", &two)] {
         let data = Dataset::all(table, what);
-        let all = calibrate_model(&model, &data, None, &spec, &options).unwrap();
-        let cold = fold_calibrations(&model, &data, &spec, &options, 5, 3, None).unwrap();
-        let warm = fold_calibrations(&model, &data, &spec, &options, 5, 3, Some(&all)).unwrap();
+        let all = fit(&model, &data, &FitRequest::new(&spec, &options)).unwrap();
+        let cold = fold_calibrations(&model, &data, &FitRequest::new(&spec, &options), 5, 3, None)
+            .unwrap();
+        let warm = fold_calibrations(
+            &model,
+            &data,
+            &FitRequest::new(&spec, &options),
+            5,
+            3,
+            Some(&all),
+        )
+        .unwrap();
         // The parametrisation is redundant (null directions keep their start's values): what must
         // agree is what the data determine, the predictions, in units of their standard deviation.
         let configs = random_configs(&model, 100, &mut g);
@@ -490,9 +510,8 @@ fn warm_folds_reach_the_cold_folds_minima_and_do_not_depend_on_the_thread_count(
             assert_eq!(c.subspace.rank, w.subspace.rank, "{what} fold {f}: rank");
             for q in &configs {
                 let (pc, _, jq) =
-                    calib::calibrate::prediction_and_jacobian(&model, &c.params, q).unwrap();
-                let (pw, _, _) =
-                    calib::calibrate::prediction_and_jacobian(&model, &w.params, q).unwrap();
+                    calib::fit::prediction_and_jacobian(&model, &c.params, q).unwrap();
+                let (pw, _, _) = calib::fit::prediction_and_jacobian(&model, &w.params, q).unwrap();
                 let jp = jq.rows(0, 3);
                 let cov = jp * &c.covariance * jp.transpose();
                 for i in 0..3 {
@@ -505,7 +524,8 @@ fn warm_folds_reach_the_cold_folds_minima_and_do_not_depend_on_the_thread_count(
             worst <= 1e-3,
             "{what}: a fold's prediction moved {worst:.2e} σ"
         );
-        let vc = cross_validate(&model, &data, &spec, &options, 5, 3).unwrap();
+        let vc =
+            cross_validate(&model, &data, &FitRequest::new(&spec, &options), 5, 3, None).unwrap();
         let pool = |n: usize| {
             rayon::ThreadPoolBuilder::new()
                 .num_threads(n)
@@ -513,10 +533,28 @@ fn warm_folds_reach_the_cold_folds_minima_and_do_not_depend_on_the_thread_count(
                 .unwrap()
         };
         let vw = pool(2)
-            .install(|| cross_validate_warm(&model, &data, &spec, &options, 5, 3, &all))
+            .install(|| {
+                cross_validate(
+                    &model,
+                    &data,
+                    &FitRequest::new(&spec, &options),
+                    5,
+                    3,
+                    Some(&all),
+                )
+            })
             .unwrap();
         let v1 = pool(1)
-            .install(|| cross_validate_warm(&model, &data, &spec, &options, 5, 3, &all))
+            .install(|| {
+                cross_validate(
+                    &model,
+                    &data,
+                    &FitRequest::new(&spec, &options),
+                    5,
+                    3,
+                    Some(&all),
+                )
+            })
             .unwrap();
         assert_eq!(v1, vw, "{what}: one thread and two");
         // |RMS(a) − RMS(b)| ≤ RMS(a − b) ≤ max |a − b| (and so for the mean, the max and the ISO
@@ -548,7 +586,7 @@ fn warm_folds_reach_the_cold_folds_minima_and_do_not_depend_on_the_thread_count(
         for (f, (c, w)) in cold.iter().zip(&warm).enumerate() {
             let db = largest(&c.before, &w.before);
             let da = largest(&c.params, &w.params);
-            let chi2 = |cal: &calib::calibrate::Calibration, before: bool| {
+            let chi2 = |cal: &calib::fit::Calibration, before: bool| {
                 let stage = if before {
                     &cal.report.before
                 } else {
@@ -569,22 +607,21 @@ fn warm_folds_reach_the_cold_folds_minima_and_do_not_depend_on_the_thread_count(
             d_before = d_before.max(db);
             d_after = d_after.max(da);
         }
-        let within = |a: &calib::calibrate::validation::HeldOutStats,
-                      b: &calib::calibrate::validation::HeldOutStats,
-                      d: f64| {
-            assert_eq!((a.n_rows, a.n_poses), (b.n_rows, b.n_poses));
-            for (x, y) in [
-                (a.rms_m, b.rms_m),
-                (a.mean_m, b.mean_m),
-                (a.max_m, b.max_m),
-                (a.iso_mean_m, b.iso_mean_m),
-            ] {
-                assert!(
-                    (x - y).abs() <= d + 1e-12 * x.abs(),
-                    "{what}: held-out {x:e} (cold) vs {y:e} (warm), bound {d:e}"
-                );
-            }
-        };
+        let within =
+            |a: &calib::validate::HeldOutStats, b: &calib::validate::HeldOutStats, d: f64| {
+                assert_eq!((a.n_rows, a.n_poses), (b.n_rows, b.n_poses));
+                for (x, y) in [
+                    (a.rms_m, b.rms_m),
+                    (a.mean_m, b.mean_m),
+                    (a.max_m, b.max_m),
+                    (a.iso_mean_m, b.iso_mean_m),
+                ] {
+                    assert!(
+                        (x - y).abs() <= d + 1e-12 * x.abs(),
+                        "{what}: held-out {x:e} (cold) vs {y:e} (warm), bound {d:e}"
+                    );
+                }
+            };
         within(&vc.before, &vw.before, d_before);
         within(&vc.after, &vw.after, d_after);
         for (fc, fw) in vc.per_fold.iter().zip(&vw.per_fold) {

@@ -3,9 +3,9 @@
 //! nothing (the same report, bit for bit).
 
 use calib::CalibError;
-use calib::calibrate::{CalibrationOptions, Dataset, calibrate};
 use calib::cancel::with_check;
-use calib::diagnose::{DiagnoseOptions, diagnose};
+use calib::fit::{CalibrationOptions, Dataset, FitRequest, fit};
+use calib::select::diagnose::{DiagnoseOptions, diagnose};
 use sim::measurement_table::{MeasurementTable, OptionalColumns, Row};
 use sim::{Data, flange_pose, robots};
 use std::cell::Cell;
@@ -56,10 +56,13 @@ fn a_stop_ends_the_calibration_at_the_next_checkpoint() {
     let (model, t) = table();
     let data = Dataset::all(&t, "ur5");
     let options = CalibrationOptions::default();
-    let plain = calibrate(&model, &data, None, &options).unwrap();
+    let plain = fit(&model, &data, &FitRequest::kinematic(&options)).unwrap();
     // Never stopping: the same calibration, and the loops did poll.
     let (never, calls) = stop_at(usize::MAX);
-    let polled = with_check(never, || calibrate(&model, &data, None, &options)).unwrap();
+    let polled = with_check(never, || {
+        fit(&model, &data, &FitRequest::kinematic(&options))
+    })
+    .unwrap();
     assert_eq!(
         serde_json::to_string(&polled.report).unwrap(),
         serde_json::to_string(&plain.report).unwrap()
@@ -69,7 +72,9 @@ fn a_stop_ends_the_calibration_at_the_next_checkpoint() {
     // Stopping at each of those checks in turn: Cancelled, with no further call to the check.
     for n in 1..=total {
         let (check, calls) = stop_at(n);
-        let r = with_check(check, || calibrate(&model, &data, None, &options));
+        let r = with_check(check, || {
+            fit(&model, &data, &FitRequest::kinematic(&options))
+        });
         assert!(matches!(r, Err(CalibError::Cancelled)), "stop at check {n}");
         assert_eq!(calls.get(), n);
     }

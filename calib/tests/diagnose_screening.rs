@@ -3,7 +3,7 @@
 //! and every figure it reports of the adopted models (steps, gains, paired and training `z`) is that
 //! of the fits on every pose, not of the subsample.
 
-use calib::diagnose::{DiagnoseOptions, diagnose};
+use calib::select::diagnose::{DiagnoseOptions, diagnose};
 use sim::scenario::{Overrides, Scenario};
 
 /// 600 poses of the iiwa 7 with geometric errors, compliance at joints 2 and 4 and backlash at
@@ -63,7 +63,7 @@ fn a_subsample_names_the_same_causes_and_reports_the_fits_on_every_pose() {
         (screened.n_train, screened.n_test),
         (every.n_train, every.n_test)
     );
-    let named = |d: &calib::diagnose::Diagnosis| -> Vec<(String, Vec<usize>)> {
+    let named = |d: &calib::select::diagnose::Diagnosis| -> Vec<(String, Vec<usize>)> {
         d.findings
             .iter()
             .map(|f| (f.cause.name().to_string(), f.joints.clone()))

@@ -2,14 +2,15 @@
 //! the simulator made with its own effect code (within the predicted standard deviations), and the
 //! model file carrying them to `predict`.
 
-use calib::calibrate::{CalibrationOptions, Dataset, calibrate_model, observations};
-use calib::extensions::{ExtensionSettings, ModelSpec};
+use calib::fit::problem::KinematicProblem;
+use calib::fit::{CalibrationOptions, Dataset, FitRequest, fit, observations};
 use calib::lm::LeastSquaresProblem;
-use calib::model_file::{CalibratedModel, Predictor};
-use calib::params::KinematicParams;
-use calib::problem::KinematicProblem;
-use calib::robot::Robot;
-use calib::stats::position_errors;
+use calib::model::extensions::ExtensionSettings;
+use calib::model::file::{CalibratedModel, Predictor};
+use calib::model::params::KinematicParams;
+use calib::model::robot::Robot;
+use calib::model::spec::ModelSpec;
+use calib::model::stats::position_errors;
 use nalgebra::{DMatrix, Vector3};
 use rand::rngs::StdRng;
 use rand::{RngExt, SeedableRng};
@@ -83,7 +84,7 @@ fn extension_columns_match_central_differences() {
     params.p_flange_target = Vector3::new(0.01, 0.02, 0.08);
     params.t_tracker_base =
         sim::lie::exp_twist(&nalgebra::Vector6::new(0.1, 0.2, -0.3, 1.5, 0.5, 0.1));
-    let np = calib::params::ParamLayout::new(&model, false)
+    let np = calib::model::params::ParamLayout::new(&model, false)
         .with_extensions(obs.ext.params.clone())
         .len();
     let all: Vec<usize> = (0..np).collect();
@@ -155,12 +156,10 @@ fn extensions_are_recovered_within_their_predicted_standard_deviations() {
         let t = simulate(&effects, seed, &dir);
         let spec =
             ModelSpec::parse("kinematic+joint_compliance+gear_backlash+thermal_drift").unwrap();
-        let cal = calibrate_model(
+        let cal = fit(
             &model,
             &Dataset::all(&t, "sim"),
-            None,
-            &spec,
-            &CalibrationOptions::default(),
+            &FitRequest::new(&spec, &CalibrationOptions::default()),
         )
         .unwrap();
         assert!(
@@ -226,13 +225,13 @@ fn the_model_file_carries_extensions_and_learned_correction_to_predict() {
     let spec = ModelSpec::parse("kinematic+joint_compliance+gear_backlash+learned:poly1").unwrap();
     let data = Dataset::all(&t, "sim");
     let options = CalibrationOptions::default();
-    let cal = calibrate_model(&model, &data, None, &spec, &options).unwrap();
-    assert_eq!(cal.report.model, spec.name());
+    let cal = fit(&model, &data, &FitRequest::new(&spec, &options)).unwrap();
+    assert_eq!(cal.report.model, spec);
     let robot = Robot::load("iiwa7", &sim::ChainSpec::default()).unwrap();
     let text = CalibratedModel::new(&robot, &cal).to_json();
     let file = CalibratedModel::from_json(&text, "model.json").unwrap();
     assert_eq!(
-        file.model,
+        file.model.name(),
         "kinematic+joint_compliance+gear_backlash+learned:poly1"
     );
     let mut pred = Predictor::from_file(&file).unwrap();
@@ -285,25 +284,27 @@ fn thermal_drift_from_time_stamps_alone_finds_the_warm_up() {
         9,
         &dir,
     );
-    let with_temp = calibrate_model(
+    let with_temp = fit(
         &model,
         &Dataset::all(&t, "sim"),
-        None,
-        &ModelSpec::parse("kinematic+thermal_drift").unwrap(),
-        &CalibrationOptions::default(),
+        &FitRequest::new(
+            &ModelSpec::parse("kinematic+thermal_drift").unwrap(),
+            &CalibrationOptions::default(),
+        ),
     )
     .unwrap();
     t.temp = None;
-    let cal = calibrate_model(
+    let cal = fit(
         &model,
         &Dataset::all(&t, "sim"),
-        None,
-        &ModelSpec::parse("kinematic+thermal_drift").unwrap(),
-        &CalibrationOptions::default(),
+        &FitRequest::new(
+            &ModelSpec::parse("kinematic+thermal_drift").unwrap(),
+            &CalibrationOptions::default(),
+        ),
     )
     .unwrap();
     match cal.extensions.as_ref().unwrap().thermal {
-        Some(calib::extensions::ThermalInput::WarmUp { tau_s, .. }) => {
+        Some(calib::model::extensions::ThermalInput::WarmUp { tau_s, .. }) => {
             assert!((1200.0..=2700.0).contains(&tau_s), "τ = {tau_s} s")
         }
         other => panic!("expected a warm-up from time stamps, got {other:?}"),
@@ -349,12 +350,13 @@ fn compliance_is_recovered_from_the_physics_engine_truth() {
         4,
         &dir,
     );
-    let cal = calibrate_model(
+    let cal = fit(
         &model,
         &Dataset::all(&t, "rapier"),
-        None,
-        &ModelSpec::parse("kinematic+joint_compliance").unwrap(),
-        &CalibrationOptions::default(),
+        &FitRequest::new(
+            &ModelSpec::parse("kinematic+joint_compliance").unwrap(),
+            &CalibrationOptions::default(),
+        ),
     )
     .unwrap();
     assert!(cal.report.health.is_clean(), "{}", cal.report.health);
@@ -391,12 +393,13 @@ fn recovered_z2(effects: &str, spec: &str, seed: u64, truth: &dyn Fn(&str) -> f6
     let model = robots::load_builtin("iiwa7").unwrap();
     let dir = std::env::temp_dir().join(format!("robocal_ext_new_{}_{seed}", std::process::id()));
     let t = simulate(effects, seed, &dir);
-    let cal = calibrate_model(
+    let cal = fit(
         &model,
         &Dataset::all(&t, "sim"),
-        None,
-        &ModelSpec::parse(spec).unwrap(),
-        &CalibrationOptions::default(),
+        &FitRequest::new(
+            &ModelSpec::parse(spec).unwrap(),
+            &CalibrationOptions::default(),
+        ),
     )
     .unwrap();
     assert!(

@@ -1,8 +1,8 @@
 //! Calibration on the generator's output (`sim::generate`, the project's source of truth): the kinematic
 //! scenario, noise-free and with its laser-tracker noise.
 
-use calib::calibrate::{CalibrationOptions, Dataset, calibrate, prediction_and_jacobian};
-use calib::stats::split_by_pose;
+use calib::fit::{CalibrationOptions, Dataset, FitRequest, Part, fit, prediction_and_jacobian};
+use calib::model::stats::split_by_pose;
 use nalgebra::Vector3;
 use sim::scenario::{Overrides, Scenario};
 use std::path::Path;
@@ -37,15 +37,10 @@ fn generated(
 fn noise_free_generated_kinematic_errors_are_recovered_to_1e9_m() {
     let (model, table, p_true) = generated(0.0, 11);
     let (train, test) = split_by_pose(&table, 0.3, 1);
-    let cal = calibrate(
+    let cal = fit(
         &model,
-        &Dataset {
-            table: &table,
-            rows: train,
-            name: "train".into(),
-        },
-        None,
-        &CalibrationOptions::default(),
+        &Dataset::new(&table, train, "train", Part::All),
+        &FitRequest::kinematic(&CalibrationOptions::default()),
     )
     .unwrap();
     assert!(cal.report.was_successful());
@@ -68,15 +63,10 @@ fn noisy_generated_data_held_out_error_matches_the_covariance() {
     for seed in 21..26 {
         let (model, table, p_true) = generated(1.0, seed);
         let (train, test) = split_by_pose(&table, 0.3, seed);
-        let cal = calibrate(
+        let cal = fit(
             &model,
-            &Dataset {
-                table: &table,
-                rows: train,
-                name: "train".into(),
-            },
-            None,
-            &CalibrationOptions::default(),
+            &Dataset::new(&table, train, "train", Part::All),
+            &FitRequest::kinematic(&CalibrationOptions::default()),
         )
         .unwrap();
         assert!(cal.report.was_successful());

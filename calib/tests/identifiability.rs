@@ -5,7 +5,7 @@
 mod common;
 
 use calib::CalibError;
-use calib::calibrate::{CalibrationOptions, Dataset, RobustLoss, calibrate};
+use calib::fit::{CalibrationOptions, Dataset, FitRequest, RobustLoss, fit};
 use common::{Truth, random_configs, rng, table};
 use sim::measurement_table::MeasurementTable;
 use sim::robots;
@@ -29,11 +29,10 @@ fn identifiable_count_matches_the_closed_form() {
             0.0,
             &mut g,
         );
-        let cal = calibrate(
+        let cal = fit(
             &model,
             &Dataset::all(&t, "t"),
-            None,
-            &CalibrationOptions::default(),
+            &FitRequest::kinematic(&CalibrationOptions::default()),
         )
         .unwrap();
         let revolute = model
@@ -70,11 +69,10 @@ fn joint_1_that_never_moves_is_named_and_the_rest_is_still_recovered() {
         q[0] = 0.3;
     }
     let t = table(&model, &truth, &configs, 0.0, 0.0, &mut g);
-    let cal = calibrate(
+    let cal = fit(
         &model,
         &Dataset::all(&t, "t"),
-        None,
-        &CalibrationOptions::default(),
+        &FitRequest::kinematic(&CalibrationOptions::default()),
     )
     .unwrap();
     assert!(cal.report.was_successful());
@@ -98,8 +96,8 @@ fn joint_1_that_never_moves_is_named_and_the_rest_is_still_recovered() {
             .any(|w| w.contains("joint 1") && w.contains("does not move"))
     );
     // Poses of the same kind (q1 = 0.3) are still predicted exactly.
-    let chain = calib::chain::Chain::new(&model, &cal.params);
-    let mut s = calib::chain::ChainScratch::new(7);
+    let chain = calib::model::chain::Chain::new(&model, &cal.params);
+    let mut s = calib::model::chain::ChainScratch::new(7);
     for mut q in random_configs(&model, 30, &mut g) {
         q[0] = 0.3;
         chain.forward(&mut s, &q);
@@ -121,11 +119,10 @@ fn too_few_poses_is_an_error_naming_the_count_needed() {
         0.0,
         &mut g,
     );
-    let err = calibrate(
+    let err = fit(
         &model,
         &Dataset::all(&t, "few.csv"),
-        None,
-        &CalibrationOptions::default(),
+        &FitRequest::kinematic(&CalibrationOptions::default()),
     )
     .unwrap_err();
     let msg = err.to_string();
@@ -153,11 +150,10 @@ fn too_few_poses_is_an_error_naming_the_count_needed() {
         rep.push_row(&t.row(r)).unwrap();
     }
     assert!(matches!(
-        calibrate(
+        fit(
             &model,
             &Dataset::all(&rep, "rep"),
-            None,
-            &CalibrationOptions::default()
+            &FitRequest::kinematic(&CalibrationOptions::default())
         ),
         Err(CalibError::TooFewPoses { poses: 8, .. })
     ));
@@ -168,11 +164,10 @@ fn too_few_poses_is_an_error_naming_the_count_needed() {
         row.pose = 1000 + k;
         same.push_row(&row).unwrap();
     }
-    let err = calibrate(
+    let err = fit(
         &model,
         &Dataset::all(&same, "same.csv"),
-        None,
-        &CalibrationOptions::default(),
+        &FitRequest::kinematic(&CalibrationOptions::default()),
     )
     .unwrap_err();
     assert!(
@@ -194,11 +189,10 @@ fn too_few_poses_is_an_error_naming_the_count_needed() {
         &mut g,
     );
     assert!(
-        calibrate(
+        fit(
             &model,
             &Dataset::all(&t, "ok"),
-            None,
-            &CalibrationOptions::default()
+            &FitRequest::kinematic(&CalibrationOptions::default())
         )
         .is_ok()
     );
@@ -223,9 +217,9 @@ fn gross_errors_are_reported_as_outliers_and_a_robust_loss_ignores_them() {
         t.position[r][1] += 1e-3; // 1 mm = 100 σ
     }
     let test_q = random_configs(&model, 50, &mut g);
-    let held_out = |params: &calib::params::KinematicParams| {
-        let chain = calib::chain::Chain::new(&model, params);
-        let mut s = calib::chain::ChainScratch::new(7);
+    let held_out = |params: &calib::model::params::KinematicParams| {
+        let chain = calib::model::chain::Chain::new(&model, params);
+        let mut s = calib::model::chain::ChainScratch::new(7);
         let e2: f64 = test_q
             .iter()
             .map(|q| {
@@ -240,7 +234,12 @@ fn gross_errors_are_reported_as_outliers_and_a_robust_loss_ignores_them() {
         gross_error_threshold: f64::INFINITY,
         ..Default::default()
     };
-    let plain = calibrate(&model, &Dataset::all(&t, "t"), None, &keep_all).unwrap();
+    let plain = fit(
+        &model,
+        &Dataset::all(&t, "t"),
+        &FitRequest::kinematic(&keep_all),
+    )
+    .unwrap();
     assert!(plain.report.excluded.is_empty());
     let rows: Vec<usize> = plain.report.outliers.iter().map(|o| o.row - 1).collect();
     let mut sorted = rows.clone();
@@ -250,7 +249,12 @@ fn gross_errors_are_reported_as_outliers_and_a_robust_loss_ignores_them() {
         robust: Some(RobustLoss::HUBER),
         ..Default::default()
     };
-    let robust = calibrate(&model, &Dataset::all(&t, "t"), None, &options).unwrap();
+    let robust = fit(
+        &model,
+        &Dataset::all(&t, "t"),
+        &FitRequest::kinematic(&options),
+    )
+    .unwrap();
     assert!(robust.report.was_successful());
     assert!(robust.report.health.is_clean(), "{}", robust.report.health);
     assert_eq!(robust.report.robust.as_ref().unwrap().downweighted_rows, 3);
@@ -288,9 +292,9 @@ fn gross_errors_are_excluded_by_default_and_named() {
     let moderate = 33usize;
     t.position[moderate][2] += 1.2e-4; // 12 σ
     let test_q = random_configs(&model, 50, &mut g);
-    let held_out = |params: &calib::params::KinematicParams| {
-        let chain = calib::chain::Chain::new(&model, params);
-        let mut s = calib::chain::ChainScratch::new(7);
+    let held_out = |params: &calib::model::params::KinematicParams| {
+        let chain = calib::model::chain::Chain::new(&model, params);
+        let mut s = calib::model::chain::ChainScratch::new(7);
         let e2: f64 = test_q
             .iter()
             .map(|q| {
@@ -300,11 +304,10 @@ fn gross_errors_are_excluded_by_default_and_named() {
             .sum();
         (e2 / test_q.len() as f64).sqrt()
     };
-    let cal = calibrate(
+    let cal = fit(
         &model,
         &Dataset::all(&t, "t"),
-        None,
-        &CalibrationOptions::default(),
+        &FitRequest::kinematic(&CalibrationOptions::default()),
     )
     .unwrap();
     assert!(cal.report.was_successful());

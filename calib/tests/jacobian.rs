@@ -3,10 +3,10 @@
 
 mod common;
 
-use calib::chain::{Chain, ChainScratch};
+use calib::fit::problem::{KinematicProblem, NoiseModel, Observations};
 use calib::lm::LeastSquaresProblem;
-use calib::params::{KinematicParams, ParamLayout};
-use calib::problem::{KinematicProblem, NoiseModel, Observations};
+use calib::model::chain::{Chain, ChainScratch};
+use calib::model::params::{KinematicParams, ParamLayout};
 use common::{Truth, random_configs, rng, table};
 use nalgebra::DMatrix;
 use sim::robots;
@@ -147,8 +147,9 @@ fn normal_equations_equal_the_jacobian_products() {
 /// placements, each with its own target: the bends are the robot's, the registration the row's).
 #[test]
 fn extended_jacobian_matches_central_differences() {
-    use calib::calibrate::{CalibrationOptions, Dataset, observations};
-    use calib::extensions::{ExtensionSettings, ModelSpec};
+    use calib::fit::{CalibrationOptions, Dataset, observations};
+    use calib::model::extensions::ExtensionSettings;
+    use calib::model::spec::ModelSpec;
     use rand::RngExt;
     use sim::measurement_table::{MeasurementTable, OptionalColumns, Row};
     for (name, orientation, seed, two_campaigns) in [
@@ -276,7 +277,7 @@ fn extended_jacobian_matches_central_differences() {
             if k >= layout.kinematic_len()
                 && matches!(
                     layout.extensions[k - layout.kinematic_len()].term,
-                    calib::extensions::Term::Bend { .. }
+                    calib::model::extensions::Term::Bend { .. }
                 )
                 && col.amax() > 1.0
             {

@@ -1,4 +1,4 @@
-//! Learned residual models (`calib::learned`): exact recovery of polynomials, generalisation to fresh
+//! Learned residual models (`calib::model::learned`): exact recovery of polynomials, generalisation to fresh
 //! poses for a periodic effect under noise, refusal to learn pure noise, determinism and bad input.
 //!
 //! All data are drawn here from seeded generators; expectations are closed forms (the generating
@@ -6,7 +6,7 @@
 
 mod common;
 
-use calib::learned::{self, LearnedResidual};
+use calib::model::learned::{self, LearnedResidual};
 use nalgebra::Vector3;
 use rand::rngs::StdRng;
 use rand::{RngExt, SeedableRng};
@@ -241,7 +241,7 @@ fn bad_input_is_an_error_naming_the_problem() {
     let q = vec![0.1; 20 * N_JOINTS];
     let r = vec![Vector3::new(1e-5, 0.0, 0.0); 20];
     let message = |e: calib::CalibError| e.to_string();
-    let e = message(calib::extensions::ModelSpec::parse("kinematic+learned:spline").unwrap_err());
+    let e = message(calib::model::spec::ModelSpec::parse("kinematic+learned:spline").unwrap_err());
     assert!(e.contains("learned") && e.contains("spline"), "{e}");
     assert_eq!(learned::LearnedKind::from_name("spline"), None);
     let e = message(fit("poly", &q[..q.len() - 1], N_JOINTS, &r, 0).unwrap_err());
@@ -370,18 +370,18 @@ fn kernel_subsamples_large_data_sets() {
     assert!(after < 0.1 * before);
 }
 
-// learned:adjoint (`calib::learned::adjoint`): its analytic Jacobian against central differences of
+// learned:adjoint (`calib::model::learned::adjoint`): its analytic Jacobian against central differences of
 // its own predictions, and the recovery of a joint axis that tilts with the configuration, simulated
 // here with the product of exponentials of per-row screws (`sim::kinematics::poe_pose`, never
-// `calib::chain`). Seeds are drawn per run and printed.
+// `calib::model::chain`). Seeds are drawn per run and printed.
 mod adjoint {
     use super::common;
 
-    use calib::calibrate::{CalibrationOptions, Dataset, calibrate, calibrate_model};
-    use calib::extensions::ModelSpec;
-    use calib::learned::adjoint::{empty_model, residuals_and_jacobian};
-    use calib::predict::Prediction;
-    use calib::problem::{NoiseModel, Observations};
+    use calib::fit::problem::{NoiseModel, Observations};
+    use calib::fit::{CalibrationOptions, Dataset, FitRequest, fit};
+    use calib::model::learned::adjoint::{empty_model, residuals_and_jacobian};
+    use calib::model::predict::Prediction;
+    use calib::model::spec::ModelSpec;
     use common::{Truth, random_configs};
     use nalgebra::{Point3, Vector3, Vector6};
     use rand::rngs::StdRng;
@@ -398,11 +398,10 @@ mod adjoint {
         let truth = Truth::random(&model, false, &mut g);
         let configs = random_configs(&model, 30, &mut g);
         let table = common::table(&model, &truth, &configs, 1e-5, 0.0, &mut g);
-        let cal = calibrate(
+        let cal = fit(
             &model,
             &Dataset::all(&table, "t"),
-            None,
-            &CalibrationOptions::default(),
+            &FitRequest::kinematic(&CalibrationOptions::default()),
         )
         .unwrap();
         let rows: Vec<usize> = (0..table.len()).collect();
@@ -491,10 +490,14 @@ mod adjoint {
         }
         let options = CalibrationOptions::default();
         let data = Dataset::all(&table, "tilt");
-        let physical =
-            calibrate_model(&model, &data, None, &ModelSpec::kinematic(), &options).unwrap();
+        let physical = fit(
+            &model,
+            &data,
+            &FitRequest::new(&ModelSpec::kinematic(), &options),
+        )
+        .unwrap();
         let spec: ModelSpec = "kinematic+learned:adjoint".parse().unwrap();
-        let adj = calibrate_model(&model, &data, None, &spec, &options).unwrap();
+        let adj = fit(&model, &data, &FitRequest::new(&spec, &options)).unwrap();
         let learned = adj.learned.as_ref().unwrap();
         eprintln!("{}", learned.describe());
         assert!(learned.is_active(), "{}", learned.describe());

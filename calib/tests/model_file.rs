@@ -2,11 +2,11 @@
 
 mod common;
 
-use calib::calibrate::{CalibrationOptions, Dataset, calibrate};
-use calib::model_file::{CalibratedModel, Predictor};
-use calib::plan::{PlanOptions, plan_poses};
-use calib::robot::Robot;
-use calib::urdf_export::calibrated_urdf;
+use calib::fit::plan::{PlanOptions, plan_poses};
+use calib::fit::{CalibrationOptions, Dataset, FitRequest, fit};
+use calib::model::file::{CalibratedModel, Predictor};
+use calib::model::robot::Robot;
+use calib::model::urdf_export::calibrated_urdf;
 use common::{Truth, random_configs, rng, table};
 use nalgebra::Point3;
 use sim::{ChainSpec, robots};
@@ -15,12 +15,7 @@ fn calibrated(
     name: &str,
     orientation: bool,
     seed: u64,
-) -> (
-    Robot,
-    Truth,
-    calib::calibrate::Calibration,
-    rand::rngs::StdRng,
-) {
+) -> (Robot, Truth, calib::fit::Calibration, rand::rngs::StdRng) {
     let robot = Robot::load(name, &ChainSpec::default()).unwrap();
     let mut g = rng(seed);
     let truth = Truth::random(&robot.model, orientation, &mut g);
@@ -32,11 +27,10 @@ fn calibrated(
         0.0,
         &mut g,
     );
-    let cal = calibrate(
+    let cal = fit(
         &robot.model,
         &Dataset::all(&t, "t"),
-        None,
-        &CalibrationOptions::default(),
+        &FitRequest::kinematic(&CalibrationOptions::default()),
     )
     .unwrap();
     (robot, truth, cal, g)
@@ -252,15 +246,14 @@ fn planned_poses_beat_random_ones_and_are_reproducible() {
             (random_configs(&model, 20, &mut g), &mut err_rand),
         ] {
             let t = table(&model, &truth, &poses, 1e-5, 0.0, &mut g);
-            let cal = calibrate(
+            let cal = fit(
                 &model,
                 &Dataset::all(&t, "t"),
-                None,
-                &CalibrationOptions::default(),
+                &FitRequest::kinematic(&CalibrationOptions::default()),
             )
             .unwrap();
-            let chain = calib::chain::Chain::new(&model, &cal.params);
-            let mut s = calib::chain::ChainScratch::new(7);
+            let chain = calib::model::chain::Chain::new(&model, &cal.params);
+            let mut s = calib::model::chain::ChainScratch::new(7);
             for q in &test_q {
                 chain.forward(&mut s, q);
                 *acc += (s.p_tracker - truth.target(&model, q).0).norm_squared();

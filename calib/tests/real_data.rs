@@ -2,8 +2,8 @@
 //! makes sense. The published uncalibrated mean absolute errors (2.5664 mm UR5, 17.7661 mm WAM) were
 //! measured on other poses without refitting base and tool, so they are context, not a bound.
 
-use calib::calibrate::{CalibrationOptions, Dataset, calibrate};
-use calib::stats::split_by_pose;
+use calib::fit::{CalibrationOptions, Dataset, FitRequest, Part, fit};
+use calib::model::stats::split_by_pose;
 use sim::robots;
 use std::path::PathBuf;
 
@@ -26,19 +26,15 @@ fn run(robot: &str, file: &str) -> (f64, f64, f64) {
     let table = sim::measurement_table::read(&path).unwrap();
     sim::measurement_table::check_against_model(&table, &model, &path).unwrap();
     let (train, test) = split_by_pose(&table, 0.3, 0);
-    let cal = calibrate(
+    let cal = fit(
         &model,
-        &Dataset {
-            table: &table,
-            rows: train,
-            name: "train".into(),
-        },
-        Some(&Dataset {
-            table: &table,
-            rows: test,
-            name: "test".into(),
-        }),
-        &CalibrationOptions::default(),
+        &Dataset::new(&table, train, "train", Part::All),
+        &FitRequest::kinematic(&CalibrationOptions::default()).judged_on(Some(&Dataset::new(
+            &table,
+            test,
+            "test",
+            Part::All,
+        ))),
     )
     .unwrap();
     eprintln!("{}", cal.report.text());
@@ -90,7 +86,7 @@ fn wam_real_data_held_out_error_drops() {
 /// truth of a real robot.)
 #[test]
 fn diagnose_on_real_data_gains_on_held_out_poses() {
-    use calib::diagnose::{DiagnoseOptions, diagnose};
+    use calib::select::diagnose::{DiagnoseOptions, diagnose};
     for (robot, file) in [
         ("ur5", "ur5_jacobi2025_grid.csv"),
         ("wam", "wam_jacobi2025_grid.csv"),
@@ -125,17 +121,16 @@ fn diagnose_on_real_data_gains_on_held_out_poses() {
 /// the robot changed (it did not: the same UR10).
 #[test]
 fn ur10_series_a_model_predicts_series_b_after_registering_20_poses() {
-    use calib::register::{RegisterOptions, register};
+    use calib::fit::register::{RegisterOptions, register};
     use rand::SeedableRng;
     use rand::seq::SliceRandom;
     let model = robots::load_builtin("ur10").unwrap();
     let a = sim::measurement_table::read(&data("ur10_landgraf2021_seriesA.csv")).unwrap();
     let b = sim::measurement_table::read(&data("ur10_landgraf2021_seriesB.csv")).unwrap();
-    let cal = calibrate(
+    let cal = fit(
         &model,
         &Dataset::all(&a, "A"),
-        None,
-        &CalibrationOptions::default(),
+        &FitRequest::kinematic(&CalibrationOptions::default()),
     )
     .unwrap();
     assert!(cal.report.was_successful());
@@ -155,14 +150,14 @@ fn ur10_series_a_model_predicts_series_b_after_registering_20_poses() {
     .unwrap();
     eprintln!("{}", reg.report.text());
     let rest = b.select_rows(rest_rows);
-    let obs = calib::problem::Observations::from_table(
+    let obs = calib::fit::problem::Observations::from_table(
         &rest,
         &(0..rest.len()).collect::<Vec<_>>(),
-        &calib::problem::NoiseModel::default(),
+        &calib::fit::problem::NoiseModel::default(),
         "B (rest)",
     )
     .unwrap();
-    let e = calib::predict::Prediction::new(&model, &reg.params).errors(&obs);
+    let e = calib::model::predict::Prediction::new(&model, &reg.params).errors(&obs);
     let mean = e.iter().map(|v| v.norm()).sum::<f64>() / e.len() as f64;
     eprintln!(
         "UR10: calibrated on A ({} poses), B registered on 20 poses, the other {} predicted: mean error {:.3} mm",
@@ -205,11 +200,10 @@ fn ur10_two_series_calibrate_as_two_campaigns() {
     for r in 0..b.len() {
         both.push_row(&b.row(r)).unwrap();
     }
-    let cal = calibrate(
+    let cal = fit(
         &model,
         &Dataset::all(&both, "A+B"),
-        None,
-        &CalibrationOptions::default(),
+        &FitRequest::kinematic(&CalibrationOptions::default()),
     )
     .unwrap();
     eprintln!("{}", cal.report.text());
@@ -221,11 +215,11 @@ fn ur10_two_series_calibrate_as_two_campaigns() {
     assert!(apart > 1.0, "the trackers stood {apart} m apart");
     // The joint fit explains both series about as well as A alone explains itself.
     assert!(cal.report.after.train.rms_m < 0.6e-3);
-    let d = calib::diagnose::diagnose(
+    let d = calib::select::diagnose::diagnose(
         &model,
         &both,
         "A+B",
-        &calib::diagnose::DiagnoseOptions {
+        &calib::select::diagnose::DiagnoseOptions {
             candidates: Vec::new(),
             learned_kinds: Vec::new(),
             ..Default::default()

@@ -3,7 +3,7 @@
 
 mod common;
 
-use calib::calibrate::{CalibrationOptions, Dataset, calibrate};
+use calib::fit::{CalibrationOptions, Dataset, FitRequest, fit};
 use common::{Truth, random_configs, rng, table};
 use sim::robots;
 
@@ -27,11 +27,10 @@ fn noise_free_errors_are_recovered_to_1e9_m_on_held_out_poses() {
             &mut g,
         );
         let test_q = random_configs(&model, 40, &mut g);
-        let cal = calibrate(
+        let cal = fit(
             &model,
             &Dataset::all(&train, "train"),
-            None,
-            &CalibrationOptions::default(),
+            &FitRequest::kinematic(&CalibrationOptions::default()),
         )
         .unwrap();
         eprintln!("{}", cal.report.text());
@@ -45,8 +44,8 @@ fn noise_free_errors_are_recovered_to_1e9_m_on_held_out_poses() {
             "{name}: {}",
             cal.report.health
         );
-        let chain = calib::chain::Chain::new(&model, &cal.params);
-        let mut s = calib::chain::ChainScratch::new(model.nq());
+        let chain = calib::model::chain::Chain::new(&model, &cal.params);
+        let mut s = calib::model::chain::ChainScratch::new(model.nq());
         let mut worst = 0.0f64;
         let mut worst_rot = 0.0f64;
         for q in &test_q {
@@ -93,7 +92,12 @@ fn noisy_recovery(name: &str, orientation: bool, reps: usize, seed: u64) {
             Some(sigma),
             &mut g,
         );
-        let cal = calibrate(&model, &Dataset::all(&train, "train"), None, &options).unwrap();
+        let cal = fit(
+            &model,
+            &Dataset::all(&train, "train"),
+            &FitRequest::kinematic(&options),
+        )
+        .unwrap();
         assert!(
             cal.report.was_successful(),
             "rep {rep}: {:?}",
@@ -111,8 +115,7 @@ fn noisy_recovery(name: &str, orientation: bool, reps: usize, seed: u64) {
         let mut j = nalgebra::DMatrix::zeros(dim * configs.len(), np);
         let mut d = nalgebra::DVector::zeros(dim * configs.len());
         for (k, q) in configs.iter().enumerate() {
-            let (p, rot, jq) =
-                calib::calibrate::prediction_and_jacobian(&model, &cal.params, q).unwrap();
+            let (p, rot, jq) = calib::fit::prediction_and_jacobian(&model, &cal.params, q).unwrap();
             j.view_mut((dim * k, 0), (dim, np)).copy_from(&jq);
             let (pt, rt) = truth.target(&model, q);
             d.fixed_rows_mut::<3>(dim * k).copy_from(&(p - pt));
@@ -141,8 +144,7 @@ fn noisy_recovery(name: &str, orientation: bool, reps: usize, seed: u64) {
         }
         // Held-out poses: error against the noise-free truth vs trace(J C Jᵀ).
         for q in random_configs(&model, 100, &mut g) {
-            let (p, _, jq) =
-                calib::calibrate::prediction_and_jacobian(&model, &cal.params, &q).unwrap();
+            let (p, _, jq) = calib::fit::prediction_and_jacobian(&model, &cal.params, &q).unwrap();
             let (pt, _) = truth.target(&model, &q);
             held_err2 += (p - pt).norm_squared();
             let jp = jq.rows(0, 3);

@@ -3,14 +3,14 @@
 //! transforms its comment gives, equal the calibrated robot.
 //!
 //! The expected positions come from `common::Truth::target` (product of exponentials on screws moved
-//! by `Ad(exp ξ)`, `sim::kinematics::poe_pose`), never from `calib::chain` or the exporter; the file
+//! by `Ad(exp ξ)`, `sim::kinematics::poe_pose`), never from `calib::model::chain` or the exporter; the file
 //! is read back by sim's URDF reader and evaluated by sim's forward kinematics (the chain of URDF
 //! frames). MuJoCo does the same from Python in `scripts/check_urdf_out.py`.
 
 mod common;
 
-use calib::model_file::{CalibratedModel, EmbeddedRobot, ModelParameters, PoseJson};
-use calib::urdf_export::{COMMENT_MARKER, calibrated_urdf};
+use calib::model::file::{CalibratedModel, EmbeddedRobot, ModelParameters, PoseJson};
+use calib::model::urdf_export::{COMMENT_MARKER, calibrated_urdf};
 use common::{Truth, random_configs, rng};
 use nalgebra::{Matrix3, Point3, Vector3};
 use sim::lie::{Pose, pose_from, rotation_from_rpy};
@@ -51,10 +51,10 @@ fn rows(m: &Matrix3<f64>) -> [[f64; 3]; 3] {
 /// parameters).
 fn model_file(text: &str, model: &Model, truth: &Truth, model_name: &str) -> CalibratedModel {
     CalibratedModel {
-        format: calib::model_file::FORMAT.into(),
-        format_version: calib::model_file::FORMAT_VERSION,
+        format: calib::model::file::FORMAT.into(),
+        format_version: calib::model::file::FORMAT_VERSION,
         software: "test".into(),
-        model: model_name.into(),
+        model: model_name.parse().unwrap(),
         robot: EmbeddedRobot {
             name: model.name.clone(),
             source: "test".into(),

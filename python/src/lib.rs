@@ -15,7 +15,7 @@
 //!   slice and copied once, into the table's layout) and go out as numpy arrays that own the vectors
 //!   the Rust side built (no further copy).
 
-use calib::model_file::Predictor;
+use calib::model::file::Predictor;
 use numpy::{
     AllowTypeChange, PyArray1, PyArray2, PyArrayDyn, PyArrayLikeDyn, PyArrayMethods,
     PyReadonlyArray1, PyUntypedArrayMethods,
@@ -114,7 +114,7 @@ fn warn(py: Python<'_>, messages: &[String], depth: usize) -> PyResult<()> {
 /// A robot: the chain from a URDF (a built-in one or a file), with its URDF text.
 #[pyclass(frozen, module = "robocal._robocal")]
 struct Robot {
-    robot: calib::robot::Robot,
+    robot: calib::model::robot::Robot,
 }
 
 #[pymethods]
@@ -135,7 +135,7 @@ impl Robot {
         };
         let robot = quick(
             py,
-            calib::robot::Robot::load(robot, &spec).map_err(CliError::from),
+            calib::model::robot::Robot::load(robot, &spec).map_err(CliError::from),
         )?;
         Ok(Robot { robot })
     }
@@ -554,7 +554,7 @@ fn target_columns<'py>(
 /// A calibrated model: the same content as the command line's MODEL.json.
 #[pyclass(frozen, module = "robocal._robocal")]
 struct CalibratedModel {
-    file: calib::model_file::CalibratedModel,
+    file: calib::model::file::CalibratedModel,
 }
 
 #[pymethods]
@@ -564,7 +564,7 @@ impl CalibratedModel {
     fn load(py: Python<'_>, path: &str) -> PyResult<Self> {
         let file = quick(
             py,
-            calib::model_file::CalibratedModel::load(Path::new(path)).map_err(CliError::from),
+            calib::model::file::CalibratedModel::load(Path::new(path)).map_err(CliError::from),
         )?;
         Ok(CalibratedModel { file })
     }
@@ -616,7 +616,7 @@ impl CalibratedModel {
     /// The fitted model (`kinematic`, `kinematic+joint_compliance`, …).
     #[getter]
     fn model(&self) -> String {
-        self.file.model.clone()
+        self.file.model.name()
     }
 }
 

@@ -4,14 +4,12 @@ use super::paths::{Inputs, check_distinct};
 use super::robot_arg::RobotArgs;
 use super::shared::{CliError, CliResult, print_json, read_table};
 use calib::CalibError;
-use calib::calibrate::auto::{self, AUTO_LEARNED_KINDS, AutoChoice};
-use calib::calibrate::validation::{
-    DEFAULT_FOLDS, Validation, ValidationPlan, calibrate_validated,
-};
-use calib::calibrate::{Calibration, CalibrationOptions, Dataset, RobustLoss};
-use calib::extensions::{ModelChoice, ModelSpec};
-use calib::model_file::CalibratedModel;
-use calib::robot::Robot;
+use calib::fit::{Calibration, CalibrationOptions, Dataset, FitRequest, Part, RobustLoss};
+use calib::model::file::CalibratedModel;
+use calib::model::robot::Robot;
+use calib::model::spec::{ModelChoice, ModelSpec};
+use calib::select::auto::{AUTO_LEARNED_KINDS, AutoChoice};
+use calib::validate::{DEFAULT_FOLDS, Validation, ValidationPlan, fit_and_validate};
 use serde_json::json;
 use sim::ChainSpec;
 use sim::measurement_table::MeasurementTable;
@@ -261,59 +259,60 @@ pub fn calibrate(
         Some(s) => s,
         None => {
             let diagnose_options = super::diagnose::options(1.0 / 3.0, options.seed, 1e-3)?;
-            let d = super::diagnose::run_diagnosis_with(
+            let (d, choice) = calib::select::choose(
                 model,
                 table,
                 data.name,
                 &diagnose_options,
+                &AUTO_LEARNED_KINDS,
                 progress,
             )?;
             note(&format!("--model auto: diagnose chose {}", d.model));
-            progress("--model auto: testing the learned residual on diagnose's held-out poses");
-            let choice = auto::choose(
-                model,
-                table,
-                data.name,
-                &d,
-                &diagnose_options,
-                &AUTO_LEARNED_KINDS,
-            )?;
             note(&format!("--model auto: {}", choice.note));
             let spec = choice.spec.clone();
             auto = Some(choice);
             spec
         }
     };
-    let (cal, validation) = calibrate_validated(model, &all, &model_spec, &calibration, &plan)
-        .map_err(|e| {
-            // Only a validation fit (a fold, or the split's training part) gets the hint: the model
-            // on every pose had enough.
-            let hint = match (&e, &plan) {
-                (CalibError::TooFewPoses { context, .. }, ValidationPlan::Split { fraction, .. })
-                    if context.ends_with("(training set)") =>
-                {
-                    Some(format!(
-                        " (--test-fraction {fraction} held out part of the poses for the validation fit; \
+    let (cal, validation) = fit_and_validate(
+        model,
+        &all,
+        &FitRequest::new(&model_spec, &calibration),
+        &plan,
+    )
+    .map_err(|e| {
+        // Only a validation fit (a fold, or the split's training part) gets the hint: the model
+        // on every pose had enough.
+        let hint = match (&e, &plan) {
+            (
+                CalibError::TooFewPoses {
+                    part: Part::Training,
+                    ..
+                },
+                ValidationPlan::Split { fraction, .. },
+            ) => Some(format!(
+                " (--test-fraction {fraction} held out part of the poses for the validation fit; \
                          --folds 0 validates nothing)"
-                    ))
-                }
-                (CalibError::TooFewPoses { context, .. }, ValidationPlan::Folds { k, .. })
-                    if context.contains("(fold ") =>
-                {
-                    Some(format!(
-                        " (--folds {k} fits each fold on {}/{k} of the poses; fewer folds, or --folds 0 \
+            )),
+            (
+                CalibError::TooFewPoses {
+                    part: Part::FoldTraining(_),
+                    ..
+                },
+                ValidationPlan::Folds { k, .. },
+            ) => Some(format!(
+                " (--folds {k} fits each fold on {}/{k} of the poses; fewer folds, or --folds 0 \
                          for no validation)",
-                        k - 1
-                    ))
-                }
-                _ => None,
-            };
-            let e = CliError::from(e);
-            match hint {
-                Some(h) => e.with_hint(&h),
-                None => e,
-            }
-        })?;
+                k - 1
+            )),
+            _ => None,
+        };
+        let e = CliError::from(e);
+        match hint {
+            Some(h) => e.with_hint(&h),
+            None => e,
+        }
+    })?;
     Ok(Outcome {
         model_spec,
         cal,

@@ -4,8 +4,8 @@ use super::paths::Inputs;
 use super::robot_arg::RobotArgs;
 use super::shared::{CliError, CliResult, print_json, read_table};
 use crate::report;
-use calib::diagnose::{DiagnoseOptions, Diagnosis, diagnose_with_progress};
-use calib::robot::Robot;
+use calib::model::robot::Robot;
+use calib::select::diagnose::{DiagnoseOptions, Diagnosis, diagnose_with_progress};
 use sim::ChainSpec;
 use std::io::IsTerminal;
 use std::path::PathBuf;
@@ -52,7 +52,7 @@ pub struct Options {
     /// (training and test in the split's proportion) and the models adopted there are refitted on
     /// every pose, which every reported figure comes from; 0 uses every pose throughout (slow on
     /// large tables: each candidate of each round is fitted on every pose).
-    #[arg(long, value_name = "N", default_value_t = calib::diagnose::screening::DEFAULT_SCREEN_POSES)]
+    #[arg(long, value_name = "N", default_value_t = calib::select::diagnose::screening::DEFAULT_SCREEN_POSES)]
     pub screen_poses: usize,
 }
 

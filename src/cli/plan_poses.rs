@@ -3,7 +3,7 @@
 use super::paths::Inputs;
 use super::robot_arg::RobotArgs;
 use super::shared::{CliError, CliResult, print_json};
-use calib::plan::{PlanOptions, plan_poses};
+use calib::fit::plan::{PlanOptions, plan_poses};
 use serde_json::json;
 use std::path::PathBuf;
 

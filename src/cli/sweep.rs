@@ -5,7 +5,7 @@ use super::paths::Inputs;
 use super::shared::{CliError, CliResult, print_json};
 use crate::sweep::table::{self, META_SUBSET, META_SWEEP, SweepRow};
 use crate::sweep::{self as sw, Context, Selection, Subset, SweepSpec};
-use calib::calibrate::CalibrationOptions;
+use calib::fit::CalibrationOptions;
 use sim::scenario::{Overrides, Scenario};
 use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
@@ -228,7 +228,7 @@ pub fn run(args: Args) -> CliResult {
         .filter(|v| *v >= 1)
         .ok_or_else(|| input("--reps", &args.reps, "must be a whole number ≥ 1"))?;
     if args.model != "kinematic" {
-        calib::extensions::ModelSpec::parse(&args.model)?;
+        calib::model::spec::ModelSpec::parse(&args.model)?;
         return Err(input(
             "--model",
             &args.model,
@@ -304,7 +304,7 @@ pub fn run(args: Args) -> CliResult {
     })?;
     let options = CalibrationOptions::default();
     let orientation = probe.tracker.six_dof();
-    let rank = calib::calibrate::generic_rank(&probe.model, orientation, &options);
+    let rank = calib::fit::generic_rank(&probe.model, orientation, &options);
     let dim = if orientation { 6 } else { 3 };
     let needed = (rank + 1).div_ceil(dim);
     for &n in &poses {

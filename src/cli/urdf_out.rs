@@ -1,9 +1,9 @@
-//! `--urdf-out` of `calibrate` and `predict`: the calibrated URDF ([`calib::urdf_export`]), checked
+//! `--urdf-out` of `calibrate` and `predict`: the calibrated URDF ([`calib::model::urdf_export`]), checked
 //! before it is written.
 
 use super::shared::CliError;
 use calib::CalibratedModel;
-use calib::urdf_export::{calibrated_urdf, unexpressed_gap};
+use calib::model::urdf_export::{calibrated_urdf, unexpressed_gap};
 use sim::measurement_table::MeasurementTable;
 use std::path::Path;
 

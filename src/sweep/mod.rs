@@ -13,10 +13,10 @@
 //! Each run ([`run_one`]):
 //! 1. resolves the scenario with the run's seed, pose count and noise multiplier and simulates the
 //!    campaign in memory (`sim::generate`, the same code as `robocal generate`);
-//! 2. splits the poses into training and held-out ones (`calib::stats::split_by_pose`, as the validation
+//! 2. splits the poses into training and held-out ones (`calib::model::stats::split_by_pose`, as the validation
 //!    split of `robocal calibrate --test-fraction F --seed S`; with planned selection the training poses are the planned
 //!    ones and the held-out ones random, see [`split_counts`]) and calibrates the kinematic model on the training rows
-//!    (`calib::calibrate`, default options);
+//!    (`calib::fit`, default options);
 //! 3. scores the result against the truth: the held-out prediction error against the noise-free true
 //!    target positions and what the covariance predicts for it, the error of each identifiable
 //!    parameter combination in units of its predicted standard deviation, and the observability of the
@@ -25,10 +25,10 @@
 pub mod table;
 
 use crate::error::CliError;
-use calib::calibrate::{Calibration, CalibrationOptions, Dataset, calibrate};
-use calib::extensions::Regressors;
-use calib::params::ParamLayout;
-use calib::predict::Prediction;
+use calib::fit::{Calibration, CalibrationOptions, Dataset, FitRequest, Part, fit};
+use calib::model::extensions::Regressors;
+use calib::model::params::ParamLayout;
+use calib::model::predict::Prediction;
 use nalgebra::{DMatrix, DVector, Vector3};
 use sim::campaign::splitmix64;
 use sim::measurement_table::MeasurementTable;
@@ -46,7 +46,7 @@ pub const FORMAT_VERSION: u32 = 1;
 pub enum Selection {
     /// The scenario's own campaign (random poses for the shipped scenarios).
     Random,
-    /// D-optimal selection (`calib::plan`) from random candidate configurations.
+    /// D-optimal selection (`calib::fit::plan`) from random candidate configurations.
     Planned,
 }
 
@@ -201,7 +201,7 @@ pub fn quantile(sorted: &[f64], q: f64) -> f64 {
 }
 
 /// Held-out and training pose counts of `n` poses for the test fraction `f`, by the rule of
-/// `calib::stats::split_by_pose`: `round(f · n)` held out, at least one when `f > 0` and `n ≥ 2`, never
+/// `calib::model::stats::split_by_pose`: `round(f · n)` held out, at least one when `f > 0` and `n ≥ 2`, never
 /// all. Returns `(train, test)`.
 pub fn split_counts(n: usize, f: f64) -> (usize, usize) {
     let mut t = (f.clamp(0.0, 1.0) * n as f64).round() as usize;
@@ -235,11 +235,12 @@ fn planned_plan(
     let configs: Vec<Vec<f64>> = (0..cand.n_poses)
         .map(|k| cand.q_row(k * cand.repeats).to_vec())
         .collect();
-    let mut po = calib::plan::PlanOptions::new(configs.len(), train, res.seed);
+    let mut po = calib::fit::plan::PlanOptions::new(configs.len(), train, res.seed);
     po.target_offset = *res.tracker.p_flange();
     po.calibration = *options;
     po.random_sets = 0;
-    let chosen = calib::plan::select_from(&res.model, &configs, &po).map_err(CliError::from)?;
+    let chosen =
+        calib::fit::plan::select_from(&res.model, &configs, &po).map_err(CliError::from)?;
     let mut list: Vec<Vec<f64>> = chosen.iter().map(|&c| configs[c].clone()).collect();
     list.extend(
         (0..configs.len())
@@ -293,7 +294,9 @@ fn run_inner(ctx: &Context<'_>, id: &RunId) -> Result<SweepRow, CliError> {
         .map(|r| Vector3::from(r.reading.p_true))
         .collect();
     let (train_rows, test_rows) = match spec.selection {
-        Selection::Random => calib::stats::split_by_pose(&table, spec.test_fraction, id.seed),
+        Selection::Random => {
+            calib::model::stats::split_by_pose(&table, spec.test_fraction, id.seed)
+        }
         Selection::Planned => {
             let n_train = split_counts(id.poses, spec.test_fraction).0 as i64;
             (0..table.len()).partition(|&r| table.pose[r] < n_train)
@@ -303,17 +306,18 @@ fn run_inner(ctx: &Context<'_>, id: &RunId) -> Result<SweepRow, CliError> {
         table: &table,
         rows: train_rows,
         name: "training set".into(),
+        part: Part::Training,
     };
     let test = Dataset {
         table: &table,
         rows: test_rows,
         name: "test set".into(),
+        part: Part::Test,
     };
-    let cal = calibrate(
+    let cal = fit(
         &res.model,
         &train,
-        (!test.rows.is_empty()).then_some(&test),
-        &ctx.options,
+        &FitRequest::kinematic(&ctx.options).judged_on((!test.rows.is_empty()).then_some(&test)),
     )
     .map_err(CliError::from)?;
     let report = &cal.report;
@@ -730,7 +734,7 @@ mod tests {
                 .unwrap();
             }
             for f in [0.05, 0.3, 0.5, 0.9] {
-                let (train, test) = calib::stats::split_by_pose(&t, f, 3);
+                let (train, test) = calib::model::stats::split_by_pose(&t, f, 3);
                 assert_eq!(
                     split_counts(n, f),
                     (train.len(), test.len()),

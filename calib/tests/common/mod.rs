@@ -1,5 +1,5 @@
 //! Synthetic data for the calib tests, built independently of the estimator: the truth is evaluated with
-//! `sim::kinematics::poe_pose` on screws moved by `Ad(exp ξ)` (never with `calib::chain`).
+//! `sim::kinematics::poe_pose` on screws moved by `Ad(exp ξ)` (never with `calib::model::chain`).
 #![allow(dead_code)]
 
 use nalgebra::{Matrix3, Point3, Vector3, Vector6};

@@ -1,0 +1,110 @@
+//! A calibration in the model file's form ([`CalibratedModel`]): the file written by `calibrate`,
+//! and the file after `register` refitted a campaign.
+
+use crate::fit::Calibration;
+use crate::fit::register::Registration;
+use crate::model::file::{
+    CalibratedModel, CovarianceJson, EmbeddedRobot, ExtensionsJson, FORMAT, FORMAT_VERSION,
+    FitSummary, keep_unrefitted, layout_map, parameters_json, urdf_checksum,
+};
+use crate::model::params::ParamLayout;
+use crate::model::robot::Robot;
+use sim::Model;
+
+impl CalibratedModel {
+    /// The file form of a calibration of `robot`.
+    pub fn new(robot: &Robot, cal: &Calibration) -> Self {
+        let p = &cal.params;
+        let vf = cal.report.variance_factor();
+        CalibratedModel {
+            format: FORMAT.into(),
+            format_version: FORMAT_VERSION,
+            software: format!("robocal-calib {}", env!("CARGO_PKG_VERSION")),
+            model: cal.report.model.clone(),
+            robot: EmbeddedRobot {
+                name: robot.model.name.clone(),
+                source: robot.source.clone(),
+                base_link: robot.model.base_link.clone(),
+                tip_link: robot.model.tip_link.clone(),
+                urdf: robot.urdf.clone(),
+                urdf_fnv1a64: Some(urdf_checksum(&robot.urdf)),
+            },
+            parameters: parameters_json(p),
+            covariance: Some(CovarianceJson {
+                parameters: (0..cal.layout.len()).map(|k| cal.layout.name(k)).collect(),
+                matrix: (0..cal.covariance.nrows())
+                    .map(|i| cal.covariance.row(i).iter().copied().collect())
+                    .collect(),
+                variance_factor: vf,
+            }),
+            extensions: cal.extensions.as_ref().map(|settings| ExtensionsJson {
+                settings: settings.clone(),
+                names: cal.layout.extensions.iter().map(|e| e.name()).collect(),
+                units: cal.layout.extensions.iter().map(|e| e.unit).collect(),
+                values: p.extension.clone(),
+            }),
+            learned: cal.learned.clone(),
+            fit: Some(FitSummary {
+                train_rms_m: cal
+                    .report
+                    .learned
+                    .as_ref()
+                    .map_or(cal.report.after.train.rms_m, |l| l.train.rms_m),
+                held_out_rms_m: None,
+                n_train_poses: cal.report.n_train_poses,
+            }),
+        }
+    }
+
+    /// The model with a campaign registered by [`crate::fit::register::register`] (`reg`): its
+    /// parameters, the default campaign, and the covariance grown by the registration's block (a
+    /// registration is conditional on the robot: no cross terms). `model` is the embedded robot.
+    pub fn registered(&self, model: &Model, reg: &Registration) -> Self {
+        let mut out = self.clone();
+        out.format_version = FORMAT_VERSION;
+        out.software = format!("robocal-calib {}", env!("CARGO_PKG_VERSION"));
+        out.parameters = parameters_json(&reg.params);
+        keep_unrefitted(&mut out.parameters, &self.parameters, reg.report.campaign);
+        let ext = self
+            .extensions
+            .as_ref()
+            .map_or(Vec::new(), |e| e.settings.params(model));
+        let old = ParamLayout::for_params(model, &self.params(), ext.clone());
+        let new = ParamLayout::for_params(model, &reg.params, ext);
+        if let Some(cov) = &self.covariance
+            && cov.matrix.len() == old.len()
+        {
+            let map = layout_map(&old, &new);
+            let mut m = vec![vec![0.0; new.len()]; new.len()];
+            for (i, mi) in map.iter().enumerate() {
+                for (j, mj) in map.iter().enumerate() {
+                    if let (Some(a), Some(b)) = (mi, mj) {
+                        m[*a][*b] = cov.matrix[i][j];
+                    }
+                }
+            }
+            for (a, &ka) in reg.indices.iter().enumerate() {
+                for (b, &kb) in reg.indices.iter().enumerate() {
+                    m[ka][kb] = reg.covariance[(a, b)];
+                }
+                // The registration is refitted: its old cross terms no longer hold.
+                for (k, row) in m.iter_mut().enumerate() {
+                    if !reg.indices.contains(&k) {
+                        row[ka] = 0.0;
+                    }
+                }
+                for (k, v) in m[ka].iter_mut().enumerate() {
+                    if !reg.indices.contains(&k) {
+                        *v = 0.0;
+                    }
+                }
+            }
+            out.covariance = Some(CovarianceJson {
+                parameters: (0..new.len()).map(|k| new.name(k)).collect(),
+                matrix: m,
+                variance_factor: cov.variance_factor,
+            });
+        }
+        out
+    }
+}

@@ -1,0 +1,407 @@
+//! The one prediction path of a calibrated model: the kinematic chain at the extended joint values,
+//! the growth of the arm, and the learned residual correction.
+//!
+//! ```text
+//! θ = q + Σₑ xₑ gₑ(row)                    (joint-angle terms of the extensions)
+//! φᵢ = Σₑ xₑ gₑ(row) e_about               (bending terms, turning the chain at joint i)
+//! p_kin = T_tracker_base · T_base_flange(θ, φ) · p_flange
+//! p = t_base + (1 + γ) (p_kin − t_base),  γ = Σₑ xₑ gₑ(row)   (growth terms)
+//! p_tracker = p + R_c R_0ᵀ r̂(q)            (learned correction, when the model has one)
+//! ```
+//!
+//! The `learned:adjoint` model is no additive correction: it changes the joints' error twists and zero
+//! offsets with the configuration ([`crate::model::learned::adjoint`]), so its rows are evaluated by a chain
+//! re-prepared for each row (in a per-thread [`AdjointScratch`]).
+//!
+//! With several measurement campaigns each row is predicted in its campaign `c`'s tracker frame
+//! (`T_tracker_base` of `c`, its target); the learned correction `r̂` lives in the first campaign's
+//! tracker frame and is turned into campaign `c`'s by `R_c R_0ᵀ` (`R_c` the rotation of `c`'s
+//! `T_tracker_base`), so that it is a property of the robot, not of where a tracker stood.
+//!
+//! [`Prediction`] holds the chain prepared once per parameter point (immutable) and evaluates rows into a
+//! [`PredictScratch`] made once per thread, so batches never allocate per row. The solver
+//! ([`crate::fit::problem`]), the statistics, outlier detection, `predict`, the sweep and diagnose all go
+//! through it.
+
+use crate::error::{CalibError, Result};
+use crate::lie3::log_rotation;
+use crate::model::chain::{Chain, ChainScratch};
+use crate::model::extensions::Regressors;
+use crate::model::learned::LearnedResidual;
+use crate::model::learned::adjoint::AdjointModel;
+use crate::model::observations::Observations;
+use crate::model::params::{KinematicParams, ParamLayout};
+pub use crate::model::physical_row::{AdjointScratch, PredictScratch, RowPrediction, physical_row};
+use nalgebra::{DMatrix, Matrix3, Vector3};
+use rayon::prelude::*;
+use sim::Model;
+
+/// Rows per parallel work item of the batch evaluations.
+const CHUNK_ROWS: usize = 2048;
+
+/// A calibrated model ready to predict: parameters, prepared chain, optional learned correction.
+#[derive(Clone, Debug)]
+pub struct Prediction<'a> {
+    params: &'a KinematicParams,
+    chain: Chain,
+    learned: Option<&'a LearnedResidual>,
+    nq: usize,
+    /// `R_c R_0ᵀ` per campaign: the learned correction's frame (the first campaign's tracker frame)
+    /// to campaign `c`'s.
+    learned_frame: Vec<Matrix3<f64>>,
+}
+
+impl<'a> Prediction<'a> {
+    /// The physical model `params` of `model` (no learned correction).
+    pub fn new(model: &Model, params: &'a KinematicParams) -> Self {
+        let r0 = params.t_tracker_base.rotation.matrix().transpose();
+        Prediction {
+            params,
+            chain: Chain::new(model, params),
+            learned: None,
+            nq: model.nq(),
+            learned_frame: (0..params.n_campaigns())
+                .map(|c| params.t_tracker_base_of(c).rotation.matrix() * r0)
+                .collect(),
+        }
+    }
+
+    /// The same with the learned correction `learned` added to every position.
+    pub fn with_learned(mut self, learned: Option<&'a LearnedResidual>) -> Self {
+        self.learned = learned;
+        self
+    }
+
+    /// The parameters.
+    pub fn params(&self) -> &KinematicParams {
+        self.params
+    }
+
+    /// The prepared chain.
+    pub fn chain(&self) -> &Chain {
+        &self.chain
+    }
+
+    /// A workspace for [`Prediction::row`].
+    pub fn scratch(&self) -> PredictScratch {
+        let mut s = PredictScratch::new(self.nq);
+        if let Some(a) = self.learned.and_then(|l| l.adjoint()) {
+            s.adjoint = Some(AdjointScratch::new(
+                &self.chain,
+                self.params,
+                a.n_features(),
+            ));
+        }
+        s
+    }
+
+    /// Row `r` of an adjoint model `a`: the chain at the row's error twists and zero offsets.
+    fn adjoint_row(
+        &self,
+        a: &AdjointModel,
+        regs: &Regressors,
+        r: usize,
+        q: &[f64],
+        campaign: usize,
+        s: &mut PredictScratch,
+    ) -> Vector3<f64> {
+        let mut ad = s
+            .adjoint
+            .take()
+            .unwrap_or_else(|| AdjointScratch::new(&self.chain, self.params, a.n_features()));
+        a.prepare(&mut ad, self.params, q);
+        let p = physical_row(&ad.chain, &ad.params, regs, r, q, campaign, s).p_tracker;
+        s.adjoint = Some(ad);
+        p
+    }
+
+    /// Row `r` (regressors `regs`, controller joint values `q`): the physical prediction in the first
+    /// campaign's tracker frame, into `s`.
+    #[inline]
+    pub fn physical(
+        &self,
+        regs: &Regressors,
+        r: usize,
+        q: &[f64],
+        s: &mut PredictScratch,
+    ) -> RowPrediction {
+        physical_row(&self.chain, self.params, regs, r, q, 0, s)
+    }
+
+    /// [`Prediction::physical`] in campaign `campaign`'s (index) tracker frame.
+    #[inline]
+    pub fn physical_in(
+        &self,
+        regs: &Regressors,
+        r: usize,
+        q: &[f64],
+        campaign: usize,
+        s: &mut PredictScratch,
+    ) -> RowPrediction {
+        physical_row(&self.chain, self.params, regs, r, q, campaign, s)
+    }
+
+    /// Predicted target position of row `r` (first campaign's tracker frame, m), learned correction
+    /// included; the predicted orientation is left in `s.chain.r_tracker_target`.
+    #[inline]
+    pub fn row(
+        &self,
+        regs: &Regressors,
+        r: usize,
+        q: &[f64],
+        s: &mut PredictScratch,
+    ) -> Vector3<f64> {
+        self.row_in(regs, r, q, 0, s)
+    }
+
+    /// [`Prediction::row`] in campaign `campaign`'s (index) tracker frame.
+    #[inline]
+    pub fn row_in(
+        &self,
+        regs: &Regressors,
+        r: usize,
+        q: &[f64],
+        campaign: usize,
+        s: &mut PredictScratch,
+    ) -> Vector3<f64> {
+        if let Some(a) = self.learned.and_then(|l| l.adjoint()) {
+            return self.adjoint_row(a, regs, r, q, campaign, s);
+        }
+        let p = self.physical_in(regs, r, q, campaign, s).p_tracker;
+        match self.learned {
+            Some(l) => p + self.learned_in(l, q, campaign),
+            None => p,
+        }
+    }
+
+    /// The learned correction at `q` in campaign `campaign`'s tracker frame (m).
+    #[inline]
+    fn learned_in(&self, l: &LearnedResidual, q: &[f64], campaign: usize) -> Vector3<f64> {
+        if campaign == 0 {
+            l.predict(q)
+        } else {
+            self.learned_frame[campaign] * l.predict(q)
+        }
+    }
+
+    /// Jacobian of the chain's target position at the row last evaluated into `s` with respect to a
+    /// step of every kinematic parameter of `layout` (3 × [`ParamLayout::len`], row-major; m per unit).
+    /// It differentiates the chain at the effective joint values `θ`: for a kinematic model (no
+    /// extensions, as in the sweep) that is the whole prediction's Jacobian; extension and learned
+    /// terms are not differentiated.
+    pub fn position_jacobian(&self, s: &PredictScratch, layout: &ParamLayout, out: &mut [f64]) {
+        self.chain.position_jacobian(&s.chain, layout, out);
+    }
+
+    /// Predicted positions (tracker frame, m) and, when `orientation` is given, orientations of every
+    /// row of `q` (row-major, `nq` per row) with regressors `regs`; parallel over chunks of rows.
+    /// Every row is in the first campaign's tracker frame.
+    pub fn positions(
+        &self,
+        q: &[f64],
+        regs: &Regressors,
+        position: &mut [Vector3<f64>],
+        orientation: Option<&mut [Matrix3<f64>]>,
+    ) {
+        self.evaluate(q, &[], regs, position, orientation, true);
+    }
+
+    /// [`Prediction::positions`] with each row in its campaign's tracker frame: `campaign` holds
+    /// one campaign index per row (empty: all in the first).
+    pub fn positions_in(
+        &self,
+        q: &[f64],
+        campaign: &[usize],
+        regs: &Regressors,
+        position: &mut [Vector3<f64>],
+        orientation: Option<&mut [Matrix3<f64>]>,
+    ) {
+        self.evaluate(q, campaign, regs, position, orientation, true);
+    }
+
+    /// [`Prediction::positions_in`], with or without the learned correction.
+    fn evaluate(
+        &self,
+        q: &[f64],
+        campaign: &[usize],
+        regs: &Regressors,
+        position: &mut [Vector3<f64>],
+        orientation: Option<&mut [Matrix3<f64>]>,
+        learned: bool,
+    ) {
+        let n = self.nq;
+        assert_eq!(q.len(), position.len() * n, "joint values per row");
+        assert!(
+            campaign.is_empty() || campaign.len() == position.len(),
+            "one campaign per row"
+        );
+        let rows = position.len();
+        let work =
+            |start: usize, pos: &mut [Vector3<f64>], mut rot: Option<&mut [Matrix3<f64>]>| {
+                let mut s = self.scratch();
+                for (k, p) in pos.iter_mut().enumerate() {
+                    let r = start + k;
+                    let qr = &q[r * n..(r + 1) * n];
+                    let c = campaign.get(r).copied().unwrap_or(0);
+                    *p = if learned {
+                        self.row_in(regs, r, qr, c, &mut s)
+                    } else {
+                        self.physical_in(regs, r, qr, c, &mut s).p_tracker
+                    };
+                    if let Some(o) = rot.as_deref_mut() {
+                        o[k] = s.chain.r_tracker_target;
+                    }
+                }
+            };
+        if rows <= CHUNK_ROWS {
+            work(0, position, orientation);
+            return;
+        }
+        match orientation {
+            Some(o) => position
+                .par_chunks_mut(CHUNK_ROWS)
+                .zip(o.par_chunks_mut(CHUNK_ROWS))
+                .enumerate()
+                .for_each(|(c, (pos, rot))| work(c * CHUNK_ROWS, pos, Some(rot))),
+            None => position
+                .par_chunks_mut(CHUNK_ROWS)
+                .enumerate()
+                .for_each(|(c, pos)| work(c * CHUNK_ROWS, pos, None)),
+        }
+    }
+
+    /// The campaign index of every row of `obs` (empty when all are in the first campaign).
+    ///
+    /// # Panics
+    /// If a row's campaign is not one of the parameters' (callers check with
+    /// [`Observations::campaign_indices_or_error`] first).
+    pub fn campaigns_of(&self, obs: &Observations) -> Vec<usize> {
+        if obs.campaign.is_none() && self.params.default_campaign == 0 {
+            return Vec::new();
+        }
+        obs.campaign_indices(self.params)
+            .unwrap_or_else(|(r, id)| panic!("row {r}: campaign {id} is not registered"))
+    }
+
+    /// Position errors `predicted − measured` (tracker frame of each row's campaign, m), one per row
+    /// of `obs` (its regressors [`Observations::ext`]): the physical error, plus the learned correction
+    /// when there is one.
+    pub fn errors(&self, obs: &Observations) -> Vec<Vector3<f64>> {
+        let campaign = self.campaigns_of(obs);
+        let mut out = vec![Vector3::zeros(); obs.len()];
+        if self.learned.is_some_and(|l| l.adjoint().is_some()) {
+            self.evaluate(&obs.q, &campaign, &obs.ext, &mut out, None, true);
+            for (e, m) in out.iter_mut().zip(&obs.position) {
+                *e -= m;
+            }
+            return out;
+        }
+        self.evaluate(&obs.q, &campaign, &obs.ext, &mut out, None, false);
+        for (r, (e, m)) in out.iter_mut().zip(&obs.position).enumerate() {
+            *e -= m;
+            if let Some(l) = self.learned {
+                let c = campaign.get(r).copied().unwrap_or(0);
+                *e += self.learned_in(l, obs.q_row(r), c);
+            }
+        }
+        out
+    }
+
+    /// [`Prediction::errors`] turned into the first campaign's tracker frame (`R_0 R_cᵀ` for a row
+    /// of campaign `c`; the same as `errors` with one campaign): errors of several campaigns in one
+    /// frame, the robot's, for comparing them with joint directions or a learned correction.
+    pub fn reference_errors(&self, obs: &Observations) -> Vec<Vector3<f64>> {
+        let mut e = self.errors(obs);
+        let campaign = self.campaigns_of(obs);
+        if !campaign.is_empty() {
+            for (v, &c) in e.iter_mut().zip(&campaign) {
+                if c != 0 {
+                    *v = self.learned_frame[c].transpose() * *v;
+                }
+            }
+        }
+        e
+    }
+
+    /// Orientation error angles `|log(R_predicted R_measuredᵀ)|` (rad), one per row of `obs`, when it
+    /// has orientation measurements.
+    pub fn orientation_errors(&self, obs: &Observations) -> Option<Vec<f64>> {
+        let meas = obs.orientation.as_ref()?;
+        let campaign = self.campaigns_of(obs);
+        let mut pos = vec![Vector3::zeros(); obs.len()];
+        let mut rot = vec![Matrix3::identity(); obs.len()];
+        self.positions_in(&obs.q, &campaign, &obs.ext, &mut pos, Some(&mut rot));
+        Some(
+            rot.iter()
+                .zip(meas)
+                .map(|(r, m)| log_rotation(&(r * m.transpose())).norm())
+                .collect(),
+        )
+    }
+
+    /// `∂p_tracker/∂qⱼ` of the kinematic chain at the controller's joint values (tracker frame; m/rad,
+    /// m/m for prismatic joints) for every row of `q` (row-major, `nq` per row) and every joint:
+    /// `out[r · nq + j]`. Extensions and the learned correction are not applied (the lever of each
+    /// joint, for projecting residuals onto joint angles).
+    pub fn joint_directions(&self, q: &[f64], out: &mut [Vector3<f64>]) {
+        self.joint_directions_in(q, &[], out);
+    }
+
+    /// [`Prediction::joint_directions`] with each row in its campaign's tracker frame (`campaign`:
+    /// one index per row, or empty for all in the first).
+    pub fn joint_directions_in(&self, q: &[f64], campaign: &[usize], out: &mut [Vector3<f64>]) {
+        let n = self.nq;
+        assert_eq!(q.len(), out.len(), "one direction per joint value");
+        let work = |start: usize, dst: &mut [Vector3<f64>]| {
+            let mut s = ChainScratch::new(n);
+            for (k, d) in dst.chunks_mut(n).enumerate() {
+                let r = start + k;
+                let c = campaign.get(r).copied().unwrap_or(0);
+                self.chain.forward_in(&mut s, &q[r * n..(r + 1) * n], c);
+                for (j, dj) in d.iter_mut().enumerate() {
+                    *dj = self.chain.joint_direction(&s, j);
+                }
+            }
+        };
+        out.par_chunks_mut(CHUNK_ROWS * n)
+            .enumerate()
+            .for_each(|(c, dst)| work(c * CHUNK_ROWS, dst));
+    }
+}
+
+/// Predicted target pose of the kinematic model `params` at `q` (tracker frame: position in m, rotation
+/// matrix) and the Jacobian of the prediction with respect to a step of every parameter
+/// ([`ParamLayout::len`] columns, physical units): 3 position rows (m per unit), plus, when the model has
+/// target orientation, 3 rows of the tracker-frame rotation vector (rad per unit). For prediction
+/// uncertainty `J C Jᵀ` with [`crate::fit::Calibration::covariance`].
+///
+/// Errors ([`CalibError::Misuse`]) for a model with extension parameters: their columns need a
+/// measured row's torques, directions and temperature, which `q` alone does not give.
+pub fn prediction_and_jacobian(
+    model: &Model,
+    params: &KinematicParams,
+    q: &[f64],
+) -> Result<(Vector3<f64>, Matrix3<f64>, DMatrix<f64>)> {
+    if !params.extension.is_empty() {
+        return Err(CalibError::Misuse(format!(
+            "prediction_and_jacobian is for the kinematic model; this one has {} extension parameters",
+            params.extension.len()
+        )));
+    }
+    let layout = ParamLayout::for_params(model, params, Vec::new());
+    let np = layout.len();
+    let chain = Chain::new(model, params);
+    let mut s = ChainScratch::new(model.nq());
+    chain.forward(&mut s, q);
+    let rows = if layout.orientation { 6 } else { 3 };
+    let mut buf = vec![0.0; rows * np];
+    chain.position_jacobian(&s, &layout, &mut buf[..3 * np]);
+    if layout.orientation {
+        chain.orientation_jacobian(&s, &layout, &mut buf[3 * np..]);
+    }
+    Ok((
+        s.p_tracker,
+        s.r_tracker_target,
+        DMatrix::from_row_slice(rows, np, &buf),
+    ))
+}
