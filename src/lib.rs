@@ -8,6 +8,7 @@
 
 pub mod cli;
 mod dataset;
+pub mod document;
 pub mod error;
 mod report;
 mod sweep;
