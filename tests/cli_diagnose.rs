@@ -502,3 +502,18 @@ fn candidates_that_cannot_be_tried_are_named_with_the_reason() {
     );
     let _ = std::fs::remove_dir_all(&d);
 }
+
+/// `calibrate --help` names every cause of calib's registry and every learned kind (issue 23: the
+/// hand-written list had lost `transmission_error` and `link_deflection`).
+#[test]
+fn calibrate_help_names_every_registered_cause() {
+    let o = robocal(&["calibrate", "--help"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let help = String::from_utf8_lossy(&o.stdout);
+    for c in calib::extensions::Cause::ALL {
+        assert!(help.contains(c.name()), "{c} missing in:\n{help}");
+    }
+    for k in calib::learned::LearnedKind::ALL {
+        assert!(help.contains(k.name()), "learned:{k} missing in:\n{help}");
+    }
+}
