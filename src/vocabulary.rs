@@ -185,7 +185,7 @@ fn list<T: std::fmt::Display>(items: &[T]) -> String {
     }
 }
 
-/// `2 at joint 3, 5 at joint 4` of per-joint values formatted by `fmt`.
+/// `2 N m/rad at joint 3, 5 N m/rad at joint 4` of per-joint values (with their units).
 fn at_joints(joints: &[usize], values: &[String]) -> String {
     joints
         .iter()
@@ -230,13 +230,11 @@ fn transmission<R: Rng + ?Sized>(
         phase_rad: Some(table_per_joint(joints, &phase, k)),
     };
     let urad = |a: &Vec<f64>| {
-        a.iter()
-            .map(|v| format!("{:.0}", v * 1e6))
-            .collect::<Vec<_>>()
-            .join("/")
+        let a: Vec<String> = a.iter().map(|v| format!("{:.0}", v * 1e6)).collect();
+        format!("{} µrad", a.join("/"))
     };
     let text = format!(
-        "{} cycles per revolution, amplitudes {} µrad",
+        "{} cycles per revolution, amplitudes {}",
         list(&orders),
         at_joints(joints, &amp.iter().map(urad).collect::<Vec<_>>())
     );
@@ -302,10 +300,12 @@ pub fn draw<R: Rng + ?Sized>(
         let k: Vec<f64> = joints.iter().map(|_| rng.random_range(5e3..2e4)).collect();
         scenario = scenario.compliance(array(&joints, &k, f64::INFINITY));
         let mut description = format!(
-            "stiffness {} N m/rad",
+            "stiffness {}",
             at_joints(
                 &joints,
-                &k.iter().map(|v| format!("{v:.0}")).collect::<Vec<_>>()
+                &k.iter()
+                    .map(|v| format!("{v:.0} N m/rad"))
+                    .collect::<Vec<_>>()
             )
         );
         if !deflection {
@@ -340,11 +340,11 @@ pub fn draw<R: Rng + ?Sized>(
             .collect();
         scenario = scenario.link_deflection(table_per_joint(&joints, &c, 2));
         let mut description = format!(
-            "bending compliance {} rad/(N m) about the two axes across the joint",
+            "bending compliance {} about the two axes across the joint",
             at_joints(
                 &joints,
                 &c.iter()
-                    .map(|a| format!("{:.1e}/{:.1e}", a[0], a[1]))
+                    .map(|a| format!("{:.1e}/{:.1e} rad/(N m)", a[0], a[1]))
                     .collect::<Vec<_>>()
             )
         );
@@ -387,11 +387,11 @@ pub fn draw<R: Rng + ?Sized>(
             .collect();
         scenario = scenario.backlash(array(&joints, &b, 0.0), BacklashMode::Direction);
         let description = format!(
-            "lost motion {} µrad",
+            "lost motion {}",
             at_joints(
                 &joints,
                 &b.iter()
-                    .map(|v| format!("{:.0}", v * 1e6))
+                    .map(|v| format!("{:.0} µrad", v * 1e6))
                     .collect::<Vec<_>>()
             )
         );

@@ -138,7 +138,8 @@ pub fn run(args: Args) -> CliResult {
             "   hidden: {}{} ({}){}",
             h.cause.map_or(h.name, |c| c.name()),
             if h.cause.is_some() && !h.joints.is_empty() {
-                format!(" at joints {}", joint_list(&h.joints))
+                let s = if h.joints.len() > 1 { "s" } else { "" };
+                format!(" at joint{s} {}", joint_list(&h.joints))
             } else {
                 String::new()
             },
@@ -167,7 +168,8 @@ pub fn run(args: Args) -> CliResult {
             if f.joints.is_empty() {
                 String::new()
             } else {
-                format!(" at joints {}", f.joint_list())
+                let s = if f.joints.len() > 1 { "s" } else { "" };
+                format!(" at joint{s} {}", f.joint_list())
             }
         );
     }
