@@ -2,16 +2,21 @@
 
 use super::{Align, Block, Document, Span};
 
-/// A table cell: `|` escaped, line breaks as spaces.
+/// Running text: `<` escaped, so that `<inertial>` in a message is shown, not taken for HTML.
+fn plain(t: &str) -> String {
+    t.replace('<', "\\<")
+}
+
+/// A table cell: running text with `|` escaped and line breaks as spaces.
 fn cell(c: &str) -> String {
-    c.replace('|', "\\|").replace(['\n', '\r'], " ")
+    plain(c).replace('|', "\\|").replace(['\n', '\r'], " ")
 }
 
 fn spans(s: &[Span]) -> String {
     s.iter()
         .map(|s| match s {
-            Span::Text(t) => t.clone(),
-            Span::Strong(t) => format!("**{t}**"),
+            Span::Text(t) => plain(t),
+            Span::Strong(t) => format!("**{}**", plain(t)),
             Span::Code(t) => format!("`{t}`"),
         })
         .collect()
@@ -23,7 +28,11 @@ pub(super) fn render(doc: &Document) -> String {
     for b in &doc.blocks {
         parts.push(match b {
             Block::Heading(level, h) => {
-                format!("{} {h}\n", "#".repeat(usize::from((*level).max(1))))
+                format!(
+                    "{} {}\n",
+                    "#".repeat(usize::from((*level).max(1))),
+                    plain(h)
+                )
             }
             Block::Paragraph(p) => format!("{}\n", spans(p)),
             Block::List(items) => items.iter().map(|i| format!("- {}\n", spans(i))).collect(),
@@ -48,8 +57,8 @@ pub(super) fn render(doc: &Document) -> String {
                 }
                 s
             }
-            Block::Figure { file, caption } => format!("![{caption}]({file})\n"),
-            Block::Warning(w) => format!("> **Warning:** {w}\n"),
+            Block::Figure { file, caption } => format!("![{}]({file})\n", plain(caption)),
+            Block::Warning(w) => format!("> **Warning:** {}\n", plain(w)),
         });
     }
     parts.join("\n")

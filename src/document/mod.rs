@@ -179,9 +179,10 @@ mod tests {
     }
 
     #[test]
-    fn markdown_escapes_table_pipes() {
+    fn markdown_escapes_table_pipes_and_tags() {
         let md = sample().to_markdown();
-        assert!(md.contains("| kinematic+a<b & c\\|d | 7.0 µm |"), "{md}");
+        assert!(md.contains("| kinematic+a\\<b & c\\|d | 7.0 µm |"), "{md}");
+        assert!(md.contains("# Title \\<x>"), "{md}");
         assert!(md.contains("|---|---:|"), "{md}");
         assert!(md.contains("![Errors \"held out\"](errors.svg)"), "{md}");
     }
