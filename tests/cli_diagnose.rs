@@ -125,7 +125,67 @@ fn diagnose_json_follows_the_contract_and_the_report_is_written() {
     assert!(html.contains("gear_backlash") && html.contains("<img src=\"errors.svg\""));
     // Why each candidate was or was not adopted, as a table.
     assert!(html.contains("Candidates tried") && html.contains("<th>held-out z</th>"));
+    // One document, three renderings: the report's Markdown and HTML and the text on stderr carry
+    // the same table cells (issue 23: the HTML was parsed back from the Markdown).
+    let md = std::fs::read_to_string(report.join("summary.md")).unwrap();
+    let (md_cells, html_cells) = (markdown_cells(&md), html_cells(&html));
+    assert!(md_cells.len() > 20, "{md}");
+    assert_eq!(md_cells, html_cells);
+    let o = robocal(&["diagnose", "--data", data.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let text = stderr(&o);
+    for c in &md_cells {
+        assert!(text.contains(c.as_str()), "{c:?} not in the text:\n{text}");
+    }
     let _ = std::fs::remove_dir_all(&d);
+}
+
+/// The cells of every Markdown table, in order (`\|` and `\<` unescaped).
+fn markdown_cells(md: &str) -> Vec<String> {
+    md.lines()
+        .filter(|l| l.starts_with('|') && !l.starts_with("|---"))
+        .flat_map(|l| {
+            let inner = l.trim().trim_start_matches('|').trim_end_matches('|');
+            let mut cells = vec![String::new()];
+            let mut chars = inner.chars().peekable();
+            while let Some(c) = chars.next() {
+                match c {
+                    '\\' if matches!(chars.peek(), Some('|' | '<')) => {
+                        cells.last_mut().unwrap().push(chars.next().unwrap());
+                    }
+                    '|' => cells.push(String::new()),
+                    c => cells.last_mut().unwrap().push(c),
+                }
+            }
+            cells.into_iter().map(|c| c.trim().to_string())
+        })
+        .collect()
+}
+
+/// The cells (`<th>`, `<td>`) of every HTML table, in order, entities decoded.
+fn html_cells(html: &str) -> Vec<String> {
+    let mut out = Vec::new();
+    let mut rest = html;
+    while let Some(a) = rest.find("<t") {
+        let tag = &rest[a + 2..];
+        let cell = (tag.starts_with('d') || tag.starts_with('h'))
+            && matches!(tag.as_bytes().get(1), Some(b'>' | b' '));
+        if !cell {
+            rest = &rest[a + 2..];
+            continue;
+        }
+        let open = rest[a..].find('>').unwrap() + a + 1;
+        let close = rest[open..].find("</t").unwrap() + open;
+        out.push(
+            rest[open..close]
+                .replace("&lt;", "<")
+                .replace("&gt;", ">")
+                .replace("&quot;", "\"")
+                .replace("&amp;", "&"),
+        );
+        rest = &rest[close..];
+    }
+    out
 }
 
 #[test]
@@ -363,7 +423,8 @@ fn the_readme_session_runs_and_every_fit_converges() {
 
 /// A robot without `<inertial>` cannot be checked for joint compliance: diagnose says so in its text
 /// and JSON (`not_tried`, with the reason naming the links) instead of dropping the candidate
-/// silently (issue 15); so for thermal drift on a table without `temp` or `t`.
+/// silently (issue 15); so for thermal drift on a table without `temp` or `t`. With `--json`, stderr
+/// has one warning line naming the causes not tried (issue 23: it had nothing).
 #[test]
 fn candidates_that_cannot_be_tried_are_named_with_the_reason() {
     let d = dir("not_tried");
@@ -388,8 +449,25 @@ fn candidates_that_cannot_be_tried_are_named_with_the_reason() {
         "--json",
     ]);
     assert!(o.status.success(), "{}", stderr(&o));
+    // With --json, stderr still says that causes were not tried: one warning line naming them.
+    let warnings: Vec<String> = stderr(&o)
+        .lines()
+        .filter(|l| l.starts_with("warning:"))
+        .map(String::from)
+        .collect();
+    assert_eq!(warnings.len(), 1, "{}", stderr(&o));
+    assert!(
+        warnings[0].contains("not tried")
+            && warnings[0].contains("joint_compliance: the gravity torques"),
+        "{}",
+        warnings[0]
+    );
     let v: Value = serde_json::from_slice(&o.stdout).unwrap();
     let not_tried = v["not_tried"].as_array().unwrap();
+    for n in not_tried {
+        let cause = n["cause"].as_str().unwrap();
+        assert!(warnings[0].contains(cause), "{cause}: {}", warnings[0]);
+    }
     let reason = |cause: &str| {
         not_tried
             .iter()
@@ -422,4 +500,19 @@ fn candidates_that_cannot_be_tried_are_named_with_the_reason() {
         "{text}"
     );
     let _ = std::fs::remove_dir_all(&d);
+}
+
+/// `calibrate --help` names every cause of calib's registry and every learned kind (issue 23: the
+/// hand-written list had lost `transmission_error` and `link_deflection`).
+#[test]
+fn calibrate_help_names_every_registered_cause() {
+    let o = robocal(&["calibrate", "--help"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let help = String::from_utf8_lossy(&o.stdout);
+    for c in calib::model::extensions::Cause::ALL {
+        assert!(help.contains(c.name()), "{c} missing in:\n{help}");
+    }
+    for k in calib::model::learned::LearnedKind::ALL {
+        assert!(help.contains(k.name()), "learned:{k} missing in:\n{help}");
+    }
 }

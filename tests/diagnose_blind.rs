@@ -1,5 +1,6 @@
 //! Blind tests of `robocal diagnose`: each case draws, from a seed kept here, which effect is hidden (or
-//! none, or two at once), on which joints and how large (within published ranges), builds the scenario
+//! none, or two at once), on which joints and how large (within published ranges: the library's one
+//! sampler, [`robocal::vocabulary::draw`], which `robocal demo` uses too), builds the scenario
 //! in code ([`sim::scenario::ScenarioBuilder`]), simulates its campaign as `robocal generate` does,
 //! runs `robocal diagnose --json` on the measurements alone as a user would, and checks the named
 //! causes, their joints and that the final held-out RMS is within 1.5× the noise floor. The hidden
@@ -17,17 +18,14 @@
 //! writes the matrix of hidden against named causes for docs/diagnose.md
 //! (`scripts/blind_confusion.sh`).
 
+use calib::model::extensions::Cause;
 use rand::rngs::StdRng;
 use rand::seq::SliceRandom;
 use rand::{RngExt, SeedableRng};
+use robocal::vocabulary::{self, Hidden, Kind};
 use serde_json::Value;
 use sim::campaign::DirectionRule;
-use sim::effects::gear_backlash::BacklashMode;
-use sim::effects::thermal_drift::{TemperatureProfile, WarmUp};
-use sim::effects::transmission_error::{TransmissionError, TransmissionSection};
-use sim::scenario::{
-    Draw, KinematicSection, Magnitude, Overrides, PayloadSection, SamplingKind, ScenarioBuilder,
-};
+use sim::scenario::{Draw, KinematicSection, Magnitude, Overrides, SamplingKind, ScenarioBuilder};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -64,342 +62,39 @@ fn base() -> ScenarioBuilder {
         })
 }
 
-/// What a case hides.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
-enum Kind {
-    Nothing,
-    Compliance,
-    Backlash,
-    Thermal,
-    Transmission,
-    Deflection,
-    DeflectionAndCompliance,
-    TransmissionAndBacklash,
-    ComplianceAndBacklash,
-    BacklashAndThermal,
-    /// Outside the vocabulary: one joint's angle error in proportion to another joint's angle.
-    Coupling,
-    /// Outside the vocabulary: a transmission error of 4 to 6 cycles per revolution.
-    HigherHarmonic,
-    /// Outside the vocabulary: one joint's angle error periodic in ANOTHER joint's angle
-    /// (`coupled_transmission`).
-    CoupledTransmission,
-}
-
-impl Kind {
-    const ALL: [Kind; 13] = [
-        Kind::Nothing,
-        Kind::Compliance,
-        Kind::Backlash,
-        Kind::Thermal,
-        Kind::Transmission,
-        Kind::Deflection,
-        Kind::DeflectionAndCompliance,
-        Kind::TransmissionAndBacklash,
-        Kind::ComplianceAndBacklash,
-        Kind::BacklashAndThermal,
-        Kind::Coupling,
-        Kind::HigherHarmonic,
-        Kind::CoupledTransmission,
-    ];
-
-    /// Whether the hidden effect is outside the causes diagnose knows.
-    fn outside(self) -> bool {
-        matches!(
-            self,
-            Kind::Coupling | Kind::HigherHarmonic | Kind::CoupledTransmission
-        )
-    }
-}
-
-/// One hidden case.
+/// One hidden case: the seed of its campaign, and what the library's vocabulary sampler drew.
 #[derive(Clone, Debug)]
 struct Case {
     seed: u64,
     kind: Kind,
-    /// cause -> 1-based joints (empty for an effect outside the vocabulary: nothing may be named).
+    /// cause word -> 1-based joints (empty for an effect outside the vocabulary: nothing may be
+    /// named).
     hidden: BTreeMap<String, Vec<usize>>,
     /// For an effect outside the vocabulary: the 1-based joint whose angle it disturbs.
     outside_joint: Option<usize>,
-    /// Names a measurement cannot tell from the hidden ones, which diagnose may give besides: bending
-    /// of joint i about the axis line of joint i + 1 is joint i + 1's compliance (iiwa joints 2 and 4
-    /// about z; see calib's link_deflection).
+    /// Names a measurement cannot tell from the hidden ones, which diagnose may give besides
+    /// ([`Hidden::aliases`]).
     aliases: BTreeMap<String, Vec<usize>>,
     description: String,
     scenario: ScenarioBuilder,
 }
 
-fn pick(rng: &mut StdRng, pool: &[usize], count: usize) -> Vec<usize> {
-    let mut left = pool.to_vec();
-    let mut out: Vec<usize> = (0..count.min(left.len()))
-        .map(|_| left.remove(rng.random_range(0..left.len())))
-        .collect();
-    out.sort_unstable();
-    out
-}
-
-/// One magnitude per joint of the iiwa 7: `values` at `joints` (in order), `rest` elsewhere.
-fn array(joints: &[usize], values: &[f64], rest: f64) -> Magnitude {
-    Magnitude::List(
-        (1..=7)
-            .map(|j| {
-                Magnitude::Number(match joints.iter().position(|x| *x == j) {
-                    Some(k) => values[k],
-                    None => rest,
-                })
-            })
-            .collect(),
-    )
-}
-
-/// One row of numbers per joint of the iiwa 7: `rows[k]` at `joints[k]`, zeros (of the same width)
-/// elsewhere.
-fn table_per_joint(joints: &[usize], rows: &[Vec<f64>], width: usize) -> Magnitude {
-    Magnitude::List(
-        (1..=7)
-            .map(|j| {
-                let row = match joints.iter().position(|x| *x == j) {
-                    Some(k) => rows[k].clone(),
-                    None => vec![0.0; width],
-                };
-                Magnitude::List(row.into_iter().map(Magnitude::Number).collect())
-            })
-            .collect(),
-    )
-}
-
-/// A transmission error at `joints` with harmonic `orders`: each amplitude 30-150 µrad with a random
-/// phase, the largest at least 100 µrad (harmonic drives: about 1 arc-min peak to peak), on joints
-/// 1-4 (joints 5-7 move the reflector by less than the noise for that).
-fn transmission(
-    rng: &mut StdRng,
-    scenario: ScenarioBuilder,
-    joints: &[usize],
-    orders: Vec<u32>,
-) -> (ScenarioBuilder, String) {
-    let k = orders.len();
-    let amp: Vec<Vec<f64>> = joints
-        .iter()
-        .map(|_| {
-            let mut a: Vec<f64> = (0..k).map(|_| rng.random_range(3e-5..1.5e-4)).collect();
-            let top = rng.random_range(0..k);
-            a[top] = rng.random_range(1e-4..2e-4);
-            a
-        })
-        .collect();
-    let phase: Vec<Vec<f64>> = joints
-        .iter()
-        .map(|_| {
-            (0..k)
-                .map(|_| rng.random_range(-std::f64::consts::PI..std::f64::consts::PI))
-                .collect()
-        })
-        .collect();
-    let section = TransmissionSection {
-        enabled: None,
-        harmonics: Some(orders.clone()),
-        amplitude_rad: table_per_joint(joints, &amp, k),
-        phase_rad: Some(table_per_joint(joints, &phase, k)),
-    };
-    let text = format!(
-        "transmission error {joints:?} orders {orders:?} amplitudes {:?} rad",
-        amp.iter()
-            .map(|a| a.iter().map(|v| format!("{v:.1e}")).collect::<Vec<_>>())
-            .collect::<Vec<_>>()
-    );
-    (scenario.effect::<TransmissionError>(section), text)
-}
-
+/// Case `kind` drawn by the library's sampler on the base campaign.
 fn draw(rng: &mut StdRng, seed: u64, kind: Kind) -> Case {
-    let mut hidden = BTreeMap::new();
-    let mut scenario = base();
-    let mut description = Vec::new();
-    let mut outside_joint = None;
-    let mut aliases = BTreeMap::new();
-    let (compliance, backlash, thermal, te, deflection) = match kind {
-        Kind::Nothing | Kind::Coupling | Kind::HigherHarmonic | Kind::CoupledTransmission => {
-            (false, false, false, false, false)
-        }
-        Kind::Compliance => (true, false, false, false, false),
-        Kind::Backlash => (false, true, false, false, false),
-        Kind::Thermal => (false, false, true, false, false),
-        Kind::Transmission => (false, false, false, true, false),
-        Kind::Deflection => (false, false, false, false, true),
-        Kind::DeflectionAndCompliance => (true, false, false, false, true),
-        Kind::TransmissionAndBacklash => (false, true, false, true, false),
-        Kind::ComplianceAndBacklash => (true, true, false, false, false),
-        Kind::BacklashAndThermal => (false, true, true, false, false),
+    let (scenario, hidden): (ScenarioBuilder, Hidden) =
+        vocabulary::draw(rng, kind, base()).unwrap_or_else(|e| panic!("draw: {e}"));
+    let words = |m: BTreeMap<Cause, Vec<usize>>| -> BTreeMap<String, Vec<usize>> {
+        m.into_iter()
+            .map(|(c, j)| (c.name().to_string(), j))
+            .collect()
     };
-    let mut used = Vec::new();
-    // A gripper-like payload whose centre of mass (0-10 cm from the flange) the table does not give,
-    // only its mass: up to 7 kg (the iiwa 7's rating). Half of the cases with a gravity-driven cause.
-    let payload = |rng: &mut StdRng, scenario: ScenarioBuilder, description: &mut Vec<String>| {
-        if !rng.random::<bool>() {
-            return scenario;
-        }
-        let m = rng.random_range(2.0..7.0);
-        let com = [
-            rng.random_range(-0.02..0.02),
-            rng.random_range(-0.02..0.02),
-            rng.random_range(0.0..0.1),
-        ];
-        description.push(format!("payload ≤ {m:.1} kg at {com:.3?} m"));
-        scenario.payload(PayloadSection {
-            mass_kg: None,
-            choice_kg: Some(vec![0.0, m / 2.0, m]),
-            com_m: Some(com),
-        })
-    };
-    if compliance {
-        // Harmonic-drive joints of lightweight arms: 5e3 to 2e4 N m/rad, on joints whose gravity
-        // torque moves the target by much more than the noise without payload (2, 3, 4).
-        let count = rng.random_range(1..=2);
-        let joints = pick(rng, &[2, 3, 4], count);
-        let k: Vec<f64> = joints.iter().map(|_| rng.random_range(5e3..2e4)).collect();
-        scenario = scenario.compliance(array(&joints, &k, f64::INFINITY));
-        description.push(format!(
-            "compliance {joints:?} k = {:?} N m/rad",
-            k.iter().map(|v| format!("{v:.0}")).collect::<Vec<_>>()
-        ));
-        if !deflection {
-            scenario = payload(rng, scenario, &mut description);
-        }
-        hidden.insert("joint_compliance".to_string(), joints);
-    }
-    if deflection {
-        // Bearing and link compliance across the shoulder and elbow (joints 2 and 4). The moment
-        // stiffness of Harmonic Drive output bearings is 1e5 to 1e6 N m/rad for sizes 14 to 32 (see
-        // sim's link_deflection), and the link tubes add about as much: 2e-6 to 5e-6 rad/(N m) per
-        // axis at the shoulder (a large unit, up to 60 N m across its axis), 5e-6 to 1e-5 at the
-        // elbow (a smaller unit carrying 10 to 30 N m), which bend the arm by 0.05 to 0.3 mrad.
-        let count = rng.random_range(1..=2);
-        let joints = pick(rng, &[2, 4], count);
-        let c: Vec<Vec<f64>> = joints
-            .iter()
-            .map(|&j| {
-                let range = if j == 2 { 2e-6..5e-6 } else { 5e-6..1e-5 };
-                vec![
-                    rng.random_range(range.clone()),
-                    rng.random_range(range.clone()),
-                ]
-            })
-            .collect();
-        scenario = scenario.link_deflection(table_per_joint(&joints, &c, 2));
-        description.push(format!(
-            "deflection {joints:?} c = {:?} rad/(N m)",
-            c.iter()
-                .map(|a| a.iter().map(|v| format!("{v:.1e}")).collect::<Vec<_>>())
-                .collect::<Vec<_>>()
-        ));
-        scenario = payload(rng, scenario, &mut description);
-        aliases.insert(
-            "joint_compliance".to_string(),
-            joints.iter().map(|j| j + 1).collect(),
-        );
-        hidden.insert("link_deflection".to_string(), joints);
-    }
-    if te {
-        let count = rng.random_range(1..=2);
-        let joints = pick(rng, &[1, 2, 3, 4], count);
-        let (sc, text) = transmission(rng, scenario, &joints, vec![1, 2, 3]);
-        scenario = sc;
-        description.push(text);
-        used.extend(joints.iter().copied());
-        hidden.insert("transmission_error".to_string(), joints);
-    }
-    if backlash {
-        // Lost motion of 0.7 to 2 arc-min (2e-4 to 6e-4 rad) on joints 1-5 (joints 6 and 7 move the
-        // reflector by less than the noise for that play).
-        let avoid: Vec<usize> = hidden.values().flatten().copied().collect();
-        let pool: Vec<usize> = (1..=5).filter(|j| !avoid.contains(j)).collect();
-        let count = rng.random_range(1..=2);
-        let joints = pick(rng, &pool, count);
-        let b: Vec<f64> = joints
-            .iter()
-            .map(|_| rng.random_range(2e-4..6e-4))
-            .collect();
-        scenario = scenario.backlash(array(&joints, &b, 0.0), BacklashMode::Direction);
-        description.push(format!(
-            "backlash {joints:?} b = {:?} rad",
-            b.iter().map(|v| format!("{v:.2e}")).collect::<Vec<_>>()
-        ));
-        hidden.insert("gear_backlash".to_string(), joints);
-    }
-    if thermal {
-        // A warm-up of 5 to 15 K with a 20-40 min time constant, aluminium links.
-        let delta = rng.random_range(5.0..15.0);
-        let tau = rng.random_range(1200.0..2400.0);
-        scenario = scenario
-            .temperature(TemperatureProfile::WarmUp(
-                WarmUp::new(20.0, delta, tau).unwrap(),
-            ))
-            .thermal(20.0, Magnitude::Number(23e-6), Some(Magnitude::Number(0.0)));
-        description.push(format!("thermal ΔT = {delta:.1} K, τ = {tau:.0} s"));
-        hidden.insert("thermal_drift".to_string(), Vec::new());
-    }
-    match kind {
-        Kind::Coupling => {
-            // Cable wind-up or a coupled drive: joint i's angle error grows with joint j's angle,
-            // 50 to 200 µrad per rad (0.1 to 0.4 mrad over a joint's range), i on joints 1-4.
-            let i = rng.random_range(1..=4);
-            let others: Vec<usize> = (1..=6).filter(|j| *j != i).collect();
-            let j = others[rng.random_range(0..others.len())];
-            let c = rng.random_range(5e-5..2e-4) * if rng.random::<bool>() { 1.0 } else { -1.0 };
-            scenario =
-                scenario.joint_coupling(vec![[i, j]], Magnitude::List(vec![Magnitude::Number(c)]));
-            description.push(format!(
-                "coupling: joint {i} gains {c:.2e} rad per rad of joint {j}"
-            ));
-            outside_joint = Some(i);
-        }
-        Kind::HigherHarmonic => {
-            let joint = rng.random_range(1..=4);
-            let order = rng.random_range(4..=6);
-            let (sc, text) = transmission(rng, scenario, &[joint], vec![order]);
-            scenario = sc;
-            description.push(text);
-            outside_joint = Some(joint);
-        }
-        Kind::CoupledTransmission => {
-            // A drive whose error follows another joint's motor (a coupled wrist, a cable routed
-            // through the previous joint): joint i's angle error A sin(q_j + φ), A 150-300 µrad (as
-            // the periodic error below), i on joints 1-4, j any other of joints 1-6. Smaller errors
-            // are under the probes' level on 100 held-out poses: 121 µrad at joint 4 gave z = 2.7
-            // against the 3.9 of α = 0.001 over 30 probes (the probe found the right joints). Not
-            // a neighbouring joint j = i ± 1: joint i's axis seen from link i − 2 turns with q(i−1),
-            // so a rotation error of joint i − 1 (a kinematic twist) makes an angle error of joint
-            // i in sin and cos of q(i−1), and the kinematic fit takes up most of such an error (joint
-            // 4 in q3: 61 µm RMS injected, 30 µm left beside 23 µm of noise; joint 3 in q4, whose
-            // axis lines up with joint 5's at q4 = 0: 84 µm injected, 33 µm left), under the
-            // probes' level: see docs/diagnose.md, Limits.
-            let i = rng.random_range(1..=4);
-            let others: Vec<usize> = (1..=6usize).filter(|j| j.abs_diff(i) >= 2).collect();
-            let j = others[rng.random_range(0..others.len())];
-            let a = rng.random_range(1.5e-4..3e-4);
-            let phase = rng.random_range(-std::f64::consts::PI..std::f64::consts::PI);
-            scenario = scenario.coupled_transmission(
-                vec![[i, j]],
-                Magnitude::List(vec![Magnitude::Number(a)]),
-                Magnitude::List(vec![Magnitude::Number(phase)]),
-            );
-            description.push(format!(
-                "coupled transmission: joint {i} gains {a:.2e} rad sin(q{j} {phase:+.2})"
-            ));
-            outside_joint = Some(i);
-        }
-        _ => {}
-    }
-    let _ = used;
-    if description.is_empty() {
-        description.push("nothing beyond geometry".into());
-    }
     Case {
         seed,
         kind,
-        hidden,
-        outside_joint,
-        aliases,
-        description: description.join(" + "),
+        hidden: words(hidden.causes()),
+        outside_joint: hidden.outside_joint,
+        aliases: words(hidden.aliases.clone()),
+        description: hidden.description(),
         scenario,
     }
 }
@@ -664,15 +359,6 @@ fn diagnose_names_the_hidden_cause_and_its_joints() {
     );
 }
 
-/// The cause words, in the column order of the confusion matrix.
-const CAUSES: [&str; 5] = [
-    "joint_compliance",
-    "gear_backlash",
-    "thermal_drift",
-    "transmission_error",
-    "link_deflection",
-];
-
 /// The confusion matrix of `ROBOCAL_BLIND_CASES` (default 1,000) cases from `ROBOCAL_BLIND_SEED`: per
 /// hidden kind, how often each cause was named, how often nothing was, how often unexplained
 /// structure was reported, and how often the case passed every check; written as Markdown to
@@ -688,11 +374,13 @@ fn confusion_matrix() {
     let cases = cases(seed, n);
     let start = std::time::Instant::now();
     let outcomes = run_cases(&cases);
+    // The cause words from calib's registry, in the order diagnose tries them.
+    let causes: Vec<&str> = Cause::ALL.iter().map(|c| c.name()).collect();
     let mut md = format!(
         "{n} blind cases, seed {seed:#x}, {:.0} s on this machine\n\n| hidden | cases | {} | nothing named | unexplained reported | all checks pass |\n|---|---|{}---|---|---|\n",
         start.elapsed().as_secs_f64(),
-        CAUSES.join(" | "),
-        "---|".repeat(CAUSES.len())
+        causes.join(" | "),
+        "---|".repeat(causes.len())
     );
     for kind in Kind::ALL {
         let of: Vec<&Outcome> = outcomes.iter().filter(|o| o.kind == kind).collect();
@@ -700,7 +388,7 @@ fn confusion_matrix() {
             continue;
         }
         let count = |f: &dyn Fn(&Outcome) -> bool| of.iter().filter(|o| f(o)).count();
-        let cols: Vec<String> = CAUSES
+        let cols: Vec<String> = causes
             .iter()
             .map(|c| count(&|o| o.named.contains_key(*c)).to_string())
             .collect();

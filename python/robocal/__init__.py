@@ -237,9 +237,7 @@ def calibrate(
     Args:
         data: the measurements (DataFrame, dict of arrays, ``.csv``/``.parquet`` path, Dataset).
         robot: a built-in robot name, a URDF path or a :class:`Robot` (for ``base_link``/``tip_link``).
-        model: ``kinematic`` (default), a ``+``-joined extension such as
-            ``kinematic+joint_compliance+thermal_drift``, ``kinematic+learned:kernel``, or ``auto``
-            (what diagnose chooses, then the learned residual when it pays).
+        model: {model_words}
         test_data: held-out measurements for validation instead of cross-validation.
         **options: the other ``calibrate`` flags: ``folds=5`` (k-fold cross-validation by pose, 0 for
             none), or ``test_fraction=0.3`` (one split instead), ``seed=0`` (of the folds or the
@@ -292,3 +290,20 @@ try:  # for the type annotations only
     import pandas as pd  # noqa: F401
 except ImportError:  # pragma: no cover
     pass
+
+
+def _model_words() -> str:
+    """The ``model:`` entry of :func:`calibrate`'s docstring, from the native module's lists (calib's
+    cause and learned-kind registries), so that a cause added there is named here."""
+    causes = list(_robocal.CAUSES)
+    example = "+".join(["kinematic", *causes[:2]])
+    return (
+        f"``kinematic`` (default), a ``+``-joined extension such as ``{example}`` with any of the\n"
+        f"            causes {', '.join(f'``{c}``' for c in causes)}, a learned residual\n"
+        f"            ``learned:{'|'.join(_robocal.LEARNED_KINDS)}``, or ``auto`` (what diagnose chooses,\n"
+        "            then the learned residual when it pays)."
+    )
+
+
+if calibrate.__doc__:  # None under python -OO
+    calibrate.__doc__ = calibrate.__doc__.replace("{model_words}", _model_words())

@@ -8,6 +8,11 @@ import numpy as np
 import numpy.typing as npt
 
 VERSION: str
+CAUSES: list[str]
+"""The cause words of ``model=`` (``joint_compliance``, …), from calib's registry, in the order
+diagnose tries them."""
+LEARNED_KINDS: list[str]
+"""The learned residual kinds, written ``learned:KIND`` in ``model=``."""
 
 class Robot:
     """A robot: the serial chain of a URDF (built-in or a file), with its URDF text."""

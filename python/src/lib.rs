@@ -766,5 +766,8 @@ fn _robocal(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(options, m)?)?;
     m.add_function(wrap_pyfunction!(builtin_robots, m)?)?;
     m.add("VERSION", sim::generate::VERSION)?;
+    // The words of `model=`, from calib's registries (the Python docstring is composed from them).
+    m.add("CAUSES", robocal::cli::model_words::cause_words())?;
+    m.add("LEARNED_KINDS", robocal::cli::model_words::learned_words())?;
     Ok(())
 }

@@ -30,7 +30,8 @@
 //! Errors on read (and on write, which refuses to store such a table): a missing required column
 //! (`pose`, `q1`, `x`, `y`, `z`), a gap in `q1..qN` or `dir1..dirN`, part of `qw, qx, qy, qz`, a duplicate
 //! column name, no data rows, a cell that is empty, not a number or not finite, a `pose` that is not an
-//! integer, a `campaign` that is not an integer, a `dir` that is not −1, 0 or +1, negative `payload` or `sigma`, and an orientation quaternion
+//! integer, a `campaign` that is not an integer, a `dir` that is not −1, 0 or +1, negative `payload` or `sigma`, a `sigma` outside
+//! [[`MIN_SIGMA_M`], [`MAX_SIGMA_M`]] (zero and subnormals included), and an orientation quaternion
 //! whose norm differs from 1 by more than [`QUATERNION_NORM_ERROR`] (not a unit quaternion at all).
 //! Quaternions closer to unit than that are kept exactly as stored (so files round-trip);
 //! [`check_against_model`] warns beyond [`QUATERNION_NORM_WARNING`] and users of orientations should
@@ -77,6 +78,10 @@ pub const MAX_POSITION_M: f64 = 1000.0;
 pub const MAX_PAYLOAD_KG: f64 = 1000.0;
 /// A `sigma` above this (m) is rejected: a tracker's uncertainty is micrometres to millimetres.
 pub const MAX_SIGMA_M: f64 = 1.0;
+/// A `sigma` below this (m), zero included, is rejected: no tracker measures to a nanometre, and a
+/// subnormal `sigma` such as 4.9e-324 m gives its row a weight that overflows the fit (found by the
+/// fuzzing suite: `calibrate` ran for minutes on both cores).
+pub const MIN_SIGMA_M: f64 = 1e-9;
 /// A `temp` outside this range (°C) is rejected: below absolute zero, or hotter than any robot runs
 /// (found by the fuzzing suite: 1e15 °C was read without a word).
 pub const TEMP_RANGE_C: (f64, f64) = (-273.15, 1000.0);
@@ -595,7 +600,7 @@ impl MeasurementTable {
     /// least one joint and one row, every float finite, `dir` in {−1, 0, +1}, `payload` and `sigma` not
     /// negative, quaternion norms within [`QUATERNION_NORM_ERROR`] of 1, physically possible magnitudes
     /// (positions within [`MAX_POSITION_M`] of the tracker, `payload` up to [`MAX_PAYLOAD_KG`], `sigma`
-    /// up to [`MAX_SIGMA_M`], `temp` within [`TEMP_RANGE_C`]), and the rows of each pose id at one configuration (joint values within
+    /// from [`MIN_SIGMA_M`] to [`MAX_SIGMA_M`], `temp` within [`TEMP_RANGE_C`]), and the rows of each pose id at one configuration (joint values within
     /// [`POSE_REPEAT_TOLERANCE`]; the error names both rows). Reports the first bad cell in reading
     /// order (row by row, columns in file order); errors name `file`.
     pub fn validate(&self, file: &Path) -> Result<()> {
@@ -735,11 +740,12 @@ impl MeasurementTable {
                 }
             }
         }
-        for (name, col, unit, limit, beyond) in [
+        for (name, col, unit, least, limit, beyond) in [
             (
                 "payload",
                 &self.payload,
                 "kg",
+                0.0,
                 MAX_PAYLOAD_KG,
                 "not a robot payload (kilograms are expected)",
             ),
@@ -747,6 +753,7 @@ impl MeasurementTable {
                 "sigma",
                 &self.sigma,
                 "m",
+                MIN_SIGMA_M,
                 MAX_SIGMA_M,
                 "not a tracker's uncertainty (metres are expected)",
             ),
@@ -756,6 +763,15 @@ impl MeasurementTable {
                 finite(name, v)?;
                 if v < 0.0 {
                     return bad(name, format!("{v:?} {unit} is negative"));
+                }
+                if v < least {
+                    return bad(
+                        name,
+                        format!(
+                            "{v:e} {unit} is below {least:e} {unit}: no tracker measures that precisely \
+                             (a 1-sigma uncertainty in metres is expected)"
+                        ),
+                    );
                 }
                 if v > limit {
                     return bad(

@@ -7,8 +7,8 @@ use rand::rngs::StdRng;
 use rand::{RngExt, SeedableRng};
 use sim::SimError;
 use sim::measurement_table::{
-    self as mt, MeasurementTable, OptionalColumns, Row, check_against_model, read_csv_str,
-    write_csv_string, write_parquet_bytes,
+    self as mt, MIN_SIGMA_M, MeasurementTable, OptionalColumns, Row, check_against_model,
+    read_csv_str, write_csv_string, write_parquet_bytes,
 };
 use std::path::{Path, PathBuf};
 
@@ -115,7 +115,10 @@ fn random_table(rng: &mut StdRng, cols: Option<OptionalColumns>) -> MeasurementT
             temp: cols.temp.then(|| bounded_f64(rng, 273.15)),
             dir: cols.dir.then_some(&dir[..]),
             payload: cols.payload.then(|| bounded_f64(rng, 1000.0).abs()),
-            sigma: cols.sigma.then(|| bounded_f64(rng, 1.0).abs()),
+            // Within [1e-9, 1] m, the range a tracker's 1-sigma can have.
+            sigma: cols
+                .sigma
+                .then(|| bounded_f64(rng, 1.0).abs().max(MIN_SIGMA_M)),
             campaign: cols.campaign.then_some(campaign),
         })
         .unwrap();
@@ -221,13 +224,13 @@ fn csv_text_is_as_specified() {
         q: &[1e16, 1e15],
         position: [-123.456, 0.30000000000000004, 2.5],
         dir: Some(&[0, 0]),
-        sigma: Some(0.0),
+        sigma: Some(2e-9),
         ..Default::default()
     })
     .unwrap();
     let expected = "pose,q1,q2,x,y,z,dir1,dir2,sigma\n\
                     -3,1e300,-0.0,0.1,1.0,5e-324,-1,1,1e-5\n\
-                    7,1e16,1000000000000000.0,-123.456,0.30000000000000004,2.5,0,0,0.0\n";
+                    7,1e16,1000000000000000.0,-123.456,0.30000000000000004,2.5,0,0,2e-9\n";
     assert_eq!(write_csv_string(&t).unwrap(), expected);
 }
 
@@ -277,6 +280,28 @@ fn csv_error(text: &str, expect: &[&str]) {
     for part in expect {
         assert!(msg.contains(part), "'{part}' missing in: {msg}");
     }
+}
+
+/// A `sigma` no tracker has — zero, a subnormal such as 4.9e-324 (which made `calibrate` run for
+/// minutes: the fuzzing suite's 10-second rule now draws such magnitudes in every column), anything
+/// below 1 nm — is a one-line error naming the row and `sigma`, on read and on write; 1 nm is read.
+#[test]
+fn a_sigma_below_a_nanometre_is_refused() {
+    for v in ["4.9e-324", "1e-300", "0", "-0.0", "0.0", "9.99e-10"] {
+        csv_error(
+            &format!("pose,q1,x,y,z,sigma\n1,0,0,0,0,1e-5\n2,0,0,0,0,{v}\n"),
+            &["data.csv: row 2 (line 3), column sigma:", "below 1e-9 m"],
+        );
+    }
+    let t = read_csv_str("pose,q1,x,y,z,sigma\n1,0,0,0,0,1e-9\n", "data.csv").unwrap();
+    assert_eq!(t.sigma, Some(vec![MIN_SIGMA_M]));
+    let mut t = t;
+    t.sigma = Some(vec![5e-324]);
+    let e = write_csv_string(&t).unwrap_err().to_string();
+    assert!(
+        e.contains("row 1, column sigma: 5e-324 m is below 1e-9 m"),
+        "{e}"
+    );
 }
 
 /// A valid CSV with `rows` rows of 3 joints, with `cell` put at `(row, column)` (1-based row).
@@ -1254,7 +1279,8 @@ fn impossible_magnitudes_and_reused_pose_ids_are_errors() {
         &["row 3", "column x", "1.200e3 m"],
     );
     let with = |col: &str, v: &str| {
-        format!("pose,q1,x,y,z,{col}\n0,0.1,0.5,0.5,0.5,{v}\n1,0.2,0.5,0.5,0.5,0\n")
+        // The second row ordinary for both columns (a sigma of 0 is refused: below 1 nm).
+        format!("pose,q1,x,y,z,{col}\n0,0.1,0.5,0.5,0.5,{v}\n1,0.2,0.5,0.5,0.5,1e-5\n")
     };
     csv_error(
         &with("payload", "1e6"),

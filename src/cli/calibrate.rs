@@ -46,11 +46,9 @@ pub struct Args {
 /// keyword arguments parsed by [`super::flags::parse`]). A flag added here is a keyword argument there.
 #[derive(clap::Args, Debug, Clone)]
 pub struct Options {
-    /// Error model: `kinematic` (joint error twists, zero offsets, base and target), a `+`-joined
-    /// extension such as `kinematic+joint_compliance+thermal_drift` (also `gear_backlash`,
-    /// `learned:poly|poly1|poly2|poly3|kernel|adjoint`), or `auto` (what diagnose chooses, then the
-    /// learned residual when it pays).
-    #[arg(long, value_name = "MODEL", default_value = "kinematic")]
+    /// Error model: `kinematic`, a `+`-joined extension with calib's causes or a learned residual,
+    /// or `auto`. The help lists the words from calib's registries ([`super::model_words`]).
+    #[arg(long, value_name = "MODEL", default_value = "kinematic", help = super::model_words::model_help())]
     pub model: String,
     /// Validate by k-fold cross-validation by pose: each fold predicted by a model fitted on the
     /// others, folds fitted in parallel (0 = no validation). The saved model is fitted on every pose

@@ -98,90 +98,10 @@ fn parse_fraction(text: &str) -> Result<f64, String> {
     }
 }
 
-/// Human-readable summary of a diagnosis.
+/// Human-readable summary of a diagnosis: the diagnosis document ([`report::diagnosis::document`])
+/// as terminal text, the same content as the report's `summary.md` and `index.html`.
 pub(crate) fn text(d: &Diagnosis, data: &str) -> String {
-    let um = |x: f64| format!("{:8.1} µm", x * 1e6);
-    let screened = d
-        .screening
-        .as_ref()
-        .map(|s| format!("screening: {}\n", s.note))
-        .unwrap_or_default();
-    let mut s = format!(
-        "diagnose {} on {data}: {} training / {} test poses\n{screened}noise floor {} ({})\n\n  {:<52} {:>11} {:>11} {:>11}\n",
-        d.robot,
-        d.n_train,
-        d.n_test,
-        um(d.noise_floor_m).trim(),
-        d.noise_floor_source,
-        "model",
-        "train RMS",
-        "test RMS",
-        "test max"
-    );
-    for st in &d.steps {
-        s.push_str(&format!(
-            "  {:<52} {} {} {}\n",
-            st.model,
-            um(st.train_rms_m),
-            um(st.test_rms_m),
-            um(st.test_max_m)
-        ));
-    }
-    s.push('\n');
-    if d.findings.is_empty() {
-        s.push_str(
-            "findings: none (the kinematic model explains the data as well as any known cause)\n",
-        );
-    } else {
-        s.push_str("findings:\n");
-    }
-    for f in &d.findings {
-        let joints = if f.joints.is_empty() {
-            String::new()
-        } else {
-            format!(" at joints {}", f.joint_list())
-        };
-        s.push_str(&format!(
-            "  {}{joints}: test RMS {:.1} -> {:.1} µm (gain {:.0} %)\n    {}\n",
-            f.cause,
-            f.test_rms_m_before * 1e6,
-            f.test_rms_m_after * 1e6,
-            100.0 * f.gain,
-            f.evidence
-        ));
-    }
-    for r in &d.unexplained.rejected {
-        s.push_str(&format!("rejected: {}\n", r.evidence));
-    }
-    for n in &d.not_tried {
-        s.push_str(&format!("not tried: {}: {}\n", n.cause, n.reason));
-    }
-    if let Some(c) = &d.campaigns {
-        s.push_str("held-out residual per campaign:\n");
-        for r in &c.campaigns {
-            s.push_str(&format!(
-                "  campaign {}: {} poses, RMS {:.1} µm (others {:.1} µm, z = {:.1}){}\n",
-                r.campaign,
-                r.n_test_poses,
-                r.test_rms_m * 1e6,
-                r.others_rms_m * 1e6,
-                r.z,
-                if r.differs { "  <- differs" } else { "" }
-            ));
-        }
-        s.push_str(&format!("  {}\n", c.note));
-    }
-    s.push_str(&format!(
-        "unexplained: {}: {}\nmodel for `calibrate --model auto`: {}\n",
-        if d.unexplained.present {
-            "present"
-        } else {
-            "none"
-        },
-        d.unexplained.note,
-        d.model
-    ));
-    s
+    report::diagnosis::document(d, data, &[]).to_text()
 }
 
 /// Checks the shared flags of diagnose-like commands.
@@ -303,6 +223,10 @@ pub fn run(args: Args) -> CliResult {
         }
     }
     if args.json {
+        // The text names the causes not tried; with --json, stderr still says so in one line.
+        if let Some(w) = report::diagnosis::not_tried(&d) {
+            eprintln!("warning: {w}");
+        }
         return print_json(&json(&d)?);
     }
     eprint!("{}", text(&d, &name));

@@ -11,6 +11,7 @@ mod fk;
 pub mod flags;
 pub mod generate;
 mod info;
+pub mod model_words;
 mod paths;
 mod plan_poses;
 pub mod predict;

@@ -69,7 +69,7 @@ fn median(mut v: Vec<f64>) -> f64 {
 ///   coordinate-wise median exceeds 10 × (reach + 0.5 m), [`reach_bound`], or their median distance from
 ///   the tracker origin exceeds 100 m. Medians make one stray point irrelevant;
 /// * quaternion norms off 1 by more than [`QUATERNION_NORM_WARNING`] (use
-///   [`MeasurementTable::unit_orientation`]), `sigma` of zero or a median `sigma` above 1 cm
+///   [`MeasurementTable::unit_orientation`]), a median `sigma` above 1 cm
 ///   (millimetres?), `temp` outside −50…150 °C (kelvin?): warnings.
 pub fn check_against_model(
     table: &MeasurementTable,
@@ -248,12 +248,6 @@ pub fn check_against_model(
     }
 
     if let Some(s) = &table.sigma {
-        let zeros = s.iter().filter(|&&v| v == 0.0).count();
-        if zeros > 0 {
-            warnings.push(format!(
-                "{name}: column sigma: {zeros} row(s) have sigma = 0, which gives them infinite weight"
-            ));
-        }
         let med = median(s.clone());
         if med > SIGMA_LARGE {
             warnings.push(format!(
