@@ -26,18 +26,21 @@
 
 pub mod campaign;
 pub mod decoder_guard;
+pub mod effect_id;
 pub mod effects;
 pub mod error;
 pub mod generate;
 pub mod io;
 pub mod kinematics;
 pub mod lie;
+pub mod magnitude;
 pub mod measurement_table;
 pub mod model;
 pub mod rapier_truth;
 pub mod robots;
 pub mod scenario;
 pub mod seeds;
+pub mod springs;
 pub mod statics;
 pub mod tracker;
 pub mod trig;

@@ -157,12 +157,12 @@ impl Model {
         self.bodies.iter().map(|b| b.mass).sum()
     }
 
-    /// Fails with [`crate::SimError::MissingInertial`] if some moving body has no mass.
-    pub fn require_inertials(&self) -> crate::Result<()> {
+    /// Fails with [`crate::error::SimError::MissingInertial`] if some moving body has no mass.
+    pub fn require_inertials(&self) -> crate::error::Result<()> {
         if self.massless_links.is_empty() {
             Ok(())
         } else {
-            Err(crate::SimError::MissingInertial {
+            Err(crate::error::SimError::MissingInertial {
                 robot: self.name.clone(),
                 links: self.massless_links.join(", "),
             })
@@ -170,15 +170,15 @@ impl Model {
     }
 
     /// Checks the length and finiteness of a joint vector.
-    pub fn check_q(&self, q: &[f64]) -> crate::Result<()> {
+    pub fn check_q(&self, q: &[f64]) -> crate::error::Result<()> {
         if q.len() != self.nq() {
-            return Err(crate::SimError::JointCount {
+            return Err(crate::error::SimError::JointCount {
                 expected: self.nq(),
                 got: q.len(),
             });
         }
         if let Some((i, v)) = q.iter().enumerate().find(|(_, v)| !v.is_finite()) {
-            return Err(crate::SimError::NonFiniteJoint {
+            return Err(crate::error::SimError::NonFiniteJoint {
                 joint: i + 1,
                 value: *v,
             });

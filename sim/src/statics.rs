@@ -31,7 +31,7 @@ pub fn gravity_torques(
     q: &[f64],
     gravity: &Vector3<f64>,
     payload: Option<&Payload>,
-) -> crate::Result<()> {
+) -> crate::error::Result<()> {
     model.require_inertials()?;
     forward_kinematics(model, data, q);
     // Walk from the tip: accumulate mass and first moment Σ m c of everything beyond joint i.

@@ -35,7 +35,7 @@ pub(crate) struct ChainJoint {
 
 /// A serial chain prepared for evaluation: optional base pose, joint origins affine in `ΔT`, flange
 /// offset affine in `ΔT`. Evaluates without allocating.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, Default)]
 pub(crate) struct Chain {
     /// Pose of the chain's root in the base frame (`None` = identity, keeping nominal results exact).
     pub base: Option<Pose>,

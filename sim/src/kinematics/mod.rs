@@ -3,6 +3,10 @@
 //! Call [`forward_kinematics`] first; the Jacobian functions read the joint poses it stored.
 //! The spatial Jacobian `J_s` (6×n, base frame, rows `[ω; v]`) maps `q̇` to the spatial twist of the
 //! flange; the body Jacobian `J_b = Ad(T_base_flange⁻¹) J_s` to its body twist.
+//!
+//! Inverse kinematics and the reachability filter of the cell are in [`ik`].
+
+pub mod ik;
 
 use crate::lie::{Pose, adjoint_apply, pose_from};
 use crate::model::{JointKind, Model};
