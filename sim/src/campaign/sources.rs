@@ -245,6 +245,7 @@ pub(super) fn pose_source(
                     ),
                 ));
             }
+            crate::measurement_table::check_within_limits(&table, model, path)?;
             let by_pose = table.rows_by_pose();
             let mut list = Vec::with_capacity(by_pose.len() * n);
             for (_, rows) in &by_pose {

@@ -53,6 +53,35 @@ fn median(mut v: Vec<f64>) -> f64 {
     }
 }
 
+/// Checks that every joint value of `table` lies within its joint's URDF limits, exactly (no
+/// tolerance): what a table whose joint positions are to be commanded, a campaign's pose file
+/// (`[campaign.file]`), must hold. The joint count must be the robot's (checked before). The first
+/// value outside, in row order, is an error naming `file`, the 1-based data row, the column (`q1`),
+/// the value, the limits and the joint.
+pub fn check_within_limits(table: &MeasurementTable, model: &Model, file: &Path) -> Result<()> {
+    let nq = model.nq();
+    for r in 0..table.len() {
+        for (j, joint) in model.joints.iter().enumerate() {
+            let Some(l) = joint.limits else { continue };
+            let v = table.q[r * nq + j];
+            if v < l.lower || v > l.upper {
+                let unit = joint.kind.unit();
+                return Err(table_err(
+                    &file.display().to_string(),
+                    Some(r + 1),
+                    Some(&format!("q{}", j + 1)),
+                    format!(
+                        "{v:?} {unit} is outside the limits [{}, {}] {unit} of joint '{}': the robot cannot \
+                         be commanded there",
+                        l.lower, l.upper, joint.name
+                    ),
+                ));
+            }
+        }
+    }
+    Ok(())
+}
+
 /// Checks `table` against the robot `model`; `file` names the table in messages. Returns the warnings
 /// (one line each), or the first error:
 ///
