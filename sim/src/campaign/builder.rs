@@ -7,7 +7,7 @@ use crate::error::Result;
 use crate::kinematics::ik::Reachability;
 
 /// Builds a [`CampaignSpec`]; [`CampaignBuilder::build`] checks every value that does not need the
-/// robot (the rest is checked by [`plan`]). Errors are [`SimError::Scenario`] under the builder's
+/// robot (the rest is checked by [`super::plan`]). Errors are [`crate::error::SimError::Scenario`] under the builder's
 /// label and the scenario key (`campaign.repeats`, …).
 #[must_use = "a builder does nothing until `build` is called"]
 #[derive(Clone, Debug, PartialEq)]
@@ -73,7 +73,7 @@ impl CampaignBuilder {
         self.spec.directions = rule;
         self
     }
-    /// Joint positions before the first pose (rad or m; checked against the robot by [`plan`]).
+    /// Joint positions before the first pose (rad or m; checked against the robot by [`super::plan`]).
     pub fn start_q(mut self, q: Option<Vec<f64>>) -> CampaignBuilder {
         self.spec.start_q = q;
         self

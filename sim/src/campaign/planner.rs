@@ -127,7 +127,7 @@ impl<'a> Planner<'a> {
     /// poses × repeats at most [`MAX_FORMAT_ROWS`]. `file` names the scenario in errors.
     ///
     /// # Errors
-    /// [`SimError::Scenario`] naming `file` and the key; a pose file that cannot be read.
+    /// [`crate::error::SimError::Scenario`] naming `file` and the key; a pose file that cannot be read.
     pub fn new(model: &'a Model, spec: &'a CampaignSpec, seed: u64, file: &str) -> Result<Self> {
         let n = model.nq();
         check_model_free(spec, file)?;

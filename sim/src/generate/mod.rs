@@ -27,7 +27,7 @@
 //! * `truth.parquet`: one row per measurement, same order: `pose`, `repeat`; the noise-free target
 //!   `p_tracker_{x,y,z}` (tracker frame, m), `p_base_{x,y,z}` (base frame, m) and the nominal robot's
 //!   target `p_nominal_base_{x,y,z}`; the displacement added by each registered effect, in stage
-//!   order, `{key}_{x,y,z}` with `key` = [`EffectId::key`] (`thermal`, `kinematic`, `transmission`,
+//!   order, `{key}_{x,y,z}` with `key` = [`crate::effects::EffectId::key`] (`thermal`, `kinematic`, `transmission`,
 //!   `coupling`, `coupled_transmission`, `backlash`, `compliance`, `deflection`; base frame, m; they sum
 //!   to `p_base − p_nominal_base`; 0 for an absent effect); the
 //!   link-side joint positions `q_link1..N` and their first-order compliance approximation
