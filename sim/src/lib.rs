@@ -50,6 +50,6 @@ pub mod urdf_text;
 pub use error::{Result, SimError};
 pub use kinematics::{Data, Frame, flange_pose, forward_kinematics};
 pub use lie::Pose;
-pub use model::{Body, Joint, JointKind, JointLimits, Model};
+pub use model::{Body, Joint, JointKind, JointLimits, Model, ModelParts};
 pub use statics::{Payload, gravity_torques};
 pub use urdf::ChainSpec;

@@ -342,16 +342,16 @@ impl RapierArm {
             frames: Vec::new(),
             joint_dof: Vec::with_capacity(n),
             hinge_dof: Vec::with_capacity(n),
-            flange_offset: model.flange_offset,
+            flange_offset: model.flange_offset(),
             gravity: *gravity,
             options,
         };
-        for (i, (b, j)) in model.bodies.iter().zip(&model.joints).enumerate() {
+        for (i, (b, j)) in model.bodies().iter().zip(model.joints()).enumerate() {
             let (mut mass, mut com, mut inertia) = (b.mass, b.com, b.inertia);
             if i + 1 == n
                 && let Some(pl) = payload
             {
-                let c_p = model.flange_offset * nalgebra::Point3::from(Vector3::from(pl.com));
+                let c_p = model.flange_offset() * nalgebra::Point3::from(Vector3::from(pl.com));
                 (mass, com, inertia) = merge_point_mass(mass, &com, &inertia, pl.mass, &c_p.coords);
             }
             let (principal, axes) = principal_axes(&inertia);
@@ -727,7 +727,7 @@ mod tests {
     #[test]
     fn rapier_mass_properties_rebuild_every_iiwa_inertia_tensor() {
         let model = crate::robots::load_builtin("iiwa7").unwrap();
-        for b in &model.bodies {
+        for b in model.bodies() {
             let (principal, axes) = principal_axes(&b.inertia);
             assert!((axes.determinant() - 1.0).abs() < 1e-14);
             let mp = rp::MassProperties::with_principal_inertia_frame(

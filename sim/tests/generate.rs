@@ -443,7 +443,7 @@ fn written_files_agree_with_independent_computations_and_hold_no_truth_in_measur
         }
         let p = (data.flange * Point3::from(p_flange)).coords;
         assert!(p.z > 0.05 && p.x.hypot(p.y) >= 0.10);
-        for (j, q) in model.joints.iter().zip(table.q_row(r)) {
+        for (j, q) in model.joints().iter().zip(table.q_row(r)) {
             let l = j.limits.unwrap();
             assert!(*q >= l.lower + 0.05 - 1e-12 && *q <= l.upper - 0.05 + 1e-12);
         }

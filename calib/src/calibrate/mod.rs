@@ -395,7 +395,7 @@ fn calibrate_with(
                 context: d.name.clone(),
                 field: "q1..qN".into(),
                 value: format!("{} joint columns", d.table.n_joints),
-                problem: format!("robot '{}' has {} joints", model.name, model.nq()),
+                problem: format!("robot '{}' has {} joints", model.name(), model.nq()),
             });
         }
     }
@@ -458,7 +458,7 @@ fn calibrate_with(
         if equations < r + 1 {
             return Err(CalibError::TooFewPoses {
                 context: train.name.clone(),
-                robot: model.name.clone(),
+                robot: model.name().to_string(),
                 joints: model.nq(),
                 poses: n_configurations,
                 equations,
@@ -660,7 +660,7 @@ fn calibrate_with(
         solver: report,
     };
     let report = CalibrationReport {
-        robot: model.name.clone(),
+        robot: model.name().to_string(),
         model: "kinematic".into(),
         n_train_rows: obs.len(),
         n_train_poses: n_poses,

@@ -1551,7 +1551,7 @@ pub fn diagnose_with_progress(
         });
     }
     Ok(Diagnosis {
-        robot: model.name.clone(),
+        robot: model.name().to_string(),
         n_train: split
             .train
             .rows

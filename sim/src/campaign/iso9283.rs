@@ -73,7 +73,7 @@ pub(super) fn iso9283_list(
                 ),
             )
         })?;
-        for (i, (j, v)) in model.joints.iter().zip(&q).enumerate() {
+        for (i, (j, v)) in model.joints().iter().zip(&q).enumerate() {
             if let Some(l) = j.limits
                 && (*v < l.lower || *v > l.upper)
             {

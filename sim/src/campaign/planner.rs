@@ -189,7 +189,7 @@ impl<'a> Planner<'a> {
                 s.clone()
             }
             None => model
-                .joints
+                .joints()
                 .iter()
                 .map(|j| j.limits.map_or(0.0, |l| 0.0f64.clamp(l.lower, l.upper)))
                 .collect(),

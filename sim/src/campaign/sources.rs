@@ -13,7 +13,7 @@ use nalgebra::Vector3;
 /// Sampling interval of joint `i`: the limits shrunk by `margin`, `[−π, π]` for unlimited rotational
 /// joints.
 fn joint_range(model: &Model, i: usize, margin: f64, file: &str, key: &str) -> Result<(f64, f64)> {
-    let j = &model.joints[i];
+    let j = &model.joints()[i];
     let (lo, hi) = match (j.limits, j.kind) {
         (Some(l), _) => (l.lower + margin, l.upper - margin),
         (None, JointKind::Prismatic) => {

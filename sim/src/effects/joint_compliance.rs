@@ -571,7 +571,7 @@ mod tests {
     use crate::statics::{DEFAULT_GRAVITY, gravity_torques};
 
     fn bodies(m: &crate::model::Model) -> Vec<(f64, Vector3<f64>)> {
-        m.bodies.iter().map(|b| (b.mass, b.com)).collect()
+        m.bodies().iter().map(|b| (b.mass, b.com)).collect()
     }
 
     #[test]

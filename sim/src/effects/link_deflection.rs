@@ -256,7 +256,7 @@ impl Effect for LinkDeflection {
         let mut joint_index = Vec::new();
         let mut frame_index = Vec::new();
         for (i, (j, c)) in model
-            .joints
+            .joints()
             .iter()
             .zip(&self.compliance_rad_per_nm)
             .enumerate()
@@ -276,9 +276,9 @@ impl Effect for LinkDeflection {
             }
             let last = joints.len() - 1;
             frame_index.push(last);
-            bodies[last] = (model.bodies[i].mass, model.bodies[i].com);
+            bodies[last] = (model.bodies()[i].mass, model.bodies()[i].com);
         }
-        let f = &model.flange_offset;
+        let f = &model.flange_offset();
         let template = Chain {
             base: None,
             joints,

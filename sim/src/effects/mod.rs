@@ -470,7 +470,7 @@ impl Truth {
             grown: Chain::grown(model, growth),
             stages,
             needs: effects.needs(),
-            bodies: model.bodies.iter().map(|b| (b.mass, b.com)).collect(),
+            bodies: model.bodies().iter().map(|b| (b.mass, b.com)).collect(),
             solver,
         })
     }

@@ -161,7 +161,7 @@ impl RapierCompliance {
         let k = match hit {
             Some(k) => k,
             None => {
-                let real = chain.model_at(&self.nominal, dt);
+                let real = chain.model_at(&self.nominal, dt)?;
                 let arm = RapierArm::with_deflection(
                     &real,
                     &self.stiffness,

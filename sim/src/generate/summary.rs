@@ -468,7 +468,7 @@ pub(super) fn summarize(
 ) -> Summary {
     let (sr, st) = res.tracker.sigmas(median);
     Summary {
-        robot: res.model.name.clone(),
+        robot: res.model.name().to_string(),
         truth_model: res.truth_model,
         compliance_steps_mean_max: totals.steps_mean_max,
         seed: res.seed,
