@@ -310,3 +310,32 @@ fn two_campaigns_calibrate_predict_and_register() {
     assert!(err.contains("the robot has changed"), "{err}");
     let _ = std::fs::remove_dir_all(&d);
 }
+
+/// `generate` with a `[campaign.file]` pose table whose joint value lies outside the robot's limits
+/// (q1 = 9 rad on the iiwa 7): exit 2, one line naming the table, the row and the joint column, and
+/// no dataset written.
+#[test]
+fn a_campaign_file_with_a_joint_outside_its_limits_is_refused() {
+    let d = dir("file_limits");
+    let s = |p: &Path| p.to_str().unwrap().to_string();
+    let scenario = d.join("file.toml");
+    std::fs::write(
+        &scenario,
+        "[robot]\nname = \"iiwa7\"\n[campaign]\n[campaign.file]\npath = \"poses.csv\"\n",
+    )
+    .unwrap();
+    std::fs::write(
+        d.join("poses.csv"),
+        "pose,q1,q2,q3,q4,q5,q6,q7,x,y,z\n\
+         0,0.1,0.2,0.3,-0.4,0.5,0.6,0.7,1,2,3\n\
+         1,9,0.2,0.3,-0.4,0.5,0.6,0.7,1,2,3\n",
+    )
+    .unwrap();
+    let out = d.join("out");
+    refused(
+        &["generate", "--scenario", &s(&scenario), "--out", &s(&out)],
+        &["poses.csv", "row 2", "column q1", "outside the limits"],
+    );
+    assert!(!out.join("measurements.parquet").exists());
+    let _ = std::fs::remove_dir_all(&d);
+}

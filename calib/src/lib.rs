@@ -67,11 +67,9 @@
 //!
 //! // A "real" UR5 whose joint 2 sits 0.5 mm off its nominal axis, measured by a tracker.
 //! let model = robots::load_builtin("ur5").unwrap();
-//! let mut real = model.clone();
-//! let mut origin = real.joints[1].origin;
+//! let mut origin = model.joints()[1].origin;
 //! origin.translation.vector.x += 5e-4;
-//! real.joints[1].origin = origin;
-//! real.joints[1].rotation_terms = sim::Joint::rotation_terms_for(&origin, &real.joints[1].axis);
+//! let real = model.with_joint_origin(1, origin).unwrap();
 //! let mut data = Data::new(&real);
 //! let mut table = MeasurementTable::new(6, OptionalColumns::NONE);
 //! for k in 0..40 {

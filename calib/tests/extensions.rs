@@ -32,7 +32,7 @@ fn table_with_columns(model: &sim::Model, n: usize, seed: u64) -> MeasurementTab
     let mut t = MeasurementTable::new(model.nq(), cols);
     for k in 0..n {
         let q: Vec<f64> = model
-            .joints
+            .joints()
             .iter()
             .map(|j| {
                 let l = j.limits.unwrap();

@@ -36,7 +36,7 @@ fn identifiable_count_matches_the_closed_form() {
         )
         .unwrap();
         let revolute = model
-            .joints
+            .joints()
             .iter()
             .filter(|j| j.kind.is_rotational())
             .count();

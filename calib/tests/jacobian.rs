@@ -314,10 +314,12 @@ fn bent_chain_equals_the_robot_with_turned_links() {
             let turn = |b: &Vector3<f64>| -> Pose { pose_from(exp_rotation(b), Vector3::zeros()) };
             let mut bent = model.clone();
             for i in 1..n {
-                bent.joints[i].origin = turn(&bend[i - 1]) * model.joints[i].origin;
-                bent.joints[i].refresh_derived();
+                let origin = turn(&bend[i - 1]) * model.joints()[i].origin;
+                bent = bent.with_joint_origin(i, origin).unwrap();
             }
-            bent.flange_offset = turn(&bend[n - 1]) * model.flange_offset;
+            let bent = bent
+                .with_flange_offset(turn(&bend[n - 1]) * model.flange_offset())
+                .unwrap();
             let mut data = sim::Data::new(&bent);
             let flange = sim::flange_pose(&bent, &mut data, &q);
             chain.forward_bent(&mut s, &q, 0, &bend);

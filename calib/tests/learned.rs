@@ -457,7 +457,7 @@ mod adjoint {
         };
         let target = |q: &[f64]| -> Vector3<f64> {
             let screws: Vec<Vector6<f64>> = model
-                .joints
+                .joints()
                 .iter()
                 .zip(tilt(q))
                 .map(|(j, xi)| adjoint_apply(&exp_twist(&xi), &j.screw))
@@ -467,8 +467,8 @@ mod adjoint {
                 .zip(&truth.zero_offsets)
                 .map(|(a, b)| a + b)
                 .collect();
-            let t =
-                truth.t_tracker_base * sim::kinematics::poe_pose(&screws, &model.home_flange, &th);
+            let t = truth.t_tracker_base
+                * sim::kinematics::poe_pose(&screws, &model.home_flange(), &th);
             (t * Point3::from(truth.p_flange)).coords
         };
         let noise = Normal::new(0.0, 5e-6).unwrap();

@@ -169,14 +169,15 @@ fn calibrated_urdf_reproduces_the_calibrated_robot() {
         let out = calibrated_urdf(&CalibratedModel::new(&robot, &cal)).unwrap();
         let urdf = out.text.as_str();
         let spec = ChainSpec {
-            base_link: Some(robot.model.base_link.clone()),
-            tip_link: Some(robot.model.tip_link.clone()),
+            base_link: Some(robot.model.base_link().to_string()),
+            tip_link: Some(robot.model.tip_link().to_string()),
         };
         let exported = sim::urdf::load_str(urdf, "exported", &spec).unwrap();
         assert_eq!(exported.nq(), robot.model.nq());
         let default_chain = sim::urdf::load_str(urdf, "exported", &ChainSpec::default()).unwrap();
         assert_eq!(
-            default_chain.tip_link, robot.model.tip_link,
+            default_chain.tip_link(),
+            robot.model.tip_link(),
             "the tip stays the default leaf"
         );
         let mut data = sim::Data::new(&exported);
@@ -216,7 +217,7 @@ fn planned_poses_beat_random_ones_and_are_reproducible() {
     );
     // Selected poses are within the limits and distinct.
     for q in &plan.selected {
-        for (v, j) in q.iter().zip(&model.joints) {
+        for (v, j) in q.iter().zip(model.joints()) {
             let l = j.limits.unwrap();
             assert!(*v >= l.lower && *v <= l.upper);
         }

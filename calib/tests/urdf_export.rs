@@ -56,10 +56,10 @@ fn model_file(text: &str, model: &Model, truth: &Truth, model_name: &str) -> Cal
         software: "test".into(),
         model: model_name.parse().unwrap(),
         robot: EmbeddedRobot {
-            name: model.name.clone(),
+            name: model.name().to_string(),
             source: "test".into(),
-            base_link: model.base_link.clone(),
-            tip_link: model.tip_link.clone(),
+            base_link: model.base_link().to_string(),
+            tip_link: model.tip_link().to_string(),
             urdf: text.to_string(),
             urdf_fnv1a64: None,
         },
@@ -136,8 +136,8 @@ fn changed_lines(input: &str, out: &str) -> Vec<(String, String)> {
 /// The file's tip position, through the comment's transforms, against the truth at `configs`.
 fn worst_target_error(text: &str, model: &Model, truth: &Truth, configs: &[Vec<f64>]) -> f64 {
     let spec = ChainSpec {
-        base_link: Some(model.base_link.clone()),
-        tip_link: Some(model.tip_link.clone()),
+        base_link: Some(model.base_link().to_string()),
+        tip_link: Some(model.tip_link().to_string()),
     };
     let written = urdf::load_str(text, "written", &spec).unwrap();
     let base = comment_origin(text, "T_tracker_base");
@@ -194,8 +194,8 @@ fn only_the_chain_origins_change_and_the_file_is_the_calibrated_robot() {
         // The file loads back with the default chain, and a second export replaces the comment.
         let again = urdf::load_str(&out.text, "written", &ChainSpec::default()).unwrap();
         assert_eq!(
-            (again.tip_link.as_str(), again.nq()),
-            (model.tip_link.as_str(), model.nq())
+            (again.tip_link(), again.nq()),
+            (model.tip_link(), model.nq())
         );
         let twice = calibrated_urdf(&model_file(&out.text, &model, &truth, "kinematic")).unwrap();
         assert_eq!(twice.text.matches(COMMENT_MARKER).count(), 1, "{name}");
@@ -281,7 +281,7 @@ fn fixed_joints_missing_origins_and_a_tip_without_flange_joint() {
         tip_link: None,
     };
     let model = urdf::load_str(text, "odd", &spec).unwrap();
-    assert_eq!((model.nq(), model.tip_link.as_str()), (3, "l3"));
+    assert_eq!((model.nq(), model.tip_link()), (3, "l3"));
     for orientation in [false, true] {
         let mut g = rng(41 + u64::from(orientation));
         let truth = Truth::random(&model, orientation, &mut g);

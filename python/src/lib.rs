@@ -143,7 +143,7 @@ impl Robot {
     /// The robot's name.
     #[getter]
     fn name(&self) -> &str {
-        &self.robot.model.name
+        self.robot.model.name()
     }
 
     /// Names of the joints of the chain, base to tip.
@@ -151,7 +151,7 @@ impl Robot {
     fn joint_names(&self) -> Vec<String> {
         self.robot
             .model
-            .joints
+            .joints()
             .iter()
             .map(|j| j.name.clone())
             .collect()
@@ -166,13 +166,13 @@ impl Robot {
     /// The chain's base link.
     #[getter]
     fn base_link(&self) -> &str {
-        &self.robot.model.base_link
+        self.robot.model.base_link()
     }
 
     /// The chain's tip (flange) link.
     #[getter]
     fn tip_link(&self) -> &str {
-        &self.robot.model.tip_link
+        self.robot.model.tip_link()
     }
 
     /// Where the robot came from: a file path or `built-in robot 'NAME'`.
@@ -193,7 +193,7 @@ impl Robot {
         let rows: Vec<Vec<f64>> = self
             .robot
             .model
-            .joints
+            .joints()
             .iter()
             .map(|j| match j.limits {
                 Some(l) => vec![l.lower, l.upper],
@@ -275,10 +275,10 @@ impl Robot {
     fn __repr__(&self) -> String {
         format!(
             "Robot('{}', dof={}, {} -> {})",
-            self.robot.model.name,
+            self.robot.model.name(),
             self.robot.model.nq(),
-            self.robot.model.base_link,
-            self.robot.model.tip_link
+            self.robot.model.base_link(),
+            self.robot.model.tip_link()
         )
     }
 }
@@ -300,7 +300,7 @@ impl Robot {
                 q.shape(),
                 model.nq(),
                 model.nq(),
-                model.name
+                model.name()
             )));
         }
         let values: Vec<f64> = q.as_array().iter().copied().collect();
@@ -308,8 +308,8 @@ impl Robot {
         for row in values.chunks(model.nq().max(1)) {
             model
                 .check_q(row)
-                .map_err(|e| bad(format!("q: {e} (robot '{}')", model.name)))?;
-            for (i, (j, v)) in model.joints.iter().zip(row).enumerate() {
+                .map_err(|e| bad(format!("q: {e} (robot '{}')", model.name())))?;
+            for (i, (j, v)) in model.joints().iter().zip(row).enumerate() {
                 if let Some(l) = j.limits
                     && (*v < l.lower || *v > l.upper)
                 {
@@ -326,7 +326,7 @@ impl Robot {
         if values.is_empty() {
             return Err(bad(format!(
                 "q: no joint values (robot '{}' has {} joints)",
-                model.name,
+                model.name(),
                 model.nq()
             )));
         }

@@ -1,5 +1,6 @@
 //! The one error type of the `sim` crate.
 
+use crate::effect_id::EffectId;
 use std::path::PathBuf;
 
 /// Everything that can go wrong when loading a robot or evaluating it with bad input.
@@ -119,9 +120,8 @@ pub enum SimError {
     /// Displayed as `joint_compliance: stiffness[3] = -5: must be > 0 N m/rad (inf = rigid)`.
     #[error("{effect}: {field} = {value}: {problem}")]
     BadEffect {
-        /// Effect name as in the scenario files: `kinematic_offsets`, `joint_compliance`,
-        /// `gear_backlash`, `thermal_drift`.
-        effect: &'static str,
+        /// The effect (displayed by its name: `kinematic_offsets`, `joint_compliance`, …).
+        effect: EffectId,
         /// Field, with a 0-based index where it is a list entry (e.g. `stiffness[3]`).
         field: String,
         /// The offending value (or length), as text.
@@ -175,6 +175,24 @@ pub enum SimError {
         /// What happened, with the step count, the last joint speed and the torque residual.
         reason: String,
     },
+}
+
+impl SimError {
+    /// A [`SimError::BadEffect`]: `field` of `effect` (with a 0-based index where it is a list entry,
+    /// e.g. `stiffness[3]`) has `value` (or length, as text), which is wrong as `problem` says.
+    pub fn bad_effect(
+        effect: EffectId,
+        field: impl Into<String>,
+        value: impl ToString,
+        problem: impl Into<String>,
+    ) -> SimError {
+        SimError::BadEffect {
+            effect,
+            field: field.into(),
+            value: value.to_string(),
+            problem: problem.into(),
+        }
+    }
 }
 
 /// Result alias for the `sim` crate.

@@ -68,15 +68,33 @@ pub struct Joint {
     /// `Some((k, sign))` when the origin rotation is exactly the identity and the axis is exactly
     /// `sign · e_k` (k = 0, 1, 2 for x, y, z), as in most URDFs: forward kinematics then turns two
     /// columns instead of multiplying 3×3 matrices. Derived from `origin.rotation` and `axis` like
-    /// [`Joint::rotation_terms`]; recompute both with [`Joint::refresh_derived`] after changing them.
+    /// [`Joint::rotation_terms`]; [`Model::new`] computes both (and `home`, `screw`) for every joint
+    /// of a model, so a joint inside a [`Model`] never holds stale ones.
     pub aligned_axis: Option<(usize, f64)>,
 }
 
 impl Joint {
-    /// Recomputes [`Joint::rotation_terms`] and [`Joint::aligned_axis`] from `origin` and `axis`.
-    pub fn refresh_derived(&mut self) {
-        self.rotation_terms = Joint::rotation_terms_for(&self.origin, &self.axis);
-        self.aligned_axis = Joint::aligned_axis_for(&self.origin, &self.axis);
+    /// A joint with its rotation terms and aligned axis computed from `origin` and the unit `axis`;
+    /// `home` and `screw` (which depend on the joints before it) are the identity and zero until
+    /// [`Model::new`] places the joint in a chain.
+    pub fn new(
+        name: String,
+        kind: JointKind,
+        origin: Pose,
+        axis: Vector3<f64>,
+        limits: Option<JointLimits>,
+    ) -> Joint {
+        Joint {
+            name,
+            kind,
+            origin,
+            axis,
+            home: Pose::identity(),
+            screw: Vector6::zeros(),
+            limits,
+            rotation_terms: Joint::rotation_terms_for(&origin, &axis),
+            aligned_axis: Joint::aligned_axis_for(&origin, &axis),
+        }
     }
 
     /// See [`Joint::aligned_axis`].
@@ -121,31 +139,224 @@ pub struct Body {
 
 /// An immutable serial-chain robot model.
 ///
-/// Built once (from a URDF, see [`crate::urdf`]) and shared by reference; evaluations write into a
-/// [`crate::Data`].
+/// Built once (from a URDF, see [`crate::urdf`], or from its parts with [`Model::new`]) and shared
+/// by reference; evaluations write into a [`crate::Data`]. Its fields are private: [`Model::new`]
+/// computes every derived quantity (each joint's home pose, screw axis, rotation terms and aligned
+/// axis, the home flange pose, the massless links) from the parts, and the mutators
+/// ([`Model::with_joint_origin`], [`Model::with_flange_offset`]) make a new model the same way, so
+/// that no derived quantity can go stale.
 #[derive(Clone, Debug)]
 pub struct Model {
-    /// Robot name from the URDF.
+    name: String,
+    base_link: String,
+    tip_link: String,
+    joints: Vec<Joint>,
+    bodies: Vec<Body>,
+    flange_offset: Pose,
+    home_flange: Pose,
+    massless_links: Vec<String>,
+    notes: Vec<String>,
+}
+
+/// What a [`Model`] is made of: everything [`Model::new`] does not derive.
+#[derive(Clone, Debug)]
+pub struct ModelParts {
+    /// Robot name.
     pub name: String,
     /// Root link of the chain (the base frame).
     pub base_link: String,
     /// Tip link of the chain (the flange frame).
     pub tip_link: String,
-    /// Movable joints from base to tip.
+    /// Movable joints from base to tip. Their `name`, `kind`, `origin`, `axis` (unit) and `limits`
+    /// are used; `home`, `screw`, `rotation_terms` and `aligned_axis` are recomputed.
     pub joints: Vec<Joint>,
     /// One body per joint: `bodies[i]` moves with `joints[i]`.
     pub bodies: Vec<Body>,
     /// `T_last_flange`: flange in the last joint frame (m).
     pub flange_offset: Pose,
-    /// `M = T_base_flange` at q = 0 (m).
-    pub home_flange: Pose,
-    /// Links of moving bodies that carry no mass (no `<inertial>`); statics refuse to run while non-empty.
-    pub massless_links: Vec<String>,
     /// Things the loader tolerated but a user should know (e.g. off-chain movable joints ignored).
     pub notes: Vec<String>,
 }
 
 impl Model {
+    /// A model from its parts, with every derived quantity computed: joint `i`'s home pose
+    /// `T_base_joint = O₁ ⋯ Oᵢ` and screw axis ([`Joint::screw`]), its rotation terms and aligned axis
+    /// ([`Joint::rotation_terms`], [`Joint::aligned_axis`]), the home flange pose `M = T_base_joint_n
+    /// T_last_flange`, and the massless links (the first link of each body of zero mass).
+    ///
+    /// # Errors
+    /// [`crate::SimError::Structure`] for a chain without joints or a body count that is not the
+    /// joint count; [`crate::SimError::BadValue`] for a non-finite origin or axis, or an axis that is
+    /// not of unit length.
+    pub fn new(parts: ModelParts) -> crate::error::Result<Model> {
+        let ModelParts {
+            name,
+            base_link,
+            tip_link,
+            mut joints,
+            bodies,
+            flange_offset,
+            notes,
+        } = parts;
+        let structure = |message: String| crate::error::SimError::Structure {
+            source_name: name.clone(),
+            message,
+        };
+        if joints.is_empty() {
+            return Err(structure(format!(
+                "no movable joint between base link '{base_link}' and tip link '{tip_link}'"
+            )));
+        }
+        if bodies.len() != joints.len() {
+            return Err(structure(format!(
+                "{} bodies for {} joints: one body per joint is needed",
+                bodies.len(),
+                joints.len()
+            )));
+        }
+        for j in &joints {
+            let bad = |field: &'static str, value: f64, problem: &'static str| {
+                crate::error::SimError::BadValue {
+                    source_name: name.clone(),
+                    element: "joint",
+                    name: j.name.clone(),
+                    field,
+                    value,
+                    problem,
+                }
+            };
+            let o = j.origin.to_homogeneous();
+            if let Some(v) = o.iter().find(|v| !v.is_finite()) {
+                return Err(bad("origin", *v, "not finite"));
+            }
+            if let Some(v) = j.axis.iter().find(|v| !v.is_finite()) {
+                return Err(bad("axis xyz", *v, "not finite"));
+            }
+            if (j.axis.norm() - 1.0).abs() > 1e-9 {
+                return Err(bad("axis xyz", j.axis.norm(), "not of unit length"));
+            }
+        }
+        let mut home = Pose::identity();
+        for j in &mut joints {
+            home *= j.origin;
+            j.home = home;
+            let w = home.rotation * j.axis;
+            let p = home.translation.vector;
+            j.screw = if j.kind.is_rotational() {
+                let v = -w.cross(&p);
+                Vector6::new(w.x, w.y, w.z, v.x, v.y, v.z)
+            } else {
+                Vector6::new(0.0, 0.0, 0.0, w.x, w.y, w.z)
+            };
+            j.rotation_terms = Joint::rotation_terms_for(&j.origin, &j.axis);
+            j.aligned_axis = Joint::aligned_axis_for(&j.origin, &j.axis);
+        }
+        let home_flange = home * flange_offset;
+        let massless_links = bodies
+            .iter()
+            .filter(|b| b.mass <= 0.0)
+            .map(|b| b.links.first().cloned().unwrap_or_default())
+            .collect();
+        Ok(Model {
+            name,
+            base_link,
+            tip_link,
+            joints,
+            bodies,
+            flange_offset,
+            home_flange,
+            massless_links,
+            notes,
+        })
+    }
+
+    /// The parts of this model (to change some and make a new one with [`Model::new`]).
+    pub fn to_parts(&self) -> ModelParts {
+        ModelParts {
+            name: self.name.clone(),
+            base_link: self.base_link.clone(),
+            tip_link: self.tip_link.clone(),
+            joints: self.joints.clone(),
+            bodies: self.bodies.clone(),
+            flange_offset: self.flange_offset,
+            notes: self.notes.clone(),
+        }
+    }
+
+    /// This model with joint `i`'s (0-based) origin `T_parent_joint` replaced by `origin` (m), every
+    /// derived quantity recomputed ([`Model::new`]).
+    ///
+    /// # Errors
+    /// [`crate::SimError::JointCount`] for `i` beyond the joints; what [`Model::new`] refuses.
+    pub fn with_joint_origin(&self, i: usize, origin: Pose) -> crate::error::Result<Model> {
+        if i >= self.nq() {
+            return Err(crate::error::SimError::JointCount {
+                expected: self.nq(),
+                got: i + 1,
+            });
+        }
+        let mut parts = self.to_parts();
+        parts.joints[i].origin = origin;
+        Model::new(parts)
+    }
+
+    /// This model with the flange offset `T_last_flange` replaced by `flange_offset` (m), the home
+    /// flange pose recomputed.
+    ///
+    /// # Errors
+    /// What [`Model::new`] refuses.
+    pub fn with_flange_offset(&self, flange_offset: Pose) -> crate::error::Result<Model> {
+        let mut parts = self.to_parts();
+        parts.flange_offset = flange_offset;
+        Model::new(parts)
+    }
+
+    /// Robot name from the URDF.
+    pub fn name(&self) -> &str {
+        &self.name
+    }
+
+    /// Root link of the chain (the base frame).
+    pub fn base_link(&self) -> &str {
+        &self.base_link
+    }
+
+    /// Tip link of the chain (the flange frame).
+    pub fn tip_link(&self) -> &str {
+        &self.tip_link
+    }
+
+    /// Movable joints from base to tip.
+    pub fn joints(&self) -> &[Joint] {
+        &self.joints
+    }
+
+    /// One body per joint: `bodies()[i]` moves with `joints()[i]`.
+    pub fn bodies(&self) -> &[Body] {
+        &self.bodies
+    }
+
+    /// `T_last_flange`: flange in the last joint frame (m).
+    pub fn flange_offset(&self) -> Pose {
+        self.flange_offset
+    }
+
+    /// `M = T_base_flange` at q = 0 (m).
+    pub fn home_flange(&self) -> Pose {
+        self.home_flange
+    }
+
+    /// Links of moving bodies that carry no mass (no `<inertial>`); statics refuse to run while
+    /// non-empty.
+    pub fn massless_links(&self) -> &[String] {
+        &self.massless_links
+    }
+
+    /// Things the loader tolerated but a user should know (e.g. off-chain movable joints ignored).
+    pub fn notes(&self) -> &[String] {
+        &self.notes
+    }
+
     /// Number of movable joints.
     #[inline]
     pub fn nq(&self) -> usize {
@@ -157,12 +368,12 @@ impl Model {
         self.bodies.iter().map(|b| b.mass).sum()
     }
 
-    /// Fails with [`crate::SimError::MissingInertial`] if some moving body has no mass.
-    pub fn require_inertials(&self) -> crate::Result<()> {
+    /// Fails with [`crate::error::SimError::MissingInertial`] if some moving body has no mass.
+    pub fn require_inertials(&self) -> crate::error::Result<()> {
         if self.massless_links.is_empty() {
             Ok(())
         } else {
-            Err(crate::SimError::MissingInertial {
+            Err(crate::error::SimError::MissingInertial {
                 robot: self.name.clone(),
                 links: self.massless_links.join(", "),
             })
@@ -170,15 +381,15 @@ impl Model {
     }
 
     /// Checks the length and finiteness of a joint vector.
-    pub fn check_q(&self, q: &[f64]) -> crate::Result<()> {
+    pub fn check_q(&self, q: &[f64]) -> crate::error::Result<()> {
         if q.len() != self.nq() {
-            return Err(crate::SimError::JointCount {
+            return Err(crate::error::SimError::JointCount {
                 expected: self.nq(),
                 got: q.len(),
             });
         }
         if let Some((i, v)) = q.iter().enumerate().find(|(_, v)| !v.is_finite()) {
-            return Err(crate::SimError::NonFiniteJoint {
+            return Err(crate::error::SimError::NonFiniteJoint {
                 joint: i + 1,
                 value: *v,
             });

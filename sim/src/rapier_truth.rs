@@ -77,10 +77,11 @@
 //! assert!(s.residual < 1e-6);
 //! ```
 
-use crate::effects::{deflection_compliance, stiffness};
 use crate::error::{Result, SimError};
 use crate::lie::{Pose, pose_from};
 use crate::model::{JointKind, Model};
+pub use crate::springs::SettleOptions;
+use crate::springs::{deflection as deflection_compliance, stiffness};
 use crate::statics::Payload;
 use nalgebra::{Matrix3, Quaternion, Rotation3, UnitQuaternion, Vector3};
 use rapier3d_f64::prelude as rp;
@@ -92,72 +93,6 @@ pub const ENGINE: &str = "rapier3d-f64 0.36";
 /// Largest accepted sag `|qᵢ − θᵢ|` during settling (rad or m): beyond it the joints are too soft for
 /// the load (no equilibrium near the commanded pose) and settling fails.
 pub const MAX_DEFLECTION_RAD: f64 = 0.5;
-
-/// How [`RapierArm::settle`] steps the engine and decides that the arm is at rest.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct SettleOptions {
-    /// Engine time step (s), > 0. One rapier step = one substep (`num_solver_iterations = 1`).
-    pub dt: f64,
-    /// Damping ratio `ζ` of each joint's damper `2 ζ √(k I)` (dimensionless, ≥ 0).
-    pub damping_ratio: f64,
-    /// Rest test on joint speed: `max |Δθ| / dt` below this (rad/s or m/s), > 0.
-    pub speed_tol: f64,
-    /// Rest test on the static balance `max |k (q − θ) + f|` (N m or N), > 0.
-    pub residual_tol: f64,
-    /// Step budget (> 0): settling fails with [`SimError::NotSettled`] when it is used up.
-    pub max_steps: usize,
-}
-
-impl Default for SettleOptions {
-    /// `dt` = 0.1 s, `ζ` = 1, speed below 1e-10 rad/s, residual below 1e-9 N m, at most 10 000 steps.
-    fn default() -> Self {
-        SettleOptions {
-            dt: 0.1,
-            damping_ratio: 1.0,
-            speed_tol: 1e-10,
-            residual_tol: 1e-9,
-            max_steps: 10_000,
-        }
-    }
-}
-
-impl SettleOptions {
-    fn check(&self) -> Result<()> {
-        let bad = |field: &str, value: String, problem: &str| SimError::BadSettleOption {
-            field: field.into(),
-            value,
-            problem: problem.into(),
-        };
-        if !(self.dt.is_finite() && self.dt > 0.0) {
-            return Err(bad("dt", self.dt.to_string(), "must be finite and > 0 s"));
-        }
-        if !(self.damping_ratio.is_finite() && self.damping_ratio >= 0.0) {
-            return Err(bad(
-                "damping_ratio",
-                self.damping_ratio.to_string(),
-                "must be finite and ≥ 0",
-            ));
-        }
-        if !(self.speed_tol.is_finite() && self.speed_tol > 0.0) {
-            return Err(bad(
-                "speed_tol",
-                self.speed_tol.to_string(),
-                "must be finite and > 0 rad/s",
-            ));
-        }
-        if !(self.residual_tol.is_finite() && self.residual_tol > 0.0) {
-            return Err(bad(
-                "residual_tol",
-                self.residual_tol.to_string(),
-                "must be finite and > 0 N m",
-            ));
-        }
-        if self.max_steps == 0 {
-            return Err(bad("max_steps", "0".into(), "must be > 0"));
-        }
-        Ok(())
-    }
-}
 
 /// The arm at rest after [`RapierArm::settle`].
 #[derive(Clone, Debug, PartialEq)]
@@ -407,16 +342,16 @@ impl RapierArm {
             frames: Vec::new(),
             joint_dof: Vec::with_capacity(n),
             hinge_dof: Vec::with_capacity(n),
-            flange_offset: model.flange_offset,
+            flange_offset: model.flange_offset(),
             gravity: *gravity,
             options,
         };
-        for (i, (b, j)) in model.bodies.iter().zip(&model.joints).enumerate() {
+        for (i, (b, j)) in model.bodies().iter().zip(model.joints()).enumerate() {
             let (mut mass, mut com, mut inertia) = (b.mass, b.com, b.inertia);
             if i + 1 == n
                 && let Some(pl) = payload
             {
-                let c_p = model.flange_offset * nalgebra::Point3::from(Vector3::from(pl.com));
+                let c_p = model.flange_offset() * nalgebra::Point3::from(Vector3::from(pl.com));
                 (mass, com, inertia) = merge_point_mass(mass, &com, &inertia, pl.mass, &c_p.coords);
             }
             let (principal, axes) = principal_axes(&inertia);
@@ -792,7 +727,7 @@ mod tests {
     #[test]
     fn rapier_mass_properties_rebuild_every_iiwa_inertia_tensor() {
         let model = crate::robots::load_builtin("iiwa7").unwrap();
-        for b in &model.bodies {
+        for b in model.bodies() {
             let (principal, axes) = principal_axes(&b.inertia);
             assert!((axes.determinant() - 1.0).abs() < 1e-14);
             let mp = rp::MassProperties::with_principal_inertia_frame(

@@ -31,7 +31,7 @@ pub fn gravity_torques(
     q: &[f64],
     gravity: &Vector3<f64>,
     payload: Option<&Payload>,
-) -> crate::Result<()> {
+) -> crate::error::Result<()> {
     model.require_inertials()?;
     forward_kinematics(model, data, q);
     // Walk from the tip: accumulate mass and first moment Σ m c of everything beyond joint i.
@@ -44,11 +44,11 @@ pub fn gravity_torques(
     }
     for i in (0..model.nq()).rev() {
         let t = &data.joint_poses[i];
-        let body = &model.bodies[i];
+        let body = &model.bodies()[i];
         let c = t * nalgebra::Point3::from(body.com);
         mass += body.mass;
         moment += c.coords * body.mass;
-        let joint = &model.joints[i];
+        let joint = &model.joints()[i];
         let w = t.rotation * joint.axis;
         data.gravity_torque[i] = if joint.kind.is_rotational() {
             // Torque of gravity about the axis through the joint origin, negated.
@@ -116,7 +116,7 @@ mod tests {
         let potential = |d: &mut Data, q: &[f64]| {
             forward_kinematics(&m, d, q);
             let mut v = 0.0;
-            for (t, b) in d.joint_poses.iter().zip(&m.bodies) {
+            for (t, b) in d.joint_poses.iter().zip(m.bodies()) {
                 v -= b.mass * g.dot(&(t * nalgebra::Point3::from(b.com)).coords);
             }
             v - pl.mass * g.dot(&(d.flange * nalgebra::Point3::from(Vector3::from(pl.com))).coords)

@@ -26,8 +26,8 @@
 
 use crate::error::{Result, SimError};
 use crate::lie::{Pose, pose_from, rotation_from_rpy};
-use crate::model::{Body, Joint, JointKind, JointLimits, Model};
-use nalgebra::{Matrix3, Vector3, Vector6};
+use crate::model::{Body, Joint, JointKind, JointLimits, Model, ModelParts};
+use nalgebra::{Matrix3, Vector3};
 use std::collections::HashMap;
 use std::path::Path;
 
@@ -527,7 +527,6 @@ impl<'a> Builder<'a> {
         // Pose of each chain link in its body's joint frame.
         let mut link_in_body: HashMap<&str, Pose> = HashMap::new();
         let mut pending = Pose::identity(); // T_prevframe_link for the current link
-        let mut home = Pose::identity();
         for j in &path {
             let origin = self.joint_origin(j)?;
             let kind = match j.joint_type {
@@ -558,27 +557,8 @@ impl<'a> Builder<'a> {
             let axis = axis / norm;
             let origin = pending * origin;
             pending = Pose::identity();
-            home *= origin;
-            let w = home.rotation * axis;
-            let p = home.translation.vector;
-            let screw = if kind.is_rotational() {
-                let v = -w.cross(&p);
-                Vector6::new(w.x, w.y, w.z, v.x, v.y, v.z)
-            } else {
-                Vector6::new(0.0, 0.0, 0.0, w.x, w.y, w.z)
-            };
             let limits = self.limits(j, kind)?;
-            joints.push(Joint {
-                name: j.name.clone(),
-                kind,
-                origin,
-                axis,
-                home,
-                screw,
-                limits,
-                rotation_terms: Joint::rotation_terms_for(&origin, &axis),
-                aligned_axis: Joint::aligned_axis_for(&origin, &axis),
-            });
+            joints.push(Joint::new(j.name.clone(), kind, origin, axis, limits));
             body_links.push(vec![j.child.link.as_str()]);
             link_in_body.insert(j.child.link.as_str(), Pose::identity());
         }
@@ -588,13 +568,11 @@ impl<'a> Builder<'a> {
             )));
         }
         let flange_offset = pending;
-        let home_flange = home * flange_offset;
 
         let mut notes = Vec::new();
         let on_chain: std::collections::HashSet<&str> =
             body_links.iter().flatten().copied().collect();
         let mut bodies = Vec::with_capacity(joints.len());
-        let mut massless = Vec::new();
         for links in &body_links {
             let mut parts: Vec<(&str, Pose)> = Vec::new();
             for l in links {
@@ -603,21 +581,15 @@ impl<'a> Builder<'a> {
                 // Fixed-joint subtrees hanging off this chain link (not the chain itself).
                 self.fixed_subtree(l, t, &on_chain, &mut parts, &mut notes)?;
             }
-            let body = self.merge(&parts)?;
-            if body.mass <= 0.0 {
-                massless.push(links[0].to_string());
-            }
-            bodies.push(body);
+            bodies.push(self.merge(&parts)?);
         }
-        Ok(Model {
+        Model::new(ModelParts {
             name: self.robot.name.clone(),
             base_link: base.to_string(),
             tip_link: tip.to_string(),
             joints,
             bodies,
             flange_offset,
-            home_flange,
-            massless_links: massless,
             notes,
         })
     }

@@ -446,11 +446,11 @@ fn iiwa_kinematic_offsets_equal_forward_kinematics_of_a_perturbed_urdf() {
     // The error twists that carry each nominal joint frame onto the perturbed one, and the tool error.
     let twists: Vec<[f64; 6]> = (0..7)
         .map(|i| {
-            let xi = log_pose(&(m2.joints[i].home * m.joints[i].home.inverse()));
+            let xi = log_pose(&(m2.joints()[i].home * m.joints()[i].home.inverse()));
             std::array::from_fn(|k| xi[k])
         })
         .collect();
-    let xt = log_pose(&(m.home_flange.inverse() * m2.home_flange));
+    let xt = log_pose(&(m.home_flange().inverse() * m2.home_flange()));
     let base = random_twist(&mut rng, 2e-3, 2e-3);
     let dq: Vec<f64> = (0..7).map(|_| (rng.random::<f64>() - 0.5) * 4e-3).collect();
     let kin =
@@ -585,7 +585,7 @@ fn iiwa_thermal_then_kinematic_equals_product_of_exponentials_of_the_grown_screw
             .zip(&twists)
             .map(|(sc, xi)| adjoint_apply(&exp_twist(&v6(xi)), sc))
             .collect();
-        let home = grown.home_flange * exp_twist(&v6(&tool));
+        let home = grown.home_flange() * exp_twist(&v6(&tool));
         for _ in 0..10 {
             let q = random_q(&mut rng);
             let phi: Vec<f64> = (0..7).map(|i| q[i] + dq[i] + beta[i] * dt).collect();
@@ -698,11 +698,11 @@ fn iiwa_compliance_uses_the_real_geometry() {
     let m2 = load_str(&text, "perturbed iiwa7", &ChainSpec::default()).unwrap();
     let twists: Vec<[f64; 6]> = (0..7)
         .map(|i| {
-            let xi = log_pose(&(m2.joints[i].home * m.joints[i].home.inverse()));
+            let xi = log_pose(&(m2.joints()[i].home * m.joints()[i].home.inverse()));
             std::array::from_fn(|k| xi[k])
         })
         .collect();
-    let xt = log_pose(&(m.home_flange.inverse() * m2.home_flange));
+    let xt = log_pose(&(m.home_flange().inverse() * m2.home_flange()));
     let base = [0.02, -0.03, 0.01, 0.001, 0.002, -0.001];
     let dq: Vec<f64> = (0..7).map(|_| (rng.random::<f64>() - 0.5) * 4e-3).collect();
     let k = iiwa_stiffness();
@@ -768,7 +768,7 @@ fn potential(m: &Model, q: &[f64]) -> f64 {
     forward_kinematics(m, &mut d, q);
     d.joint_poses
         .iter()
-        .zip(&m.bodies)
+        .zip(m.bodies())
         .map(|(t, b)| -b.mass * gravity().dot(&(t * Point3::from(b.com)).coords))
         .sum()
 }
@@ -1467,7 +1467,7 @@ fn holding_torques(model: &Model, x: &[f64], pl: &Payload) -> Vec<f64> {
     forward_kinematics(model, &mut d, x);
     let g = gravity();
     let mut points: Vec<(usize, f64, Vector3<f64>)> = Vec::new();
-    for (b, body) in model.bodies.iter().enumerate() {
+    for (b, body) in model.bodies().iter().enumerate() {
         if body.mass > 0.0 {
             points.push((
                 b,
@@ -1481,7 +1481,7 @@ fn holding_torques(model: &Model, x: &[f64], pl: &Payload) -> Vec<f64> {
     (0..model.nq())
         .map(|k| {
             let t = &d.joint_poses[k];
-            let w = t.rotation * model.joints[k].axis;
+            let w = t.rotation * model.joints()[k].axis;
             let mut r = Vector3::zeros();
             for (b, mass, c) in &points {
                 if *b >= k {

@@ -443,7 +443,7 @@ fn written_files_agree_with_independent_computations_and_hold_no_truth_in_measur
         }
         let p = (data.flange * Point3::from(p_flange)).coords;
         assert!(p.z > 0.05 && p.x.hypot(p.y) >= 0.10);
-        for (j, q) in model.joints.iter().zip(table.q_row(r)) {
+        for (j, q) in model.joints().iter().zip(table.q_row(r)) {
             let l = j.limits.unwrap();
             assert!(*q >= l.lower + 0.05 - 1e-12 && *q <= l.upper - 0.05 + 1e-12);
         }
@@ -978,4 +978,49 @@ fn fuzz_case_8805_a_campaign_too_long_to_time_is_a_scenario_error() {
     assert!(run("1e308", 1).is_ok());
     assert!(run("1e300", 12).is_ok());
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// A `[campaign.file]` pose table with a joint value outside the robot's limits (q1 = 9 rad on the
+/// iiwa 7, whose joint 1 stops at ±2.97 rad) is refused before anything is planned: one line naming
+/// the file, the 1-based data row and the joint column. The same table within the limits plans.
+#[test]
+fn a_campaign_file_with_a_joint_outside_its_limits_is_refused() {
+    let dir = temp_dir("file_limits");
+    let text = "[robot]\nname = \"iiwa7\"\n[campaign]\n[campaign.file]\npath = \"poses.csv\"\n";
+    std::fs::write(dir.join("file.toml"), text).unwrap();
+    let outside = "pose,q1,q2,q3,q4,q5,q6,q7,x,y,z\n\
+                   0,0.1,0.2,0.3,-0.4,0.5,0.6,0.7,1,2,3\n\
+                   1,9,0.2,0.3,-0.4,0.5,0.6,0.7,1,2,3\n";
+    std::fs::write(dir.join("poses.csv"), outside).unwrap();
+    let res = Scenario::load(&dir.join("file.toml"))
+        .unwrap()
+        .resolve(&Overrides::default())
+        .unwrap();
+    let err = generate::plan_of(&res).unwrap_err();
+    assert!(
+        matches!(&err, sim::SimError::Table { row: Some(2), column: Some(c), .. } if c == "q1"),
+        "{err:?}"
+    );
+    let msg = err.to_string();
+    assert_eq!(msg.lines().count(), 1, "{msg}");
+    assert!(
+        msg.contains("poses.csv: row 2")
+            && msg.contains("column q1")
+            && msg.contains("9.0 rad is outside the limits"),
+        "{msg}"
+    );
+    // The generator refuses it too, and writes nothing.
+    let out = dir.join("out");
+    assert!(generate::generate(&res, &out, None).is_err());
+    assert!(!out.join(generate::MEASUREMENTS_FILE).exists());
+    // Within the limits the same table plans, one pose per id.
+    std::fs::write(dir.join("poses.csv"), outside.replace("1,9,", "1,0.9,")).unwrap();
+    let res = Scenario::load(&dir.join("file.toml"))
+        .unwrap()
+        .resolve(&Overrides::default())
+        .unwrap();
+    let plan = generate::plan_of(&res).unwrap();
+    assert_eq!(plan.n_poses, 2);
+    assert_eq!(plan.q_row(1)[0], 0.9);
+    let _ = std::fs::remove_dir_all(dir);
 }

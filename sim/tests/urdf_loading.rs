@@ -11,7 +11,7 @@ fn load(text: &str) -> Result<sim::Model, SimError> {
 
 fn msg(r: Result<sim::Model, SimError>) -> String {
     match r {
-        Ok(m) => panic!("expected an error, loaded '{}'", m.name),
+        Ok(m) => panic!("expected an error, loaded '{}'", m.name()),
         Err(e) => e.to_string(),
     }
 }
@@ -50,7 +50,7 @@ fn third_party_iiwa_exports_give_the_independent_reference_flange() {
             "{file}: {}",
             t.translation.vector
         );
-        assert!(model.massless_links.is_empty(), "{file}");
+        assert!(model.massless_links().is_empty(), "{file}");
     }
 }
 
@@ -137,14 +137,14 @@ fn a_branching_tree_needs_a_tip_link() {
         tip_link: Some("right".into()),
     };
     let model = urdf::load_str(&text, "test.urdf", &spec).unwrap();
-    assert_eq!(model.joints[1].name, "jr");
+    assert_eq!(model.joints()[1].name, "jr");
     // The other branch moves, so its mass is not folded into 'mid'; the user is told.
     assert!(
-        model.notes.iter().any(|n| n.contains("'jl'")),
+        model.notes().iter().any(|n| n.contains("'jl'")),
         "{:?}",
-        model.notes
+        model.notes()
     );
-    assert_eq!(model.bodies[0].mass, 1.0);
+    assert_eq!(model.bodies()[0].mass, 1.0);
     let bad = ChainSpec {
         base_link: None,
         tip_link: Some("nope".into()),
@@ -176,7 +176,7 @@ fn missing_inertial_is_reported_when_statics_are_asked_for() {
         revolute("j", "a", "b", "0 0 1")
     );
     let model = load(&text).unwrap();
-    assert_eq!(model.massless_links, vec!["b".to_string()]);
+    assert_eq!(model.massless_links(), vec!["b".to_string()]);
     let mut data = Data::new(&model);
     let e = gravity_torques(
         &model,
@@ -255,13 +255,15 @@ fn fixed_links_are_merged_with_parallel_axis_theorem() {
         revolute("j", "a", "b", "0 0 1")
     );
     let model = load(&text).unwrap();
-    let body = &model.bodies[0];
+    let body = &model.bodies()[0];
     assert_eq!(body.mass, 2.0);
     assert!((body.com - Vector3::new(0.1, 0.0, 0.0)).norm() < 1e-15);
     assert!((body.inertia[(2, 2)] - (0.02 + 2.0 * 0.01)).abs() < 1e-15);
     assert!((body.inertia[(0, 0)] - 0.02).abs() < 1e-15);
-    assert_eq!(model.tip_link, "c");
-    assert!((model.flange_offset.translation.vector - Vector3::new(0.2, 0.0, 0.0)).norm() < 1e-15);
+    assert_eq!(model.tip_link(), "c");
+    assert!(
+        (model.flange_offset().translation.vector - Vector3::new(0.2, 0.0, 0.0)).norm() < 1e-15
+    );
 }
 
 /// A duplicated joint name and a joint from a link to itself are structure errors naming the joint
@@ -479,13 +481,15 @@ fn fixed_frames_off_the_chain_do_not_make_it_ambiguous() {
     ]);
     let model = load(&text).unwrap();
     assert_eq!(
-        (model.base_link.as_str(), model.tip_link.as_str()),
+        (model.base_link(), model.tip_link()),
         ("base_link", "tool0")
     );
     assert_eq!(model.nq(), 2);
     // The camera's 1 kg is welded to body 1 (l1 + camera), the flange and tool0 to body 2.
-    assert_eq!((model.bodies[0].mass, model.bodies[1].mass), (2.0, 3.0));
-    assert!((model.flange_offset.translation.vector - Vector3::new(0.0, 0.0, 0.15)).norm() < 1e-15);
+    assert_eq!((model.bodies()[0].mass, model.bodies()[1].mass), (2.0, 3.0));
+    assert!(
+        (model.flange_offset().translation.vector - Vector3::new(0.0, 0.0, 0.15)).norm() < 1e-15
+    );
 }
 
 /// Two tool frames off the last link (ROS 2 ur_description: `tool0` and `ft_frame`): the chain's
@@ -518,9 +522,9 @@ fn several_tool_frames_off_the_last_link_need_a_tip_link() {
         ("flange", 0.1),
     ] {
         let model = with_tip(&text, tip).unwrap();
-        assert_eq!(model.tip_link, tip);
+        assert_eq!(model.tip_link(), tip);
         assert!(
-            (model.flange_offset.translation.z - z).abs() < 1e-15,
+            (model.flange_offset().translation.z - z).abs() < 1e-15,
             "{tip}"
         );
     }
@@ -607,7 +611,7 @@ fn several_roots_need_a_base_link_and_the_rule_applies_below_it() {
     };
     let model = urdf::load_str(&text, "test.urdf", &spec).unwrap();
     assert_eq!(
-        (model.tip_link.as_str(), model.joints[0].name.as_str()),
+        (model.tip_link(), model.joints()[0].name.as_str()),
         ("b", "j2")
     );
 }

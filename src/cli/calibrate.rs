@@ -222,7 +222,7 @@ impl Outcome {
         urdf_out: Option<&Path>,
     ) -> serde_json::Value {
         json!({
-            "robot": robot.model.name,
+            "robot": robot.model.name(),
             "model": self.model_spec.name(),
             "data": data,
             "out": out.map(|p| p.display().to_string()),

@@ -40,10 +40,11 @@ pub fn run(args: Args) -> CliResult {
     model.check_q(&q).map_err(|e| {
         CliError::Input(format!(
             "--q: {e} (robot '{}' of --robot {})",
-            model.name, args.robot.robot
+            model.name(),
+            args.robot.robot
         ))
     })?;
-    for (i, (j, v)) in model.joints.iter().zip(&q).enumerate() {
+    for (i, (j, v)) in model.joints().iter().zip(&q).enumerate() {
         if let Some(l) = j.limits
             && (*v < l.lower || *v > l.upper)
         {
@@ -65,11 +66,15 @@ pub fn run(args: Args) -> CliResult {
             .map(|i| (0..3).map(|j| r[(i, j)]).collect())
             .collect();
         return print_json(&json!({
-            "robot": model.name, "base_link": model.base_link, "tip_link": model.tip_link,
+            "robot": model.name(), "base_link": model.base_link(), "tip_link": model.tip_link(),
             "q": q, "position_m": [p.x, p.y, p.z], "rotation": rows,
         }));
     }
-    eprintln!("T_base_flange ({} in {}):", model.tip_link, model.base_link);
+    eprintln!(
+        "T_base_flange ({} in {}):",
+        model.tip_link(),
+        model.base_link()
+    );
     eprintln!("  position (m): {:.9} {:.9} {:.9}", p.x, p.y, p.z);
     eprintln!("  rotation:");
     for i in 0..3 {

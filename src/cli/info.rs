@@ -19,9 +19,9 @@ pub fn run(args: Args) -> CliResult {
     let model = args.robot.load()?;
     if args.json {
         let joints: Vec<_> = model
-            .joints
+            .joints()
             .iter()
-            .zip(&model.bodies)
+            .zip(model.bodies())
             .map(|(j, b)| {
                 json!({
                     "name": j.name, "kind": j.kind,
@@ -32,28 +32,28 @@ pub fn run(args: Args) -> CliResult {
                 })
             })
             .collect();
-        let m = model.home_flange.to_homogeneous();
+        let m = model.home_flange().to_homogeneous();
         return print_json(&json!({
-            "robot": model.name, "base_link": model.base_link, "tip_link": model.tip_link,
+            "robot": model.name(), "base_link": model.base_link(), "tip_link": model.tip_link(),
             "joints": joints,
-            "home_flange": {"position_m": model.home_flange.translation.vector.as_slice(),
+            "home_flange": {"position_m": model.home_flange().translation.vector.as_slice(),
                              "rotation": (0..3).map(|r| (0..3).map(|c| m[(r, c)]).collect::<Vec<_>>()).collect::<Vec<_>>()},
             "moving_mass_kg": model.moving_mass(),
-            "massless_links": model.massless_links, "notes": model.notes,
+            "massless_links": model.massless_links(), "notes": model.notes(),
         }));
     }
     eprintln!(
         "robot '{}': {} joints, chain {} -> {}",
-        model.name,
+        model.name(),
         model.nq(),
-        model.base_link,
-        model.tip_link
+        model.base_link(),
+        model.tip_link()
     );
     eprintln!(
         "{:>3}  {:<16} {:<10} {:>26}  {:>26}  {:>20}  {:>8}",
         "#", "joint", "kind", "axis (base, q=0)", "point on axis (m)", "limits", "mass kg"
     );
-    for (i, (j, b)) in model.joints.iter().zip(&model.bodies).enumerate() {
+    for (i, (j, b)) in model.joints().iter().zip(model.bodies()).enumerate() {
         let w = j.home.rotation * j.axis;
         let p = j.home.translation.vector;
         let lim = match j.limits {
@@ -75,16 +75,16 @@ pub fn run(args: Args) -> CliResult {
             b.mass
         );
     }
-    let p = model.home_flange.translation.vector;
+    let p = model.home_flange().translation.vector;
     eprintln!("flange at q = 0: ({:.6}, {:.6}, {:.6}) m", p.x, p.y, p.z);
     eprintln!("moving mass: {:.4} kg", model.moving_mass());
-    if !model.massless_links.is_empty() {
+    if !model.massless_links().is_empty() {
         eprintln!(
             "warning: no inertial data for {}: gravity torques and compliance are unavailable",
-            model.massless_links.join(", ")
+            model.massless_links().join(", ")
         );
     }
-    for n in &model.notes {
+    for n in model.notes() {
         eprintln!("note: {n}");
     }
     Ok(())

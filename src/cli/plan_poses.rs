@@ -90,7 +90,7 @@ pub fn run(args: Args) -> CliResult {
     }
     if args.json {
         return print_json(&json!({
-            "robot": model.name,
+            "robot": model.name(),
             "candidates": args.candidates,
             "select": args.select,
             "seed": args.seed,
@@ -100,7 +100,11 @@ pub fn run(args: Args) -> CliResult {
     }
     eprintln!(
         "selected {} of {} candidate poses for '{}' ({} of {} parameter combinations identifiable)",
-        args.select, args.candidates, model.name, plan.rank, plan.n_params
+        args.select,
+        args.candidates,
+        model.name(),
+        plan.rank,
+        plan.n_params
     );
     eprintln!(
         "D-optimal criterion log det: selected {:.2}, random sets {:.2} ± {:.2} ({} of {} random sets singular)",

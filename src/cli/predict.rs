@@ -50,7 +50,7 @@ pub fn check_configurations(
         return Err(CliError::Input(format!(
             "{name}: {} joint columns, but the model's robot '{}' has {} joints",
             table.n_joints,
-            robot.name,
+            robot.name(),
             robot.nq()
         )));
     }
@@ -81,7 +81,7 @@ pub fn run(args: Args) -> CliResult {
     if args.json {
         print_json(&json!({
             "model": args.model.display().to_string(),
-            "robot": predictor.model.name,
+            "robot": predictor.model.name(),
             "rows": table.len(),
             "orientation": preds.orientation.is_some(),
             "out": args.out.display().to_string(),
@@ -91,7 +91,7 @@ pub fn run(args: Args) -> CliResult {
         eprintln!(
             "predicted {} rows with the calibrated '{}' model; wrote {}",
             table.len(),
-            predictor.model.name,
+            predictor.model.name(),
             args.out.display()
         );
         if let Some(p) = &args.urdf_out {

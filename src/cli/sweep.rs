@@ -317,7 +317,7 @@ pub fn run(args: Args) -> CliResult {
                     "{n} poses leave {n_train} for calibration after holding out {n_test}, but the kinematic \
                      model of '{}' has {rank} identifiable combinations: at least {needed} calibration \
                      poses are needed",
-                    probe.model.name
+                    probe.model.name()
                 ),
             ));
         }

@@ -332,7 +332,7 @@ pub fn describe_null_space(
     let n = model.nq();
     // Current screws S'ᵢ = Ad(Gᵢ) Sᵢ (base frame).
     let screws: Vec<Vector6<f64>> = model
-        .joints
+        .joints()
         .iter()
         .zip(&params.joint_error)
         .map(|(j, g)| adjoint_apply(g, &j.screw))
@@ -348,7 +348,7 @@ pub fn describe_null_space(
 
     // 1. Error twists that leave a joint's own axis unchanged.
     let mut own = Vec::new();
-    for (i, joint) in model.joints.iter().enumerate() {
+    for (i, joint) in model.joints().iter().enumerate() {
         let s = screws[i];
         let w = nalgebra::Vector3::new(s[0], s[1], s[2]);
         let cands: Vec<(Vector6<f64>, &str)> = if joint.kind == JointKind::Prismatic {

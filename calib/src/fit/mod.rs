@@ -521,7 +521,7 @@ pub(crate) fn kinematic_fit(
                 context: d.name.clone(),
                 field: "q1..qN".into(),
                 value: format!("{} joint columns", d.table.n_joints),
-                problem: format!("robot '{}' has {} joints", model.name, model.nq()),
+                problem: format!("robot '{}' has {} joints", model.name(), model.nq()),
             });
         }
     }
@@ -585,7 +585,7 @@ pub(crate) fn kinematic_fit(
             return Err(CalibError::TooFewPoses {
                 context: train.name.clone(),
                 part: train.part,
-                robot: model.name.clone(),
+                robot: model.name().to_string(),
                 joints: model.nq(),
                 poses: n_configurations,
                 equations,
@@ -787,7 +787,7 @@ pub(crate) fn kinematic_fit(
         solver: report,
     };
     let report = CalibrationReport {
-        robot: model.name.clone(),
+        robot: model.name().to_string(),
         model: ModelSpec::kinematic(),
         n_train_rows: obs.len(),
         n_train_poses: n_poses,

@@ -22,10 +22,10 @@ impl CalibratedModel {
             software: format!("robocal-calib {}", env!("CARGO_PKG_VERSION")),
             model: cal.report.model.clone(),
             robot: EmbeddedRobot {
-                name: robot.model.name.clone(),
+                name: robot.model.name().to_string(),
                 source: robot.source.clone(),
-                base_link: robot.model.base_link.clone(),
-                tip_link: robot.model.tip_link.clone(),
+                base_link: robot.model.base_link().to_string(),
+                tip_link: robot.model.tip_link().to_string(),
                 urdf: robot.urdf.clone(),
                 urdf_fnv1a64: Some(urdf_checksum(&robot.urdf)),
             },

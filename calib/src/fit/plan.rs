@@ -91,7 +91,7 @@ pub struct PosePlan {
 
 fn random_q(model: &Model, rng: &mut rand::rngs::StdRng) -> Vec<f64> {
     model
-        .joints
+        .joints()
         .iter()
         .map(|j| {
             let (lo, hi) = j
@@ -317,7 +317,7 @@ pub fn select_from(
             context: "pose selection".into(),
             field: format!("candidate {i}"),
             value: format!("{} joint values", c.len()),
-            problem: format!("robot '{}' has {} joints", model.name, model.nq()),
+            problem: format!("robot '{}' has {} joints", model.name(), model.nq()),
         });
     }
     Ok(select(model, candidates, options)?.set)

@@ -196,7 +196,7 @@ pub fn register(
             format!("{} joint columns", table.n_joints),
             format!(
                 "the model's robot '{}' has {} joints",
-                model.name,
+                model.name(),
                 model.nq()
             ),
         ));

@@ -97,7 +97,7 @@ pub fn generic_rank(model: &Model, orientation: bool, options: &CalibrationOptio
     let n = model.nq();
     let mut q = Vec::with_capacity(poses * n);
     for _ in 0..poses {
-        for j in &model.joints {
+        for j in model.joints() {
             let (lo, hi) = j.limits.map_or((-3.0, 3.0), |l| (l.lower, l.upper));
             q.push(lo + (hi - lo) * rng.random::<f64>());
         }

@@ -99,14 +99,14 @@ impl Chain {
     pub fn new(model: &Model, params: &KinematicParams) -> Self {
         let n = model.nq();
         let mut c = Chain {
-            kind: model.joints.iter().map(|j| j.kind).collect(),
-            axis: model.joints.iter().map(|j| j.axis).collect(),
+            kind: model.joints().iter().map(|j| j.kind).collect(),
+            axis: model.joints().iter().map(|j| j.axis).collect(),
             origin: vec![Pose::identity(); n],
             terms: vec![[Matrix3::zeros(); 3]; n],
             home_inv: vec![Pose::identity(); n],
             flange_offset: Pose::identity(),
-            home: model.joints.iter().map(|j| j.home).collect(),
-            home_flange: model.home_flange,
+            home: model.joints().iter().map(|j| j.home).collect(),
+            home_flange: model.home_flange(),
             zero_offset: vec![0.0; n],
             bases: Vec::new(),
             targets: Vec::new(),

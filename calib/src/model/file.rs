@@ -676,7 +676,7 @@ impl Predictor {
                 value: format!("{} joint columns", table.n_joints),
                 problem: format!(
                     "the model's robot '{}' has {} joints",
-                    self.model.name,
+                    self.model.name(),
                     self.model.nq()
                 ),
             });

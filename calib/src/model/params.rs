@@ -90,7 +90,7 @@ impl ParamLayout {
             n_joints: model.nq(),
             orientation,
             prismatic: model
-                .joints
+                .joints()
                 .iter()
                 .map(|j| j.kind == JointKind::Prismatic)
                 .collect(),

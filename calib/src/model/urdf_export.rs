@@ -146,8 +146,8 @@ pub fn calibrated_urdf(file: &CalibratedModel) -> Result<CalibratedUrdf> {
     let params = file.params();
     let source = format!("embedded robot '{}'", file.robot.name);
     let spec = ChainSpec {
-        base_link: Some(model.base_link.clone()),
-        tip_link: Some(model.tip_link.clone()),
+        base_link: Some(model.base_link().to_string()),
+        tip_link: Some(model.tip_link().to_string()),
     };
     let chain = sim::urdf::chain_joints(&file.robot.urdf, &source, &spec)?;
     let movable: Vec<&str> = chain
@@ -155,7 +155,7 @@ pub fn calibrated_urdf(file: &CalibratedModel) -> Result<CalibratedUrdf> {
         .filter(|c| c.movable)
         .map(|c| c.name.as_str())
         .collect();
-    let names: Vec<&str> = model.joints.iter().map(|j| j.name.as_str()).collect();
+    let names: Vec<&str> = model.joints().iter().map(|j| j.name.as_str()).collect();
     if movable != names {
         return Err(CalibError::Misuse(format!(
             "{source}: the chain's movable joints {movable:?} are not the model's {names:?}"
@@ -172,7 +172,7 @@ pub fn calibrated_urdf(file: &CalibratedModel) -> Result<CalibratedUrdf> {
     let mut t_tip_flange = Pose::identity();
     for (k, cj) in chain.iter().enumerate() {
         let new_origin = if cj.movable {
-            let joint = &model.joints[i];
+            let joint = &model.joints()[i];
             let home = params.joint_error[i] * joint.home;
             let o = frame_home_inv
                 * home
@@ -187,7 +187,7 @@ pub fn calibrated_urdf(file: &CalibratedModel) -> Result<CalibratedUrdf> {
             let rest = chain[k + 1..]
                 .iter()
                 .fold(Pose::identity(), |acc, c| acc * c.origin);
-            frame_home_inv * model.home_flange * rest.inverse()
+            frame_home_inv * model.home_flange() * rest.inverse()
         } else {
             parent_in_frame *= cj.origin;
             continue;
@@ -203,7 +203,7 @@ pub fn calibrated_urdf(file: &CalibratedModel) -> Result<CalibratedUrdf> {
     }
     let mut warnings = Vec::new();
     if last_movable + 1 == chain.len() {
-        t_tip_flange = frame_home_inv * model.home_flange;
+        t_tip_flange = frame_home_inv * model.home_flange();
         let t = t_tip_flange.translation.vector.norm();
         let a = t_tip_flange.rotation.angle();
         if t > UNCHANGED_BELOW || a > UNCHANGED_BELOW {
@@ -212,7 +212,7 @@ pub fn calibrated_urdf(file: &CalibratedModel) -> Result<CalibratedUrdf> {
                  ({:.3} mm and {:.3} mrad from it) cannot be placed by a joint origin; the target transform \
                  in the comment is given in the tip link frame and is exact for the target (add a fixed \
                  flange joint to the URDF to carry it)",
-                model.tip_link,
+                model.tip_link(),
                 chain[last_movable].name,
                 t * 1e3,
                 a * 1e3
@@ -275,7 +275,8 @@ fn comment_lines(
         ),
         format!(
             "the <origin> of these joints of the chain '{}' -> '{}' differ from it:",
-            model.base_link, model.tip_link
+            model.base_link(),
+            model.tip_link()
         ),
     ];
     l.push(format!(
@@ -301,7 +302,7 @@ fn comment_lines(
     l.push(format!(
         "  {}",
         model
-            .joints
+            .joints()
             .iter()
             .zip(&params.zero_offset)
             .map(|(j, d)| format!("{} {}", j.name, number(*d)))
@@ -314,7 +315,7 @@ fn comment_lines(
     ));
     l.push(format!(
         "  the base link '{}' in the laser-tracker frame (m, rad)",
-        model.base_link
+        model.base_link()
     ));
     l.push(format!(
         "T_tip_target: {}",
@@ -322,7 +323,7 @@ fn comment_lines(
     ));
     l.push(format!(
         "  the target in the tip link '{}' frame (m{})",
-        model.tip_link,
+        model.tip_link(),
         if orientation {
             ", rad"
         } else {
@@ -332,12 +333,12 @@ fn comment_lines(
     l.push("As fixed joints, for TF (add them and their links to use the frames):".into());
     l.push(format!(
         "  <link name=\"robocal_tracker\"/><joint name=\"robocal_tracker_joint\" type=\"fixed\"><parent link=\"robocal_tracker\"/><child link=\"{}\"/>{}</joint>",
-        model.base_link,
+        model.base_link(),
         origin_element(&params.t_tracker_base, true)
     ));
     l.push(format!(
         "  <link name=\"robocal_target\"/><joint name=\"robocal_target_joint\" type=\"fixed\"><parent link=\"{}\"/><child link=\"robocal_target\"/>{}</joint>",
-        model.tip_link,
+        model.tip_link(),
         origin_element(t_tip_target, orientation)
     ));
     for w in warnings {
@@ -358,8 +359,8 @@ impl CalibratedUrdf {
         configs: &[Vec<f64>],
     ) -> Result<f64> {
         let spec = ChainSpec {
-            base_link: Some(model.base_link.clone()),
-            tip_link: Some(model.tip_link.clone()),
+            base_link: Some(model.base_link().to_string()),
+            tip_link: Some(model.tip_link().to_string()),
         };
         let exported = sim::urdf::load_str(&self.text, "calibrated URDF", &spec)?;
         let mut base_params = params.clone();

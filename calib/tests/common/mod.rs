@@ -69,7 +69,7 @@ impl Truth {
     /// The real screws `Ad(exp ξᵢ) Sᵢ`.
     pub fn screws(&self, model: &Model) -> Vec<Vector6<f64>> {
         model
-            .joints
+            .joints()
             .iter()
             .zip(&self.twists)
             .map(|(j, xi)| adjoint_apply(&exp_twist(xi), &j.screw))
@@ -84,7 +84,7 @@ impl Truth {
             .map(|(a, b)| a + b)
             .collect();
         let t = self.t_tracker_base
-            * sim::kinematics::poe_pose(&self.screws(model), &model.home_flange, &th);
+            * sim::kinematics::poe_pose(&self.screws(model), &model.home_flange(), &th);
         let p = (t * Point3::from(self.p_flange)).coords;
         let r = t.rotation.matrix() * self.r_flange_target.unwrap_or_else(Matrix3::identity);
         (p, r)
@@ -96,7 +96,7 @@ pub fn random_configs(model: &Model, n: usize, rng: &mut StdRng) -> Vec<Vec<f64>
     (0..n)
         .map(|_| {
             model
-                .joints
+                .joints()
                 .iter()
                 .map(|j| {
                     let (lo, hi) = j

@@ -3,6 +3,7 @@
 //! stage of the truth ([`super::Truth`]) evaluates; see [`super::kinematic_offsets`] (the evaluation
 //! scheme) and [`super::thermal_drift`] (the growth).
 
+use crate::error::Result;
 use crate::lie::{Pose, exp_twist, pose_from};
 use crate::model::Model;
 use nalgebra::{Matrix3, Vector3, Vector6};
@@ -35,7 +36,7 @@ pub(crate) struct ChainJoint {
 
 /// A serial chain prepared for evaluation: optional base pose, joint origins affine in `ΔT`, flange
 /// offset affine in `ΔT`. Evaluates without allocating.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, Default)]
 pub(crate) struct Chain {
     /// Pose of the chain's root in the base frame (`None` = identity, keeping nominal results exact).
     pub base: Option<Pose>,
@@ -56,12 +57,12 @@ fn growth(model: &Model, alpha: Option<&[f64]>) -> (Vec<Vector3<f64>>, Vector3<f
     let mut g = Vec::with_capacity(model.nq());
     let mut acc = Vector3::zeros();
     let mut r_prev = Matrix3::identity();
-    for (k, j) in model.joints.iter().enumerate() {
+    for (k, j) in model.joints().iter().enumerate() {
         acc += r_prev * j.origin.translation.vector * a(k);
         g.push(acc);
         r_prev = *j.home.rotation.matrix();
     }
-    let gf = acc + r_prev * model.flange_offset.translation.vector * a(model.nq());
+    let gf = acc + r_prev * model.flange_offset().translation.vector * a(model.nq());
     (g, gf)
 }
 
@@ -88,7 +89,7 @@ impl Chain {
     pub fn grown(model: &Model, alpha: Option<&[f64]>) -> Chain {
         let a = |k: usize| alpha.map_or(0.0, |al| al[k]);
         let joints = model
-            .joints
+            .joints()
             .iter()
             .enumerate()
             .map(|(k, j)| ChainJoint {
@@ -101,7 +102,7 @@ impl Chain {
                 coordinate_hinge: None,
             })
             .collect();
-        let f = &model.flange_offset;
+        let f = &model.flange_offset();
         Chain {
             base: None,
             joints,
@@ -126,7 +127,7 @@ impl Chain {
         let mut prev_h = Vector3::zeros();
         let mut prev_g = Vector3::zeros();
         let mut joints = Vec::with_capacity(model.nq());
-        for ((j, xi), gi) in model.joints.iter().zip(joint_twists).zip(&g) {
+        for ((j, xi), gi) in model.joints().iter().zip(joint_twists).zip(&g) {
             let e = exp_twist(&vec6(xi));
             let re = e.rotation.matrix();
             let r = re * j.home.rotation.matrix();
@@ -148,7 +149,7 @@ impl Chain {
             (prev_r, prev_h, prev_g) = (r, h, gg);
         }
         let x = exp_twist(&vec6(tool_twist));
-        let m = &model.home_flange;
+        let m = &model.home_flange();
         let rm = m.rotation.matrix();
         let flange_rot = prev_r.transpose() * rm * x.rotation.matrix();
         let flange_p0 =
@@ -175,30 +176,17 @@ impl Chain {
     /// origin, so the model's base frame is still the nominal base frame), flange offset, and the
     /// derived home poses and screw axes. Its forward kinematics equal [`Chain::eval`] at `dt` (up to
     /// rounding; a test checks it). `nominal` must be the model the chain was made from.
-    pub fn model_at(&self, nominal: &Model, dt: f64) -> Model {
-        let mut model = nominal.clone();
-        let mut home = self.base.unwrap_or_else(Pose::identity);
-        for (k, (joint, cj)) in model.joints.iter_mut().zip(&self.joints).enumerate() {
+    pub fn model_at(&self, nominal: &Model, dt: f64) -> Result<Model> {
+        let mut parts = nominal.to_parts();
+        for (k, (joint, cj)) in parts.joints.iter_mut().zip(&self.joints).enumerate() {
             let local = pose_from(cj.origin_rot, cj.p0 + cj.dp * dt);
             joint.origin = match (k, &self.base) {
                 (0, Some(b)) => b * local,
                 _ => local,
             };
-            home *= local;
-            joint.home = home;
-            let w = home.rotation * cj.axis;
-            let v = if cj.rotational {
-                -w.cross(&home.translation.vector)
-            } else {
-                w
-            };
-            let w = if cj.rotational { w } else { Vector3::zeros() };
-            joint.screw = Vector6::new(w.x, w.y, w.z, v.x, v.y, v.z);
-            joint.refresh_derived();
         }
-        model.flange_offset = pose_from(self.flange_rot, self.flange_p0 + self.flange_dp * dt);
-        model.home_flange = home * model.flange_offset;
-        model
+        parts.flange_offset = pose_from(self.flange_rot, self.flange_p0 + self.flange_dp * dt);
+        Model::new(parts)
     }
 
     /// Joint frames `T_base_joint[i]` into `poses` and the flange pose `T_base_flange` (m), at joint

@@ -31,22 +31,12 @@
 //! gear. Behind the joint's main reduction it is divided by its ratio; a gear on the output side
 //! passes it on in full. Amplitudes of 10⁻⁵–10⁻⁴ rad at the link cover the two cases.
 
-use super::effect::{Effect, Moved, Needs, Prepare, ResolveCx, State};
+use super::effect::{Effect, Moved, Prepare, ResolveCx, State};
 use super::joint_pairs;
 use super::transmission_error::{MAX_AMPLITUDE_RAD, MAX_ORDER};
+use crate::effect_id::EffectId;
 use crate::error::{Result, SimError};
-use crate::scenario::magnitude::Magnitude;
-
-const EFFECT: &str = "coupled_transmission_error";
-
-fn bad(field: impl Into<String>, value: impl ToString, problem: impl Into<String>) -> SimError {
-    SimError::BadEffect {
-        effect: EFFECT,
-        field: field.into(),
-        value: value.to_string(),
-        problem: problem.into(),
-    }
-}
+use crate::magnitude::Magnitude;
 
 /// One term of [`CoupledTransmission`]: joint `joint`'s link angle gains
 /// `amplitude_rad · sin(order · q_source + phase_rad)`.
@@ -94,39 +84,53 @@ impl CoupledTransmission {
     pub fn new(terms: Vec<CoupledTerm>) -> Result<Self> {
         for (k, t) in terms.iter().enumerate() {
             let f = |name: &str| format!("terms[{k}].{name}");
-            joint_pairs::check_numbered(EFFECT, k, t.joint, t.source)?;
+            joint_pairs::check_numbered(EffectId::CoupledTransmission, k, t.joint, t.source)?;
             if t.source == t.joint {
-                return Err(bad(
+                return Err(SimError::bad_effect(
+                    EffectId::CoupledTransmission,
                     f("source"),
                     t.source,
                     "is the joint itself: an error periodic in the joint's own angle is [effects.transmission]",
                 ));
             }
             if t.order == 0 || t.order > MAX_ORDER {
-                return Err(bad(
+                return Err(SimError::bad_effect(
+                    EffectId::CoupledTransmission,
                     f("order"),
                     t.order,
                     format!("must be a whole number of cycles per revolution, 1 … {MAX_ORDER}"),
                 ));
             }
             if !t.amplitude_rad.is_finite() {
-                return Err(bad(f("amplitude_rad"), t.amplitude_rad, "not finite"));
+                return Err(SimError::bad_effect(
+                    EffectId::CoupledTransmission,
+                    f("amplitude_rad"),
+                    t.amplitude_rad,
+                    "not finite",
+                ));
             }
             if t.amplitude_rad.abs() > MAX_AMPLITUDE_RAD {
-                return Err(bad(
+                return Err(SimError::bad_effect(
+                    EffectId::CoupledTransmission,
                     f("amplitude_rad"),
                     t.amplitude_rad,
                     format!("amplitude above {MAX_AMPLITUDE_RAD} rad; give it in rad, not degrees"),
                 ));
             }
             if !t.phase_rad.is_finite() {
-                return Err(bad(f("phase_rad"), t.phase_rad, "not finite"));
+                return Err(SimError::bad_effect(
+                    EffectId::CoupledTransmission,
+                    f("phase_rad"),
+                    t.phase_rad,
+                    "not finite",
+                ));
             }
             if terms[..k]
                 .iter()
                 .any(|o| o.joint == t.joint && o.source == t.source && o.order == t.order)
             {
-                return Err(bad(
+                return Err(SimError::bad_effect(
+                    EffectId::CoupledTransmission,
                     format!("terms[{k}]"),
                     format!("[{}, {}] order {}", t.joint, t.source, t.order),
                     "given twice",
@@ -143,7 +147,11 @@ impl CoupledTransmission {
 
     /// Checks that every joint number fits a robot with `nq` joints.
     pub fn check_fits(&self, nq: usize) -> Result<()> {
-        joint_pairs::check_fits(EFFECT, self.terms.iter().map(|t| (t.joint, t.source)), nq)
+        joint_pairs::check_fits(
+            EffectId::CoupledTransmission,
+            self.terms.iter().map(|t| (t.joint, t.source)),
+            nq,
+        )
     }
 }
 
@@ -169,8 +177,7 @@ pub struct CoupledTransmissionSection {
 }
 
 impl Effect for CoupledTransmission {
-    const NAME: &'static str = EFFECT;
-    const KEY: &'static str = "coupled_transmission";
+    const ID: EffectId = EffectId::CoupledTransmission;
     type Section = CoupledTransmissionSection;
     type Stage = CoupledTransmission;
     type Scratch = ();
@@ -204,10 +211,6 @@ impl Effect for CoupledTransmission {
         Ok(effect)
     }
 
-    fn needs(&self) -> Needs {
-        Needs::default()
-    }
-
     fn check_lengths(&self, nq: usize) -> Result<()> {
         self.check_fits(nq)
     }
@@ -215,8 +218,6 @@ impl Effect for CoupledTransmission {
     fn prepare(&self, _cx: &Prepare<'_>) -> Result<CoupledTransmission> {
         Ok(self.clone())
     }
-
-    fn scratch(_stage: &CoupledTransmission, _nq: usize) {}
 
     /// Link-side angles shifted by the terms: `φᵢ += A sin(h qⱼ + φ)` (reported angles), and the same
     /// on the link-side positions.

@@ -3,16 +3,18 @@
 //! An effect is one file in `sim/src/effects/` that implements [`Effect`] for its parameter type, and
 //! one line in the registry of [`super`]. The trait says
 //!
-//! * who it is: [`Effect::NAME`] (`gear_backlash`, in summaries and errors) and [`Effect::KEY`]
+//! * who it is: [`Effect::ID`], its line in the registry ([`crate::effect_id`]), which gives
+//!   [`Effect::NAME`] (`gear_backlash`, in summaries and errors) and [`Effect::KEY`]
 //!   (`backlash`: the scenario section `[effects.backlash]`, the `truth.json` key `effects.backlash`,
 //!   the `truth.parquet` columns `backlash_{x,y,z}` and the fields of [`super::Effects`] and
 //!   [`super::Contributions`]);
 //! * how it is written in a scenario: [`Effect::Section`], resolved into the effect by
 //!   [`Effect::from_section`] (random magnitudes drawn through a [`ResolveCx`]);
 //! * what it reads: [`Effect::needs`] (campaign columns `dir`, `temp`, `t`, `payload`, and the
-//!   model's inertials) and [`Effect::check_lengths`];
+//!   model's inertials; nothing by default) and [`Effect::check_lengths`];
 //! * how it acts in the truth pipeline: [`Effect::prepare`] once per robot (an immutable, `Sync`
-//!   [`Effect::Stage`]), [`Effect::scratch`] once per thread, and [`Effect::act`] per pose on the
+//!   [`Effect::Stage`]), [`Effect::scratch`] once per thread (by default the empty
+//!   workspace, [`Default`]), and [`Effect::act`] per pose on the
 //!   pipeline [`State`], without allocating. The stages run in registry order, each one after the
 //!   ones before it; the contribution of a stage is the target displacement it causes (see
 //!   [`super`]).
@@ -22,10 +24,12 @@
 
 use super::chain::Chain;
 use super::gravity::{BodyMasses, GravityWork};
+use crate::effect_id::EffectId;
 use crate::error::{Result, SimError, scenario_err};
 use crate::lie::Pose;
+use crate::magnitude::Magnitude;
 use crate::model::Model;
-use crate::scenario::magnitude::Magnitude;
+use crate::springs::SettleOptions;
 use crate::statics::Payload;
 use nalgebra::Vector3;
 
@@ -38,7 +42,7 @@ pub enum ComplianceSolver {
     Analytic,
     /// The real robot as a rapier multibody with joint springs, settled to rest
     /// ([`super::rapier_compliance`], [`crate::rapier_truth`]). Needs a compliance effect.
-    Rapier(crate::rapier_truth::SettleOptions),
+    Rapier(SettleOptions),
 }
 
 /// What the controller reports and the environment imposes at one measurement.
@@ -240,11 +244,14 @@ pub trait Effect:
     + Sync
     + 'static
 {
-    /// Name in summaries and errors (`gear_backlash`).
-    const NAME: &'static str;
+    /// Its typed identity: its line in the registry ([`crate::effect_id`]), which the registry
+    /// checks.
+    const ID: EffectId;
+    /// Name in summaries and errors (`gear_backlash`): [`EffectId::name`] of [`Effect::ID`].
+    const NAME: &'static str = Self::ID.name();
     /// Key of the scenario section, the `truth.json` entry and the `truth.parquet` columns
-    /// (`backlash`).
-    const KEY: &'static str;
+    /// (`backlash`): [`EffectId::key`] of [`Effect::ID`].
+    const KEY: &'static str = Self::ID.key();
     /// The scenario section `[effects.<KEY>]` as written (magnitudes not yet drawn).
     type Section: Clone
         + std::fmt::Debug
@@ -253,8 +260,8 @@ pub trait Effect:
         + serde::de::DeserializeOwned;
     /// What [`Effect::prepare`] makes once per robot: immutable, shared by every thread.
     type Stage: Clone + std::fmt::Debug + Send + Sync;
-    /// Per-thread workspace of the stage.
-    type Scratch: Clone + std::fmt::Debug + Send;
+    /// Per-thread workspace of the stage (`()` for a stage that needs none).
+    type Scratch: Clone + std::fmt::Debug + Default + Send;
 
     /// False when the section says `enabled = false`.
     fn enabled(section: &Self::Section) -> bool;
@@ -263,8 +270,10 @@ pub trait Effect:
     /// name the scenario file and key.
     fn from_section(section: &Self::Section, cx: &ResolveCx<'_>) -> Result<Self>;
 
-    /// What this effect reads besides the joint positions.
-    fn needs(&self) -> Needs;
+    /// What this effect reads besides the joint positions; by default nothing (`Needs::default()`).
+    fn needs(&self) -> Needs {
+        Needs::default()
+    }
 
     /// Checks that the parameter lists fit a robot with `nq` joints.
     fn check_lengths(&self, nq: usize) -> Result<()>;
@@ -278,8 +287,12 @@ pub trait Effect:
     /// Prepares the stage for fast evaluation (once per robot).
     fn prepare(&self, cx: &Prepare<'_>) -> Result<Self::Stage>;
 
-    /// A per-thread workspace for a robot with `nq` joints.
-    fn scratch(stage: &Self::Stage, nq: usize) -> Self::Scratch;
+    /// A per-thread workspace for a robot with `nq` joints; by default the empty one
+    /// ([`Default`]), for a stage that needs no workspace.
+    fn scratch(stage: &Self::Stage, nq: usize) -> Self::Scratch {
+        let _ = (stage, nq);
+        Self::Scratch::default()
+    }
 
     /// Applies the effect at one pose: changes `state` (chain angles, geometry, `ΔT`, link-side
     /// positions) and says whether the target moved. Must not allocate.

@@ -29,22 +29,12 @@
 
 use super::effect::{Effect, Moved, Needs, Prepare, ResolveCx, State};
 use super::gravity::chain_gravity_torques;
+use crate::effect_id::EffectId;
 use crate::error::{Result, SimError};
 
 /// Largest accepted dead band (rad): gears with more lost motion than 0.1 rad (5.7°) are not modelled,
 /// and a value in degrees is refused.
 pub const MAX_DEAD_BAND_RAD: f64 = 0.1;
-
-const EFFECT: &str = "gear_backlash";
-
-fn bad(field: impl Into<String>, value: impl ToString, problem: impl Into<String>) -> SimError {
-    SimError::BadEffect {
-        effect: EFFECT,
-        field: field.into(),
-        value: value.to_string(),
-        problem: problem.into(),
-    }
-}
 
 /// Which flank the link rests on.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
@@ -92,7 +82,8 @@ impl TryFrom<GearBacklashSpec> for GearBacklash {
     fn try_from(s: GearBacklashSpec) -> Result<Self> {
         match (s.mode, s.threshold_nm) {
             (BacklashMode::Direction, None) => GearBacklash::direction(s.dead_band_rad),
-            (BacklashMode::Direction, Some(_)) => Err(bad(
+            (BacklashMode::Direction, Some(_)) => Err(SimError::bad_effect(
+                EffectId::GearBacklash,
                 "threshold_nm",
                 "given",
                 "only used in gravity mode; remove it or set mode = \"gravity\"",
@@ -103,7 +94,8 @@ impl TryFrom<GearBacklashSpec> for GearBacklash {
             (BacklashMode::Gravity, Some(Threshold::PerJoint(t))) => {
                 GearBacklash::gravity(s.dead_band_rad, t)
             }
-            (BacklashMode::Gravity, None) => Err(bad(
+            (BacklashMode::Gravity, None) => Err(SimError::bad_effect(
+                EffectId::GearBacklash,
                 "threshold_nm",
                 "missing",
                 "gravity mode needs a holding-torque threshold (N m), one number or one per joint",
@@ -116,14 +108,16 @@ impl GearBacklash {
     fn check_band(dead_band_rad: &[f64]) -> Result<()> {
         for (i, &b) in dead_band_rad.iter().enumerate() {
             if !(b.is_finite() && b >= 0.0) {
-                return Err(bad(
+                return Err(SimError::bad_effect(
+                    EffectId::GearBacklash,
                     format!("dead_band_rad[{i}]"),
                     b,
                     "must be finite and ≥ 0",
                 ));
             }
             if b > MAX_DEAD_BAND_RAD {
-                return Err(bad(
+                return Err(SimError::bad_effect(
+                    EffectId::GearBacklash,
                     format!("dead_band_rad[{i}]"),
                     b,
                     format!(
@@ -149,7 +143,8 @@ impl GearBacklash {
     pub fn gravity(dead_band_rad: Vec<f64>, threshold_nm: Vec<f64>) -> Result<Self> {
         Self::check_band(&dead_band_rad)?;
         if threshold_nm.len() != dead_band_rad.len() {
-            return Err(bad(
+            return Err(SimError::bad_effect(
+                EffectId::GearBacklash,
                 "threshold_nm",
                 format!("{} entries", threshold_nm.len()),
                 format!(
@@ -160,7 +155,8 @@ impl GearBacklash {
         }
         for (i, &t) in threshold_nm.iter().enumerate() {
             if !(t.is_finite() && t >= 0.0) {
-                return Err(bad(
+                return Err(SimError::bad_effect(
+                    EffectId::GearBacklash,
                     format!("threshold_nm[{i}]"),
                     t,
                     "must be finite and ≥ 0 N m",
@@ -198,7 +194,8 @@ impl GearBacklash {
     /// Checks that the lengths fit a robot with `nq` joints.
     pub fn check_fits(&self, nq: usize) -> Result<()> {
         if self.dead_band_rad.len() != nq {
-            return Err(bad(
+            return Err(SimError::bad_effect(
+                EffectId::GearBacklash,
                 "dead_band_rad",
                 format!("{} entries", self.dead_band_rad.len()),
                 format!("the robot has {nq} joints"),
@@ -227,16 +224,15 @@ pub struct BacklashSection {
     /// Switch (default on).
     pub enabled: Option<bool>,
     /// Dead band (rad; m for prismatic joints), shape `[n]`.
-    pub dead_band_rad: crate::scenario::magnitude::Magnitude,
+    pub dead_band_rad: crate::magnitude::Magnitude,
     /// Flank rule; default `direction`.
     pub mode: Option<BacklashMode>,
     /// Gravity-mode holding-torque threshold (N m), shape `[n]`.
-    pub threshold_nm: Option<crate::scenario::magnitude::Magnitude>,
+    pub threshold_nm: Option<crate::magnitude::Magnitude>,
 }
 
 impl Effect for GearBacklash {
-    const NAME: &'static str = EFFECT;
-    const KEY: &'static str = "backlash";
+    const ID: EffectId = EffectId::GearBacklash;
     type Section = BacklashSection;
     type Stage = GearBacklash;
     type Scratch = ();
@@ -286,8 +282,6 @@ impl Effect for GearBacklash {
     fn prepare(&self, _cx: &Prepare<'_>) -> Result<GearBacklash> {
         Ok(self.clone())
     }
-
-    fn scratch(_stage: &GearBacklash, _nq: usize) {}
 
     /// Link-side angle shifted by half the dead band: `φᵢ −= sᵢ` (gravity torques, in gravity mode,
     /// from the last evaluation: the angles before backlash).

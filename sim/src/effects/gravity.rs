@@ -11,7 +11,7 @@ use nalgebra::{Point3, Vector3};
 pub(crate) type BodyMasses = [(f64, Vector3<f64>)];
 
 /// Workspace for gravity torques and the equilibrium solve on an `n`-joint chain.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, Default)]
 pub(crate) struct GravityWork {
     /// Joint axes in the base frame (unit).
     pub w: Vec<Vector3<f64>>,

@@ -36,6 +36,7 @@ use super::effect::{
 };
 use super::gravity::{BodyMasses, GravityWork, chain_gravity_hessian, chain_gravity_torques};
 use super::rapier_compliance::{RapierCache, RapierCompliance};
+use crate::effect_id::EffectId;
 use crate::error::{Result, SimError};
 use crate::lie::Pose;
 use crate::statics::Payload;
@@ -48,8 +49,6 @@ pub const MAX_ITERATIONS: usize = 50;
 /// Largest accepted sag `|qᵢ − θᵢ|` (rad or m): beyond it there is no equilibrium near the commanded
 /// pose worth the name (a real robot's sag is below 0.01 rad).
 pub const MAX_DEFLECTION_RAD: f64 = 0.5;
-
-use super::stiffness::{EFFECT, bad};
 
 /// Per-joint stiffness (see the module docs for the model).
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -102,7 +101,8 @@ impl TryFrom<JointComplianceSpec> for JointCompliance {
                 StiffnessEntry::Word(w) => match w.to_ascii_lowercase().as_str() {
                     "inf" | "infinity" | "rigid" => f64::INFINITY,
                     _ => {
-                        return Err(bad(
+                        return Err(SimError::bad_effect(
+                            EffectId::JointCompliance,
                             format!("stiffness_nm_per_rad[{i}]"),
                             format!("'{w}'"),
                             "must be a number (N m/rad) or \"inf\" for a rigid joint",
@@ -119,7 +119,7 @@ impl JointCompliance {
     /// Joint springs of stiffness `stiffness_nm_per_rad` (N m/rad or N/m, one per joint): each > 0, or
     /// `f64::INFINITY` for a rigid joint. Refuses NaN, zero and negative values.
     pub fn new(stiffness_nm_per_rad: Vec<f64>) -> Result<Self> {
-        super::stiffness::check_values(&stiffness_nm_per_rad)?;
+        crate::springs::stiffness::check_values(&stiffness_nm_per_rad)?;
         Ok(JointCompliance {
             stiffness_nm_per_rad,
         })
@@ -142,7 +142,7 @@ impl JointCompliance {
 
     /// Checks that the length fits a robot with `nq` joints.
     pub fn check_fits(&self, nq: usize) -> Result<()> {
-        super::stiffness::check_len(&self.stiffness_nm_per_rad, nq)
+        crate::springs::stiffness::check_len(&self.stiffness_nm_per_rad, nq)
     }
 }
 
@@ -415,7 +415,7 @@ pub struct ComplianceSection {
     /// Switch (default on).
     pub enabled: Option<bool>,
     /// Joint stiffness (N m/rad; N/m for prismatic joints), shape `[n]`.
-    pub stiffness_nm_per_rad: crate::scenario::magnitude::Magnitude,
+    pub stiffness_nm_per_rad: crate::magnitude::Magnitude,
 }
 
 /// The prepared compliance stage: `1/kᵢ` per joint and, with [`ComplianceSolver::Rapier`], the
@@ -429,13 +429,13 @@ pub struct ComplianceStage {
 
 impl ComplianceStage {
     /// The rapier settle options, when the stage settles in the physics engine.
-    pub fn rapier_options(&self) -> Option<crate::rapier_truth::SettleOptions> {
+    pub fn rapier_options(&self) -> Option<crate::springs::SettleOptions> {
         self.rapier.as_ref().map(|r| *r.options())
     }
 }
 
 /// Per-thread workspace of the compliance stage.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, Default)]
 pub struct ComplianceScratch {
     /// Chain angles after compliance (rad or m).
     theta: Vec<f64>,
@@ -448,8 +448,7 @@ pub struct ComplianceScratch {
 }
 
 impl Effect for JointCompliance {
-    const NAME: &'static str = EFFECT;
-    const KEY: &'static str = "compliance";
+    const ID: EffectId = EffectId::JointCompliance;
     type Section = ComplianceSection;
     type Stage = ComplianceStage;
     type Scratch = ComplianceScratch;
@@ -571,8 +570,8 @@ mod tests {
     use crate::robots;
     use crate::statics::{DEFAULT_GRAVITY, gravity_torques};
 
-    fn bodies(m: &crate::Model) -> Vec<(f64, Vector3<f64>)> {
-        m.bodies.iter().map(|b| (b.mass, b.com)).collect()
+    fn bodies(m: &crate::model::Model) -> Vec<(f64, Vector3<f64>)> {
+        m.bodies().iter().map(|b| (b.mass, b.com)).collect()
     }
 
     #[test]

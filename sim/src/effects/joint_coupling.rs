@@ -34,25 +34,15 @@
 //! The cable wind-up reported for the iiwa 7 in issue 12 (an independent generator's data set) left
 //! about 5 times the tracker noise floor unexplained, i.e. ratios of order 10⁻⁴.
 
-use super::effect::{Effect, Moved, Needs, Prepare, ResolveCx, State};
+use super::effect::{Effect, Moved, Prepare, ResolveCx, State};
 use super::joint_pairs;
+use crate::effect_id::EffectId;
 use crate::error::{Result, SimError};
-use crate::scenario::magnitude::Magnitude;
+use crate::magnitude::Magnitude;
 
 /// Largest accepted `|cᵢⱼ|` (rad/rad): a 5 % coupling is a different robot, not an error; more is
 /// almost surely a value in percent or degrees.
 pub const MAX_RATIO: f64 = 0.05;
-
-const EFFECT: &str = "joint_coupling";
-
-fn bad(field: impl Into<String>, value: impl ToString, problem: impl Into<String>) -> SimError {
-    SimError::BadEffect {
-        effect: EFFECT,
-        field: field.into(),
-        value: value.to_string(),
-        problem: problem.into(),
-    }
-}
 
 /// One term of [`JointCoupling`]: joint `joint`'s link angle gains `ratio_rad_per_rad · q_source`.
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -92,17 +82,19 @@ impl JointCoupling {
     /// non-finite ratios and `|ratio|` above [`MAX_RATIO`]. An empty list is no coupling.
     pub fn new(terms: Vec<CouplingTerm>) -> Result<Self> {
         for (k, t) in terms.iter().enumerate() {
-            joint_pairs::check_numbered(EFFECT, k, t.joint, t.source)?;
+            joint_pairs::check_numbered(EffectId::JointCoupling, k, t.joint, t.source)?;
             let r = t.ratio_rad_per_rad;
             if !r.is_finite() {
-                return Err(bad(
+                return Err(SimError::bad_effect(
+                    EffectId::JointCoupling,
                     format!("terms[{k}].ratio_rad_per_rad"),
                     r,
                     "not finite",
                 ));
             }
             if r.abs() > MAX_RATIO {
-                return Err(bad(
+                return Err(SimError::bad_effect(
+                    EffectId::JointCoupling,
                     format!("terms[{k}].ratio_rad_per_rad"),
                     r,
                     format!("coupling above {MAX_RATIO} rad/rad; give a ratio, not percent"),
@@ -112,7 +104,8 @@ impl JointCoupling {
                 .iter()
                 .any(|o| o.joint == t.joint && o.source == t.source)
             {
-                return Err(bad(
+                return Err(SimError::bad_effect(
+                    EffectId::JointCoupling,
                     format!("terms[{k}]"),
                     format!("[{}, {}]", t.joint, t.source),
                     "this (joint, source) pair is given twice",
@@ -138,7 +131,11 @@ impl JointCoupling {
 
     /// Checks that every joint number fits a robot with `nq` joints.
     pub fn check_fits(&self, nq: usize) -> Result<()> {
-        joint_pairs::check_fits(EFFECT, self.terms.iter().map(|t| (t.joint, t.source)), nq)
+        joint_pairs::check_fits(
+            EffectId::JointCoupling,
+            self.terms.iter().map(|t| (t.joint, t.source)),
+            nq,
+        )
     }
 }
 
@@ -160,8 +157,7 @@ pub struct CouplingSection {
 }
 
 impl Effect for JointCoupling {
-    const NAME: &'static str = EFFECT;
-    const KEY: &'static str = "coupling";
+    const ID: EffectId = EffectId::JointCoupling;
     type Section = CouplingSection;
     type Stage = JointCoupling;
     type Scratch = ();
@@ -187,10 +183,6 @@ impl Effect for JointCoupling {
         Ok(coupling)
     }
 
-    fn needs(&self) -> Needs {
-        Needs::default()
-    }
-
     fn check_lengths(&self, nq: usize) -> Result<()> {
         self.check_fits(nq)
     }
@@ -198,8 +190,6 @@ impl Effect for JointCoupling {
     fn prepare(&self, _cx: &Prepare<'_>) -> Result<JointCoupling> {
         Ok(self.clone())
     }
-
-    fn scratch(_stage: &JointCoupling, _nq: usize) {}
 
     /// Link-side angles shifted by the coupling terms: `φᵢ += cᵢⱼ qⱼ` (reported angles), and the same
     /// on the link-side positions.

@@ -2,33 +2,19 @@
 //! [`super::coupled_transmission`]): terms that name a `joint` and a `source` joint (1-based), their
 //! checks, and the translation of the constructor's field names into the scenario section's keys.
 
+use crate::effect_id::EffectId;
 use crate::error::{Result, SimError};
-
-/// A [`SimError::BadEffect`] of `effect`.
-fn bad(
-    effect: &'static str,
-    field: String,
-    value: impl ToString,
-    problem: impl Into<String>,
-) -> SimError {
-    SimError::BadEffect {
-        effect,
-        field,
-        value: value.to_string(),
-        problem: problem.into(),
-    }
-}
 
 /// Checks that term `k`'s `joint` and `source` are numbered from 1.
 pub(crate) fn check_numbered(
-    effect: &'static str,
+    effect: EffectId,
     k: usize,
     joint: usize,
     source: usize,
 ) -> Result<()> {
     for (name, j) in [("joint", joint), ("source", source)] {
         if j == 0 {
-            return Err(bad(
+            return Err(SimError::bad_effect(
                 effect,
                 format!("terms[{k}].{name}"),
                 0,
@@ -41,14 +27,14 @@ pub(crate) fn check_numbered(
 
 /// Checks that every term's `(joint, source)` fits a robot with `nq` joints.
 pub(crate) fn check_fits(
-    effect: &'static str,
+    effect: EffectId,
     pairs: impl IntoIterator<Item = (usize, usize)>,
     nq: usize,
 ) -> Result<()> {
     for (k, (joint, source)) in pairs.into_iter().enumerate() {
         for (name, j) in [("joint", joint), ("source", source)] {
             if j > nq {
-                return Err(bad(
+                return Err(SimError::bad_effect(
                     effect,
                     format!("terms[{k}].{name}"),
                     j,

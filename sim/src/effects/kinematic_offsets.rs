@@ -30,7 +30,8 @@
 //! The base frame is the nominal robot's base (the frame the tracker-to-base transform refers to).
 
 use super::chain::Chain;
-use super::effect::{Effect, Moved, Needs, Prepare, ResolveCx, State};
+use super::effect::{Effect, Moved, Prepare, ResolveCx, State};
+use crate::effect_id::EffectId;
 use crate::error::{Result, SimError};
 use crate::lie::{adjoint_apply, exp_twist};
 use crate::model::Model;
@@ -41,17 +42,6 @@ use nalgebra::{Vector3, Vector6};
 pub const MAX_ROTATION_ERROR_RAD: f64 = 0.5;
 /// Largest accepted translation part `|v|` of an error twist (m); more is almost surely millimetres.
 pub const MAX_TRANSLATION_ERROR_M: f64 = 1.0;
-
-const EFFECT: &str = "kinematic_offsets";
-
-fn bad(field: impl Into<String>, value: impl ToString, problem: impl Into<String>) -> SimError {
-    SimError::BadEffect {
-        effect: EFFECT,
-        field: field.into(),
-        value: value.to_string(),
-        problem: problem.into(),
-    }
-}
 
 /// Geometric errors of the real robot (see the module docs for the model).
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -96,12 +86,18 @@ impl TryFrom<KinematicOffsetsSpec> for KinematicOffsets {
 fn check_twist(field: &str, xi: &[f64; 6]) -> Result<()> {
     for (k, v) in xi.iter().enumerate() {
         if !v.is_finite() {
-            return Err(bad(format!("{field}[{k}]"), v, "not finite"));
+            return Err(SimError::bad_effect(
+                EffectId::KinematicOffsets,
+                format!("{field}[{k}]"),
+                v,
+                "not finite",
+            ));
         }
     }
     let w = Vector3::new(xi[0], xi[1], xi[2]).norm();
     if w > MAX_ROTATION_ERROR_RAD {
-        return Err(bad(
+        return Err(SimError::bad_effect(
+            EffectId::KinematicOffsets,
             format!("{field} |ω|"),
             w,
             format!(
@@ -111,7 +107,8 @@ fn check_twist(field: &str, xi: &[f64; 6]) -> Result<()> {
     }
     let v = Vector3::new(xi[3], xi[4], xi[5]).norm();
     if v > MAX_TRANSLATION_ERROR_M {
-        return Err(bad(
+        return Err(SimError::bad_effect(
+            EffectId::KinematicOffsets,
             format!("{field} |v|"),
             v,
             format!("translation error above {MAX_TRANSLATION_ERROR_M} m; give it in m, not mm"),
@@ -136,7 +133,8 @@ impl KinematicOffsets {
         tool_twist: [f64; 6],
     ) -> Result<Self> {
         if zero_offsets.len() != joint_twists.len() {
-            return Err(bad(
+            return Err(SimError::bad_effect(
+                EffectId::KinematicOffsets,
                 "zero_offsets",
                 format!("{} entries", zero_offsets.len()),
                 format!(
@@ -150,10 +148,16 @@ impl KinematicOffsets {
         }
         for (i, &d) in zero_offsets.iter().enumerate() {
             if !d.is_finite() {
-                return Err(bad(format!("zero_offsets[{i}]"), d, "not finite"));
+                return Err(SimError::bad_effect(
+                    EffectId::KinematicOffsets,
+                    format!("zero_offsets[{i}]"),
+                    d,
+                    "not finite",
+                ));
             }
             if d.abs() > MAX_ROTATION_ERROR_RAD {
-                return Err(bad(
+                return Err(SimError::bad_effect(
+                    EffectId::KinematicOffsets,
                     format!("zero_offsets[{i}]"),
                     d,
                     format!(
@@ -205,7 +209,8 @@ impl KinematicOffsets {
     /// Checks that the lengths fit a robot with `nq` joints.
     pub fn check_fits(&self, nq: usize) -> Result<()> {
         if self.joint_twists.len() != nq {
-            return Err(bad(
+            return Err(SimError::bad_effect(
+                EffectId::KinematicOffsets,
                 "joint_twists",
                 format!("{} entries", self.joint_twists.len()),
                 format!("the robot has {nq} joints"),
@@ -219,7 +224,7 @@ impl KinematicOffsets {
     pub fn real_screws(&self, model: &Model) -> Result<Vec<Vector6<f64>>> {
         self.check_fits(model.nq())?;
         Ok(model
-            .joints
+            .joints()
             .iter()
             .zip(&self.joint_twists)
             .map(|(j, xi)| adjoint_apply(&exp_twist(&vec6(xi)), &j.screw))
@@ -234,19 +239,19 @@ pub struct KinematicSection {
     /// Switch (default on).
     pub enabled: Option<bool>,
     /// Rotation part ω of each joint's error twist (rad, base frame), shape `[n][3]`.
-    pub joint_rotation_rad: Option<crate::scenario::magnitude::Magnitude>,
+    pub joint_rotation_rad: Option<crate::magnitude::Magnitude>,
     /// Translation part v of each joint's error twist (m, base frame), shape `[n][3]`.
-    pub joint_translation_m: Option<crate::scenario::magnitude::Magnitude>,
+    pub joint_translation_m: Option<crate::magnitude::Magnitude>,
     /// Joint zero offsets (rad; m for prismatic joints), shape `[n]`.
-    pub zero_offset_rad: Option<crate::scenario::magnitude::Magnitude>,
+    pub zero_offset_rad: Option<crate::magnitude::Magnitude>,
     /// Base error twist rotation (rad), shape `[3]`.
-    pub base_rotation_rad: Option<crate::scenario::magnitude::Magnitude>,
+    pub base_rotation_rad: Option<crate::magnitude::Magnitude>,
     /// Base error twist translation (m), shape `[3]`.
-    pub base_translation_m: Option<crate::scenario::magnitude::Magnitude>,
+    pub base_translation_m: Option<crate::magnitude::Magnitude>,
     /// Tool error twist rotation (rad, flange frame), shape `[3]`.
-    pub tool_rotation_rad: Option<crate::scenario::magnitude::Magnitude>,
+    pub tool_rotation_rad: Option<crate::magnitude::Magnitude>,
     /// Tool error twist translation (m, flange frame), shape `[3]`.
-    pub tool_translation_m: Option<crate::scenario::magnitude::Magnitude>,
+    pub tool_translation_m: Option<crate::magnitude::Magnitude>,
 }
 
 /// The prepared kinematic-offsets stage: the real chain (thermally grown when thermal drift is
@@ -271,8 +276,7 @@ impl KinematicOffsets {
 }
 
 impl Effect for KinematicOffsets {
-    const NAME: &'static str = EFFECT;
-    const KEY: &'static str = "kinematic";
+    const ID: EffectId = EffectId::KinematicOffsets;
     type Section = KinematicSection;
     type Stage = KinematicStage;
     type Scratch = ();
@@ -311,10 +315,6 @@ impl Effect for KinematicOffsets {
         ))
     }
 
-    fn needs(&self) -> Needs {
-        Needs::default()
-    }
-
     fn check_lengths(&self, nq: usize) -> Result<()> {
         self.check_fits(nq)
     }
@@ -325,8 +325,6 @@ impl Effect for KinematicOffsets {
             zero_offsets: self.zero_offsets.clone(),
         })
     }
-
-    fn scratch(_stage: &KinematicStage, _nq: usize) {}
 
     /// Real screws, base and tool errors (the stage's chain replaces the grown nominal one) and zero
     /// offsets `φᵢ += δqᵢ`.
@@ -380,7 +378,7 @@ mod tests {
         .unwrap();
         let c = kin.real_chain(&m, None);
         let screws = kin.real_screws(&m).unwrap();
-        let home = m.home_flange * exp_twist(&vec6(&kin.tool_twist));
+        let home = m.home_flange() * exp_twist(&vec6(&kin.tool_twist));
         let base = exp_twist(&vec6(&kin.base_twist));
         let mut poses = vec![Pose::identity(); 7];
         for k in 0..20 {
@@ -396,7 +394,7 @@ mod tests {
             let mut t = base;
             for (i, s) in screws.iter().enumerate() {
                 let expect = adjoint_apply(&t, s);
-                let w = poses[i].rotation * m.joints[i].axis;
+                let w = poses[i].rotation * m.joints()[i].axis;
                 let v = poses[i].translation.vector.cross(&w);
                 let got = Vector6::new(w.x, w.y, w.z, v.x, v.y, v.z);
                 assert!((got - expect).amax() < 1e-14, "joint {i}");
@@ -420,7 +418,7 @@ mod tests {
         let alpha: Vec<f64> = (0..8).map(|k| 20e-6 + 1e-6 * k as f64).collect();
         let c = kin.real_chain(&m, Some(&alpha));
         let dt = 7.5;
-        let real = c.model_at(&m, dt);
+        let real = c.model_at(&m, dt).unwrap();
         let mut d = Data::new(&real);
         let mut poses = vec![Pose::identity(); 7];
         for k in 0..10 {
@@ -435,16 +433,16 @@ mod tests {
                 assert!((p.translation.vector - r.translation.vector).amax() < 1e-14);
                 assert!((p.rotation.matrix() - r.rotation.matrix()).amax() < 1e-14);
             }
-            let b = poe_pose(&real.screws(), &real.home_flange, &q);
+            let b = poe_pose(&real.screws(), &real.home_flange(), &q);
             assert!((a.translation.vector - b.translation.vector).amax() < 1e-14);
             assert!((a.rotation.matrix() - b.rotation.matrix()).amax() < 1e-14);
         }
         // The growth is really in it: at another temperature the flange moves.
-        let cold = c.model_at(&m, 0.0);
+        let cold = c.model_at(&m, 0.0).unwrap();
         assert!(
-            (cold.home_flange.translation.vector - real.home_flange.translation.vector).norm()
+            (cold.home_flange().translation.vector - real.home_flange().translation.vector).norm()
                 > 1e-5
         );
-        assert_eq!(real.bodies, m.bodies);
+        assert_eq!(real.bodies(), m.bodies());
     }
 }

@@ -70,10 +70,11 @@ use super::effect::{ComplianceSolver, Effect, Moved, Needs, Prepare, ResolveCx, 
 use super::gravity::GravityWork;
 use super::joint_compliance::{Equilibrium, NewtonSchedule};
 use super::rapier_compliance::{RapierCache, RapierCompliance};
+use crate::effect_id::EffectId;
 use crate::error::{Result, SimError};
 use crate::lie::Pose;
+use crate::magnitude::Magnitude;
 use crate::model::Joint;
-use crate::scenario::magnitude::Magnitude;
 use nalgebra::{Matrix3, Vector3};
 
 /// Steps larger than this (rad) refresh the Newton matrix of the joint + deflection solve. It starts
@@ -83,8 +84,8 @@ use nalgebra::{Matrix3, Vector3};
 /// pays for more factorizations.
 pub const REFRESH_STEP_RAD: f64 = 1e-2;
 
-use super::deflection_compliance::{EFFECT, bad, check_len, check_values};
-pub use super::deflection_compliance::{MAX_COMPLIANCE_RAD_PER_NM, deflection_axes};
+pub use crate::springs::deflection::{MAX_COMPLIANCE_RAD_PER_NM, deflection_axes};
+use crate::springs::deflection::{check_len, check_values};
 
 /// Per-joint compliance across the joint axis (see the module docs for the model).
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -162,7 +163,7 @@ pub struct DeflectionStage {
 }
 
 /// Per-thread workspace of the deflection stage.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, Default)]
 pub struct DeflectionScratch {
     /// Prepared rapier arms (rapier truth only).
     rapier: RapierCache,
@@ -198,8 +199,7 @@ fn hinge(axis: Vector3<f64>) -> ChainJoint {
 }
 
 impl Effect for LinkDeflection {
-    const NAME: &'static str = EFFECT;
-    const KEY: &'static str = "deflection";
+    const ID: EffectId = EffectId::LinkDeflection;
     type Section = DeflectionSection;
     type Stage = DeflectionStage;
     type Scratch = DeflectionScratch;
@@ -241,7 +241,8 @@ impl Effect for LinkDeflection {
                 )?)
             }
             (ComplianceSolver::Rapier(_), None) => {
-                return Err(bad(
+                return Err(SimError::bad_effect(
+                    EffectId::LinkDeflection,
                     "compliance_rad_per_nm",
                     "given",
                     "the rapier truth settles joints and deflection together: give [effects.compliance] too",
@@ -255,7 +256,7 @@ impl Effect for LinkDeflection {
         let mut joint_index = Vec::new();
         let mut frame_index = Vec::new();
         for (i, (j, c)) in model
-            .joints
+            .joints()
             .iter()
             .zip(&self.compliance_rad_per_nm)
             .enumerate()
@@ -275,9 +276,9 @@ impl Effect for LinkDeflection {
             }
             let last = joints.len() - 1;
             frame_index.push(last);
-            bodies[last] = (model.bodies[i].mass, model.bodies[i].com);
+            bodies[last] = (model.bodies()[i].mass, model.bodies()[i].com);
         }
-        let f = &model.flange_offset;
+        let f = &model.flange_offset();
         let template = Chain {
             base: None,
             joints,

@@ -43,11 +43,11 @@
 //!
 //! # One effect, one file
 //!
-//! Each effect is one module implementing [`Effect`] (see [`effect`]: its name and key, its scenario
-//! section, its parameters, the columns it needs, how it acts on the pipeline) and one line in the
-//! registry at the end of this module's source, which generates [`EffectId`], the fields of
-//! [`Effects`], [`EffectsSection`] and [`Contributions`], and the stage loop of [`Truth::target`]
-//! (statically dispatched, in registry order). The registry order is the stage order above.
+//! Each effect is one module implementing [`Effect`] (see [`effect`]: its id, its scenario section,
+//! its parameters, the columns it needs, how it acts on the pipeline) and one line in the registry of
+//! [`crate::effect_id`], which gives [`EffectId`] and, expanded here, the fields of [`Effects`],
+//! [`EffectsSection`] and [`Contributions`], and the stage loop of [`Truth::target`] (statically
+//! dispatched, in registry order). The registry order is the stage order above.
 //!
 //! For many measurements, prepare once with [`Truth::new`] and evaluate with [`Truth::target`] and a
 //! [`TruthScratch`]: no allocation per pose; [`true_target`] is the one-shot wrapper.
@@ -86,7 +86,6 @@ use nalgebra::{Point3, Vector3};
 
 pub mod chain;
 pub mod coupled_transmission;
-pub(crate) mod deflection_compliance;
 pub mod effect;
 pub mod gear_backlash;
 pub(crate) mod gravity;
@@ -96,42 +95,21 @@ mod joint_pairs;
 pub mod kinematic_offsets;
 pub mod link_deflection;
 pub mod rapier_compliance;
-pub(crate) mod stiffness;
 pub mod thermal_drift;
 pub mod transmission_error;
 
+pub use crate::effect_id::EffectId;
 pub use effect::{ComplianceSolver, Conditions, Effect, Moved, Needs, Prepare, ResolveCx, State};
 
-/// Generates, from one line per effect (`key: Type => Id`, in stage order), the typed ids, the
-/// containers and the statically dispatched stage loop.
+/// Generates, from the registry ([`crate::effect_id`]: one line per effect, `key: Type => Id =
+/// "name"`, in stage order), the containers and the statically dispatched stage loop.
 macro_rules! registry {
-    ($( $(#[$doc:meta])* $key:ident : $ty:ty => $id:ident ),+ $(,)?) => {
-        /// Typed identity of an injected effect; [`EffectId::ALL`] lists them in stage order.
-        #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, serde::Serialize)]
-        #[serde(rename_all = "snake_case")]
-        pub enum EffectId {
-            $( $(#[$doc])* $id, )+
-        }
-
-        impl EffectId {
-            /// Every effect, in stage order.
-            pub const ALL: &'static [EffectId] = &[$(EffectId::$id),+];
-
-            /// Name in summaries and errors (`gear_backlash`, [`Effect::NAME`]).
-            pub fn name(self) -> &'static str {
-                match self {
-                    $( EffectId::$id => <$ty as Effect>::NAME, )+
-                }
-            }
-
-            /// Key of the scenario section, `truth.json` entry and `truth.parquet` columns
-            /// (`backlash`, [`Effect::KEY`]).
-            pub fn key(self) -> &'static str {
-                match self {
-                    $( EffectId::$id => <$ty as Effect>::KEY, )+
-                }
-            }
-        }
+    ($( $(#[$doc:meta])* $key:ident : $ty:ty => $id:ident = $name:literal ),+ $(,)?) => {
+        // Each effect's own id is its registry line's.
+        $( const _: () = assert!(
+            matches!(<$ty as Effect>::ID, EffectId::$id),
+            concat!("Effect::ID of ", stringify!($ty), " is not EffectId::", stringify!($id)),
+        ); )+
 
         /// Every effect injected into one simulated robot; `None` = effect absent. Unknown keys are
         /// refused when deserializing, so a misspelt effect is an error rather than silently absent.
@@ -230,7 +208,6 @@ macro_rules! registry {
         }
 
         $( impl Registered for $ty {
-            const ID: EffectId = EffectId::$id;
             fn get(effects: &Effects) -> Option<&Self> {
                 effects.$key.as_ref()
             }
@@ -298,11 +275,9 @@ macro_rules! registry {
     };
 }
 
-/// An effect of the registry: its typed id and where it sits in [`Effects`] and [`EffectsSection`].
-/// Implemented by the registry for every effect.
+/// An effect of the registry: where it sits in [`Effects`] and [`EffectsSection`] (its typed id is
+/// [`Effect::ID`]). Implemented by the registry for every effect.
 pub trait Registered: Effect {
-    /// Its typed id.
-    const ID: EffectId;
     /// Its entry in `effects`.
     fn get(effects: &Effects) -> Option<&Self>;
     /// Its entry in `effects`, to set.
@@ -464,7 +439,7 @@ impl Truth {
 
     /// Prepares the real robot as [`Truth::new`], with the compliance stage computed by `solver`.
     /// [`ComplianceSolver::Rapier`] fails without a compliance effect (there is nothing for the
-    /// engine to settle) and for bad [`crate::rapier_truth::SettleOptions`].
+    /// engine to settle) and for bad [`crate::springs::SettleOptions`].
     pub fn with_solver(
         model: &Model,
         effects: &Effects,
@@ -472,13 +447,12 @@ impl Truth {
     ) -> Result<Truth> {
         effects.check_fits(model)?;
         if matches!(solver, ComplianceSolver::Rapier(_)) && effects.compliance.is_none() {
-            return Err(SimError::BadEffect {
-                effect: "joint_compliance",
-                field: "stiffness_nm_per_rad".into(),
-                value: "absent".into(),
-                problem: "the rapier truth settles the compliant joints: give a compliance effect"
-                    .into(),
-            });
+            return Err(SimError::bad_effect(
+                EffectId::JointCompliance,
+                "stiffness_nm_per_rad",
+                "absent",
+                "the rapier truth settles the compliant joints: give a compliance effect",
+            ));
         }
         let growth = effects.link_growth_per_k();
         let cx = Prepare {
@@ -496,7 +470,7 @@ impl Truth {
             grown: Chain::grown(model, growth),
             stages,
             needs: effects.needs(),
-            bodies: model.bodies.iter().map(|b| (b.mass, b.com)).collect(),
+            bodies: model.bodies().iter().map(|b| (b.mass, b.com)).collect(),
             solver,
         })
     }
@@ -647,7 +621,7 @@ pub fn true_target(
     cond: &Conditions<'_>,
     p_flange: &Vector3<f64>,
     gravity: &Vector3<f64>,
-) -> crate::Result<TrueTarget> {
+) -> crate::error::Result<TrueTarget> {
     let truth = Truth::new(model, effects)?;
     let mut scratch = truth.scratch();
     let t = truth.target(cond, p_flange, gravity, &mut scratch)?;
@@ -661,24 +635,6 @@ pub fn true_target(
     })
 }
 
-// The registry: one line per effect, in stage order (see the module docs). Adding an effect is one
-// new module above and one line here.
-registry! {
-    /// Thermal drift.
-    thermal: thermal_drift::ThermalDrift => ThermalDrift,
-    /// Kinematic offsets (geometric errors).
-    kinematic: kinematic_offsets::KinematicOffsets => KinematicOffsets,
-    /// Transmission error (periodic in the joint's own angle).
-    transmission: transmission_error::TransmissionError => TransmissionError,
-    /// Joint coupling (link angle error proportional to a joint angle).
-    coupling: joint_coupling::JointCoupling => JointCoupling,
-    /// Coupled transmission error (link angle error periodic in another joint's angle).
-    coupled_transmission: coupled_transmission::CoupledTransmission => CoupledTransmission,
-    /// Gear backlash.
-    backlash: gear_backlash::GearBacklash => GearBacklash,
-    /// Joint compliance.
-    compliance: joint_compliance::JointCompliance => JointCompliance,
-    /// Link deflection (compliance across the joint axes), settled with the joint springs; the last
-    /// stage.
-    deflection: link_deflection::LinkDeflection => LinkDeflection,
-}
+// The registry's lines (one per effect, in stage order) are in `crate::effect_id`; adding an effect
+// is one new module above and one line there.
+crate::effect_id::for_each_effect!(registry);

@@ -25,7 +25,8 @@ use super::chain::Chain;
 use crate::error::Result;
 use crate::lie::Pose;
 use crate::model::Model;
-use crate::rapier_truth::{RapierArm, RapierWorkspace, SettleOptions};
+use crate::rapier_truth::{RapierArm, RapierWorkspace};
+use crate::springs::SettleOptions;
 use crate::statics::Payload;
 use nalgebra::Vector3;
 
@@ -160,7 +161,7 @@ impl RapierCompliance {
         let k = match hit {
             Some(k) => k,
             None => {
-                let real = chain.model_at(&self.nominal, dt);
+                let real = chain.model_at(&self.nominal, dt)?;
                 let arm = RapierArm::with_deflection(
                     &real,
                     &self.stiffness,

@@ -27,6 +27,7 @@
 //! `α` has `n + 1` entries (links 0 … n), `β` has `n` (joints 1 … n, 0-based in the vectors).
 
 use super::effect::{Effect, Moved, Needs, Prepare, ResolveCx, State};
+use crate::effect_id::EffectId;
 use crate::error::{Result, SimError};
 
 /// Linear expansion coefficient of aluminium alloys (1/K), the default link material.
@@ -34,17 +35,6 @@ pub const ALUMINIUM_ALPHA_PER_K: f64 = 23e-6;
 
 /// Largest accepted |α| (1/K); no structural material comes near it, and `23` meaning ppm/K is refused.
 pub const MAX_ABS_ALPHA_PER_K: f64 = 1e-3;
-
-const EFFECT: &str = "thermal_drift";
-
-fn bad(field: impl Into<String>, value: impl ToString, problem: impl Into<String>) -> SimError {
-    SimError::BadEffect {
-        effect: EFFECT,
-        field: field.into(),
-        value: value.to_string(),
-        problem: problem.into(),
-    }
-}
 
 /// Link growth and joint-zero drift with temperature (see the module docs for the model).
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -84,10 +74,16 @@ impl ThermalDrift {
     /// not differ by one.
     pub fn new(t_ref_c: f64, alpha_per_k: Vec<f64>, beta_rad_per_k: Vec<f64>) -> Result<Self> {
         if !t_ref_c.is_finite() {
-            return Err(bad("t_ref_c", t_ref_c, "must be a finite temperature (°C)"));
+            return Err(SimError::bad_effect(
+                EffectId::ThermalDrift,
+                "t_ref_c",
+                t_ref_c,
+                "must be a finite temperature (°C)",
+            ));
         }
         if alpha_per_k.len() != beta_rad_per_k.len() + 1 {
-            return Err(bad(
+            return Err(SimError::bad_effect(
+                EffectId::ThermalDrift,
                 "alpha_per_k",
                 format!("{} entries", alpha_per_k.len()),
                 format!(
@@ -99,10 +95,16 @@ impl ThermalDrift {
         }
         for (k, &a) in alpha_per_k.iter().enumerate() {
             if !a.is_finite() {
-                return Err(bad(format!("alpha_per_k[{k}]"), a, "not finite"));
+                return Err(SimError::bad_effect(
+                    EffectId::ThermalDrift,
+                    format!("alpha_per_k[{k}]"),
+                    a,
+                    "not finite",
+                ));
             }
             if a.abs() >= MAX_ABS_ALPHA_PER_K {
-                return Err(bad(
+                return Err(SimError::bad_effect(
+                    EffectId::ThermalDrift,
                     format!("alpha_per_k[{k}]"),
                     a,
                     "is not a plausible expansion coefficient; give it in 1/K (aluminium: 23e-6)",
@@ -111,7 +113,12 @@ impl ThermalDrift {
         }
         for (i, &b) in beta_rad_per_k.iter().enumerate() {
             if !b.is_finite() {
-                return Err(bad(format!("beta_rad_per_k[{i}]"), b, "not finite"));
+                return Err(SimError::bad_effect(
+                    EffectId::ThermalDrift,
+                    format!("beta_rad_per_k[{i}]"),
+                    b,
+                    "not finite",
+                ));
             }
         }
         Ok(ThermalDrift {
@@ -155,7 +162,8 @@ impl ThermalDrift {
     /// Checks that the lengths fit a robot with `nq` joints.
     pub fn check_fits(&self, nq: usize) -> Result<()> {
         if self.beta_rad_per_k.len() != nq {
-            return Err(bad(
+            return Err(SimError::bad_effect(
+                EffectId::ThermalDrift,
                 "beta_rad_per_k",
                 format!("{} entries", self.beta_rad_per_k.len()),
                 format!("the robot has {nq} joints"),
@@ -208,13 +216,24 @@ impl WarmUp {
     /// Checks the fields (for values built as a struct literal or deserialized).
     pub fn validate(&self) -> Result<()> {
         if !self.t0_c.is_finite() {
-            return Err(bad("warm_up.t0_c", self.t0_c, "not finite"));
+            return Err(SimError::bad_effect(
+                EffectId::ThermalDrift,
+                "warm_up.t0_c",
+                self.t0_c,
+                "not finite",
+            ));
         }
         if !self.delta_c.is_finite() {
-            return Err(bad("warm_up.delta_c", self.delta_c, "not finite"));
+            return Err(SimError::bad_effect(
+                EffectId::ThermalDrift,
+                "warm_up.delta_c",
+                self.delta_c,
+                "not finite",
+            ));
         }
         if !(self.tau_s.is_finite() && self.tau_s > 0.0) {
-            return Err(bad(
+            return Err(SimError::bad_effect(
+                EffectId::ThermalDrift,
                 "warm_up.tau_s",
                 self.tau_s,
                 "must be a finite time constant > 0 s",
@@ -259,7 +278,8 @@ impl TemperatureSchedule {
     /// A schedule from `(t_s, temp_c)` points: at least one, all finite, times strictly increasing.
     pub fn new(points: Vec<(f64, f64)>) -> Result<Self> {
         if points.is_empty() {
-            return Err(bad(
+            return Err(SimError::bad_effect(
+                EffectId::ThermalDrift,
                 "schedule",
                 "[]",
                 "needs at least one (t_s, temp_c) point",
@@ -267,13 +287,24 @@ impl TemperatureSchedule {
         }
         for (k, &(t, c)) in points.iter().enumerate() {
             if !t.is_finite() {
-                return Err(bad(format!("schedule[{k}].t_s"), t, "not finite"));
+                return Err(SimError::bad_effect(
+                    EffectId::ThermalDrift,
+                    format!("schedule[{k}].t_s"),
+                    t,
+                    "not finite",
+                ));
             }
             if !c.is_finite() {
-                return Err(bad(format!("schedule[{k}].temp_c"), c, "not finite"));
+                return Err(SimError::bad_effect(
+                    EffectId::ThermalDrift,
+                    format!("schedule[{k}].temp_c"),
+                    c,
+                    "not finite",
+                ));
             }
             if k > 0 && t <= points[k - 1].0 {
-                return Err(bad(
+                return Err(SimError::bad_effect(
+                    EffectId::ThermalDrift,
                     format!("schedule[{k}].t_s"),
                     t,
                     format!(
@@ -323,9 +354,12 @@ impl TemperatureProfile {
     /// Checks the profile's values.
     pub fn validate(&self) -> Result<()> {
         match self {
-            TemperatureProfile::Constant(c) if !c.is_finite() => {
-                Err(bad("constant", c, "not finite"))
-            }
+            TemperatureProfile::Constant(c) if !c.is_finite() => Err(SimError::bad_effect(
+                EffectId::ThermalDrift,
+                "constant",
+                c,
+                "not finite",
+            )),
             TemperatureProfile::Constant(_) | TemperatureProfile::Schedule(_) => Ok(()),
             TemperatureProfile::WarmUp(w) => w.validate(),
         }
@@ -350,14 +384,13 @@ pub struct ThermalSection {
     /// Temperature at which the nominal model is exact (°C); default 20.
     pub t_ref_c: Option<f64>,
     /// Link expansion coefficients (1/K), shape `[n + 1]`.
-    pub alpha_per_k: crate::scenario::magnitude::Magnitude,
+    pub alpha_per_k: crate::magnitude::Magnitude,
     /// Joint-zero drift (rad/K), shape `[n]`; default 0.
-    pub beta_rad_per_k: Option<crate::scenario::magnitude::Magnitude>,
+    pub beta_rad_per_k: Option<crate::magnitude::Magnitude>,
 }
 
 impl Effect for ThermalDrift {
-    const NAME: &'static str = EFFECT;
-    const KEY: &'static str = "thermal";
+    const ID: EffectId = EffectId::ThermalDrift;
     type Section = ThermalSection;
     type Stage = ThermalDrift;
     type Scratch = ();
@@ -391,8 +424,6 @@ impl Effect for ThermalDrift {
     fn prepare(&self, _cx: &Prepare<'_>) -> Result<ThermalDrift> {
         Ok(self.clone())
     }
-
-    fn scratch(_stage: &ThermalDrift, _nq: usize) {}
 
     /// Grown links (the chain every stage evaluates carries `α`; here `ΔT` is set) and drifted zeros
     /// `φᵢ += βᵢ ΔT`.

@@ -40,9 +40,10 @@
 //! arc-seconds (`e` in µm, `D` in mm; Heidenhain, "Angle Encoders without Integral Bearing"), so
 //! 5 µm on a 50 mm disc gives 41″ ≈ 2·10⁻⁴ rad at one cycle per revolution.
 
-use super::effect::{Effect, Moved, Needs, Prepare, ResolveCx, State};
+use super::effect::{Effect, Moved, Prepare, ResolveCx, State};
+use crate::effect_id::EffectId;
 use crate::error::{Result, SimError};
-use crate::scenario::magnitude::Magnitude;
+use crate::magnitude::Magnitude;
 
 /// Largest accepted harmonic order (cycles per revolution).
 pub const MAX_ORDER: u32 = 1000;
@@ -51,17 +52,6 @@ pub const MAX_ORDER: u32 = 1000;
 pub const MAX_AMPLITUDE_RAD: f64 = 0.01;
 /// The default harmonic orders: once, twice and three times per revolution.
 pub const DEFAULT_ORDERS: [u32; 3] = [1, 2, 3];
-
-const EFFECT: &str = "transmission_error";
-
-fn bad(field: impl Into<String>, value: impl ToString, problem: impl Into<String>) -> SimError {
-    SimError::BadEffect {
-        effect: EFFECT,
-        field: field.into(),
-        value: value.to_string(),
-        problem: problem.into(),
-    }
-}
 
 /// Per-joint periodic transmission error (see the module docs for the model).
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -102,7 +92,8 @@ impl TryFrom<TransmissionErrorSpec> for TransmissionError {
 
 fn check_orders(harmonics: &[u32]) -> Result<()> {
     if harmonics.is_empty() {
-        return Err(bad(
+        return Err(SimError::bad_effect(
+            EffectId::TransmissionError,
             "harmonics",
             "[]",
             "give at least one order (e.g. [1, 2, 3])",
@@ -110,14 +101,20 @@ fn check_orders(harmonics: &[u32]) -> Result<()> {
     }
     for (k, &h) in harmonics.iter().enumerate() {
         if h == 0 || h > MAX_ORDER {
-            return Err(bad(
+            return Err(SimError::bad_effect(
+                EffectId::TransmissionError,
                 format!("harmonics[{k}]"),
                 h,
                 format!("must be a whole number of cycles per revolution, 1 … {MAX_ORDER}"),
             ));
         }
         if harmonics[..k].contains(&h) {
-            return Err(bad(format!("harmonics[{k}]"), h, "given twice"));
+            return Err(SimError::bad_effect(
+                EffectId::TransmissionError,
+                format!("harmonics[{k}]"),
+                h,
+                "given twice",
+            ));
         }
     }
     Ok(())
@@ -136,7 +133,8 @@ impl TransmissionError {
         check_orders(&harmonics)?;
         let nh = harmonics.len();
         if phase_rad.len() != amplitude_rad.len() {
-            return Err(bad(
+            return Err(SimError::bad_effect(
+                EffectId::TransmissionError,
                 "phase_rad",
                 format!("{} rows", phase_rad.len()),
                 format!(
@@ -148,14 +146,20 @@ impl TransmissionError {
         for (i, (a_row, p_row)) in amplitude_rad.iter().zip(&phase_rad).enumerate() {
             for (name, row) in [("amplitude_rad", a_row), ("phase_rad", p_row)] {
                 if row.len() != nh {
-                    return Err(bad(
+                    return Err(SimError::bad_effect(
+                        EffectId::TransmissionError,
                         format!("{name}[{i}]"),
                         format!("{} entries", row.len()),
                         format!("needs one per harmonic ({nh})"),
                     ));
                 }
                 if let Some((k, v)) = row.iter().enumerate().find(|(_, v)| !v.is_finite()) {
-                    return Err(bad(format!("{name}[{i}][{k}]"), v, "not finite"));
+                    return Err(SimError::bad_effect(
+                        EffectId::TransmissionError,
+                        format!("{name}[{i}][{k}]"),
+                        v,
+                        "not finite",
+                    ));
                 }
             }
             if let Some((k, a)) = a_row
@@ -163,7 +167,8 @@ impl TransmissionError {
                 .enumerate()
                 .find(|(_, a)| a.abs() > MAX_AMPLITUDE_RAD)
             {
-                return Err(bad(
+                return Err(SimError::bad_effect(
+                    EffectId::TransmissionError,
                     format!("amplitude_rad[{i}][{k}]"),
                     a,
                     format!(
@@ -214,7 +219,8 @@ impl TransmissionError {
     /// Checks that the lengths fit a robot with `nq` joints.
     pub fn check_fits(&self, nq: usize) -> Result<()> {
         if self.amplitude_rad.len() != nq {
-            return Err(bad(
+            return Err(SimError::bad_effect(
+                EffectId::TransmissionError,
                 "amplitude_rad",
                 format!("{} rows", self.amplitude_rad.len()),
                 format!("the robot has {nq} joints"),
@@ -253,8 +259,7 @@ fn rows(flat: Vec<f64>, n: usize, nh: usize) -> Vec<Vec<f64>> {
 }
 
 impl Effect for TransmissionError {
-    const NAME: &'static str = EFFECT;
-    const KEY: &'static str = "transmission";
+    const ID: EffectId = EffectId::TransmissionError;
     type Section = TransmissionSection;
     type Stage = TransmissionStage;
     type Scratch = ();
@@ -280,10 +285,6 @@ impl Effect for TransmissionError {
         ))
     }
 
-    fn needs(&self) -> Needs {
-        Needs::default()
-    }
-
     fn check_lengths(&self, nq: usize) -> Result<()> {
         self.check_fits(nq)
     }
@@ -297,8 +298,6 @@ impl Effect for TransmissionError {
             joints,
         })
     }
-
-    fn scratch(_stage: &TransmissionStage, _nq: usize) {}
 
     /// Link-side angle shifted by the periodic error of the reported angle: `φᵢ += Σₖ Aᵢₖ sin(hₖ qᵢ +
     /// φᵢₖ)`, and the same on the link-side positions.

@@ -2,8 +2,9 @@
 //! stream past, in row order, so that every sum is the same floating-point sum whatever the chunk
 //! sizes; and the exact median of the target distances in bounded memory ([`MedianSelector`]).
 
-use super::{EffectSize, Simulation};
+use super::simulate::Simulation;
 use crate::effects::{Contributions, EffectId};
+use crate::scenario::{Resolved, TruthModel};
 
 /// Length of `v` (m): the one formula of every length in the summary, and of the target distance
 /// the median is taken of (read back from `truth.parquet`, it must give the same bits).
@@ -338,5 +339,148 @@ mod tests {
                 .unwrap();
             assert_eq!(m.to_bits(), sorted_median(&v).to_bits(), "{name}");
         }
+    }
+}
+
+/// Root-mean-square displacement (m) and largest one of one effect over the rows.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct EffectSize {
+    /// Effect name ([`EffectId::name`]: `thermal_drift`, `kinematic_offsets`, `gear_backlash`,
+    /// `joint_compliance`).
+    pub effect: &'static str,
+    /// RMS of the displacement length over the rows (m).
+    pub rms_m: f64,
+    /// Largest displacement length (m).
+    pub max_m: f64,
+}
+
+/// What a generation produced, for the summary paragraph and `truth.json`.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct Summary {
+    /// Robot name.
+    pub robot: String,
+    /// How the truth was computed (`analytic` or `rapier`).
+    pub truth_model: TruthModel,
+    /// Compliance solve per row: mean and largest Newton iterations (analytic) or engine steps
+    /// (rapier); zeros without compliance.
+    pub compliance_steps_mean_max: [f64; 2],
+    /// Seed in force.
+    pub seed: u64,
+    /// Poses.
+    pub poses: usize,
+    /// Rows (measurements).
+    pub rows: usize,
+    /// The injected effects and their sizes at the target.
+    pub effects: Vec<EffectSize>,
+    /// RMS of the total deviation of the real target from the nominal one (m).
+    pub total_rms_m: f64,
+    /// Noise multiplier.
+    pub noise_scale: f64,
+    /// Median target distance from the tracker (m).
+    pub median_distance_m: f64,
+    /// Radial and transverse σ at the median distance (m, scaled).
+    pub sigma_at_median_m: [f64; 2],
+    /// RMS length of the added noise vector over rows without outliers (m).
+    pub noise_rms_m: f64,
+    /// Rows with a gross outlier.
+    pub outliers: usize,
+    /// Files written (paths as given; not stored in `truth.json`, which must not depend on the output
+    /// folder).
+    #[serde(skip)]
+    pub files: Vec<String>,
+}
+
+fn fmt_len(m: f64) -> String {
+    if m == 0.0 {
+        "0".into()
+    } else if m < 1e-3 {
+        format!("{:.1} µm", m * 1e6)
+    } else {
+        format!("{:.3} mm", m * 1e3)
+    }
+}
+
+impl Summary {
+    /// One human-readable paragraph.
+    pub fn paragraph(&self) -> String {
+        let effects = if self.effects.is_empty() {
+            "no injected effects".to_string()
+        } else {
+            let parts: Vec<String> = self
+                .effects
+                .iter()
+                .map(|e| {
+                    format!(
+                        "{} (RMS {}, max {})",
+                        e.effect,
+                        fmt_len(e.rms_m),
+                        fmt_len(e.max_m)
+                    )
+                })
+                .collect();
+            format!(
+                "effects {}; total RMS deviation {}",
+                parts.join(", "),
+                fmt_len(self.total_rms_m)
+            )
+        };
+        let noise = if self.noise_scale == 0.0 {
+            "noise-free (scale 0)".to_string()
+        } else {
+            format!(
+                "tracker noise ×{}: σ_radial {}, σ_transverse {} at the median distance {:.2} m, RMS |noise| {}, {} outlier row(s)",
+                self.noise_scale,
+                fmt_len(self.sigma_at_median_m[0]),
+                fmt_len(self.sigma_at_median_m[1]),
+                self.median_distance_m,
+                fmt_len(self.noise_rms_m),
+                self.outliers
+            )
+        };
+        let truth = match self.truth_model {
+            TruthModel::Analytic => String::new(),
+            TruthModel::Rapier => format!(
+                " (rapier physics-engine compliance, {:.1} steps per pose on average)",
+                self.compliance_steps_mean_max[0]
+            ),
+        };
+        format!(
+            "generated {} poses ({} measurements) of robot '{}'{truth}, seed {}; {}; {}; wrote {}.",
+            self.poses,
+            self.rows,
+            self.robot,
+            self.seed,
+            effects,
+            noise,
+            self.files.join(", ")
+        )
+    }
+}
+
+/// The summary of a campaign of `poses` poses and `rows` rows from its accumulated statistics and the
+/// median target distance (m).
+pub(super) fn summarize(
+    res: &Resolved,
+    (poses, rows): (usize, usize),
+    totals: Totals,
+    median: f64,
+    files: Vec<String>,
+) -> Summary {
+    let (sr, st) = res.tracker.sigmas(median);
+    Summary {
+        robot: res.model.name().to_string(),
+        truth_model: res.truth_model,
+        compliance_steps_mean_max: totals.steps_mean_max,
+        seed: res.seed,
+        poses,
+        rows,
+        effects: totals.effects,
+        total_rms_m: totals.total_rms_m,
+        noise_scale: res.tracker.noise_scale(),
+        median_distance_m: median,
+        sigma_at_median_m: [sr, st],
+        noise_rms_m: totals.noise_rms_m,
+        outliers: totals.outliers,
+        files,
     }
 }

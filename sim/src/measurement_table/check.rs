@@ -29,7 +29,7 @@ const TEMP_RANGE: (f64, f64) = (-50.0, 150.0);
 pub fn reach_bound(model: &Model) -> f64 {
     let mut prev = nalgebra::Vector3::zeros();
     let mut sum = 0.0;
-    for j in &model.joints {
+    for j in model.joints() {
         let p = j.home.translation.vector;
         sum += (p - prev).norm();
         prev = p;
@@ -37,7 +37,7 @@ pub fn reach_bound(model: &Model) -> f64 {
             sum += j.limits.map_or(1.0, |l| l.lower.abs().max(l.upper.abs()));
         }
     }
-    sum + (model.home_flange.translation.vector - prev).norm()
+    sum + (model.home_flange().translation.vector - prev).norm()
 }
 
 fn median(mut v: Vec<f64>) -> f64 {
@@ -51,6 +51,35 @@ fn median(mut v: Vec<f64>) -> f64 {
     } else {
         0.5 * (v[m - 1] + v[m])
     }
+}
+
+/// Checks that every joint value of `table` lies within its joint's URDF limits, exactly (no
+/// tolerance): what a table whose joint positions are to be commanded, a campaign's pose file
+/// (`[campaign.file]`), must hold. The joint count must be the robot's (checked before). The first
+/// value outside, in row order, is an error naming `file`, the 1-based data row, the column (`q1`),
+/// the value, the limits and the joint.
+pub fn check_within_limits(table: &MeasurementTable, model: &Model, file: &Path) -> Result<()> {
+    let nq = model.nq();
+    for r in 0..table.len() {
+        for (j, joint) in model.joints().iter().enumerate() {
+            let Some(l) = joint.limits else { continue };
+            let v = table.q[r * nq + j];
+            if v < l.lower || v > l.upper {
+                let unit = joint.kind.unit();
+                return Err(table_err(
+                    &file.display().to_string(),
+                    Some(r + 1),
+                    Some(&format!("q{}", j + 1)),
+                    format!(
+                        "{v:?} {unit} is outside the limits [{}, {}] {unit} of joint '{}': the robot cannot \
+                         be commanded there",
+                        l.lower, l.upper, joint.name
+                    ),
+                ));
+            }
+        }
+    }
+    Ok(())
 }
 
 /// Checks `table` against the robot `model`; `file` names the table in messages. Returns the warnings
@@ -80,7 +109,7 @@ pub fn check_against_model(
     table.validate_named(&name)?;
     let nq = model.nq();
     if table.n_joints != nq {
-        let joints: Vec<&str> = model.joints.iter().map(|j| j.name.as_str()).collect();
+        let joints: Vec<&str> = model.joints().iter().map(|j| j.name.as_str()).collect();
         return Err(table_err(
             &name,
             None,
@@ -89,7 +118,7 @@ pub fn check_against_model(
                 "the file has {} joint columns (q1..q{}), but robot '{}' has {nq} joints ({})",
                 table.n_joints,
                 table.n_joints,
-                model.name,
+                model.name(),
                 joints.join(", ")
             ),
         ));
@@ -100,7 +129,7 @@ pub fn check_against_model(
 
     // Units of joint columns.
     let mut hints: Vec<Option<String>> = vec![None; nq];
-    for (j, joint) in model.joints.iter().enumerate() {
+    for (j, joint) in model.joints().iter().enumerate() {
         let max_abs = column(j).fold(0.0f64, |m, v| m.max(v.abs()));
         let fits = |scale: f64| {
             joint.limits.is_some_and(|l| {
@@ -138,7 +167,7 @@ pub fn check_against_model(
     // URDF limits.
     let mut outside: Vec<(usize, f64, usize)> = vec![(0, 0.0, 0); nq]; // (count, worst excess, worst row)
     for r in 0..n {
-        for (j, joint) in model.joints.iter().enumerate() {
+        for (j, joint) in model.joints().iter().enumerate() {
             let Some(l) = joint.limits else { continue };
             let v = table.q[r * nq + j];
             let excess = (l.lower - v).max(v - l.upper);
@@ -172,7 +201,7 @@ pub fn check_against_model(
     }
     for (j, &(count, worst, row)) in outside.iter().enumerate() {
         if count > 0 {
-            let joint = &model.joints[j];
+            let joint = &model.joints()[j];
             let l = joint.limits.expect("only joints with limits count");
             let unit = joint.kind.unit();
             warnings.push(format!(
@@ -220,7 +249,7 @@ pub fn check_against_model(
             "{name}: columns x, y, z: the points lie a median {spread:.4} from their median point and \
              {distance:.4} from the tracker origin, but robot '{}' reaches about {reach:.3} m: the \
              positions look like millimetres, but metres are expected",
-            model.name
+            model.name()
         ));
     }
 

@@ -4,8 +4,8 @@
 use crate::campaign::{CampaignSpec, DirectionRule, Iso9283, PayloadRule, Reachability, Sampling};
 use crate::effects::Effects;
 use crate::error::{Result, SimError, scenario_err};
+use crate::magnitude::fnv1a64;
 use crate::model::Model;
-use crate::scenario::magnitude::fnv1a64;
 use crate::scenario::schema::{PointsPerJoint, SamplingKind, ScenarioFile, TruthModel};
 use crate::tracker::{self, NoiseModel, Tracker};
 use crate::urdf::ChainSpec;

@@ -37,8 +37,8 @@ use crate::effects::link_deflection::DeflectionSection;
 use crate::effects::thermal_drift::{TemperatureProfile, ThermalSection};
 use crate::effects::transmission_error::TransmissionSection;
 use crate::error::{Result, scenario_err};
+use crate::magnitude::Magnitude;
 use crate::scenario::build::{Overrides, Resolved, Scenario};
-use crate::scenario::magnitude::Magnitude;
 use crate::scenario::schema::{
     CampaignSection, FileSection, GridSection, IsoSection, PayloadSection, RobotSection,
     SamplingKind, ScenarioFile, TrackerSection, TruthModel, TruthSection,
@@ -449,7 +449,7 @@ impl ScenarioBuilder {
 mod tests {
     use super::*;
     use crate::effects::thermal_drift::WarmUp;
-    use crate::scenario::magnitude::Draw;
+    use crate::magnitude::Draw;
 
     /// A scenario built in code resolves exactly as the same scenario written by hand.
     #[test]

@@ -4,7 +4,7 @@
 //! the robot, giving a [`Resolved`] scenario ready for [`crate::generate`].
 //!
 //! The modules, by job: [`schema`] (the file as written, one struct per table), [`magnitude`] (the
-//! random draws), [`build`] (parsing, loading and resolving), [`builder`] (the same scenario from code,
+//! random draws; defined in [`crate::magnitude`], below the effects whose sections hold them), [`build`] (parsing, loading and resolving), [`builder`] (the same scenario from code,
 //! validated as a file is). The `[effects.*]` sections are defined by their effects
 //! ([`crate::effects::Effect::Section`]).
 //!
@@ -100,7 +100,6 @@
 
 pub mod build;
 pub mod builder;
-pub mod magnitude;
 pub mod schema;
 
 pub use crate::effects::EffectsSection;
@@ -112,9 +111,11 @@ pub use crate::effects::kinematic_offsets::KinematicSection;
 pub use crate::effects::link_deflection::DeflectionSection;
 pub use crate::effects::thermal_drift::ThermalSection;
 pub use crate::effects::transmission_error::TransmissionSection;
+/// The random draws, kept at their old path (they live in [`crate::magnitude`], below the effects).
+pub use crate::magnitude;
+pub use crate::magnitude::{Draw, Magnitude, fnv1a64};
 pub use build::{Overrides, Resolved, RobotSource, Scenario};
 pub use builder::ScenarioBuilder;
-pub use magnitude::{Draw, Magnitude, fnv1a64};
 pub use schema::{
     CampaignSection, FileSection, GridSection, IsoSection, PayloadSection, PointsPerJoint,
     RobotSection, SamplingKind, ScenarioFile, TrackerSection, TruthModel, TruthSection,

@@ -5,7 +5,7 @@
 use crate::campaign::DirectionRule;
 use crate::effects::EffectsSection;
 use crate::effects::thermal_drift::TemperatureProfile;
-use crate::scenario::magnitude::Magnitude;
+use crate::magnitude::Magnitude;
 use serde::{Deserialize, Serialize};
 
 /// `[robot]`.
@@ -167,7 +167,7 @@ pub enum TruthModel {
     Analytic,
     /// The analytic truth with its compliance stage settled by the rapier physics engine on the same
     /// real geometry ([`crate::effects::ComplianceSolver::Rapier`] with the default
-    /// [`crate::rapier_truth::SettleOptions`]); needs `[effects.compliance]`.
+    /// [`crate::springs::SettleOptions`]); needs `[effects.compliance]`.
     Rapier,
 }
 

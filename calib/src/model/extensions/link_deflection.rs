@@ -132,7 +132,11 @@ impl CauseModel for LinkDeflection {
         model
             .require_inertials()
             .map_err(|e| format!("the gravity moments it needs cannot be computed: {e}"))?;
-        if model.joints.iter().all(|j| bending_axes(&j.axis).is_none()) {
+        if model
+            .joints()
+            .iter()
+            .all(|j| bending_axes(&j.axis).is_none())
+        {
             return Err("no joint turns about a coordinate axis of its frame".into());
         }
         Ok(())
@@ -156,7 +160,7 @@ impl CauseModel for LinkDeflection {
         let g = Vector3::from(settings.gravity_base);
         (0..model.nq())
             .flat_map(|i| {
-                modelled_axes(&model.joints, i, &g)
+                modelled_axes(model.joints(), i, &g)
                     .into_iter()
                     .map(move |about| ExtensionParam {
                         cause: Cause::LinkDeflection,
@@ -238,7 +242,7 @@ pub fn gravity_moments(
     }
     for i in (0..model.nq()).rev() {
         let frame = &data.joint_poses[i];
-        let body = &model.bodies[i];
+        let body = &model.bodies()[i];
         let c = frame * Point3::from(body.com);
         mass += body.mass;
         first += c.coords * body.mass;
@@ -258,7 +262,7 @@ mod tests {
         let model = sim::robots::load_builtin("iiwa7").unwrap();
         let g = Vector3::from(sim::statics::DEFAULT_GRAVITY);
         let axes: Vec<Vec<usize>> = (0..7)
-            .map(|i| modelled_axes(&model.joints, i, &g))
+            .map(|i| modelled_axes(model.joints(), i, &g))
             .collect();
         // Joint 2's and 4's z axes run along the upper arm and forearm, the axes of joints 3 and 5;
         // joint 1's y axis is parallel to joint 2's, 0.19 m below it on the vertical.
@@ -276,7 +280,7 @@ mod tests {
         );
         // Hung from a wall (gravity along the base x), joint 1's y bending is its own again.
         let wall = Vector3::new(-9.81, 0.0, 0.0);
-        assert_eq!(modelled_axes(&model.joints, 0, &wall), vec![0, 1]);
+        assert_eq!(modelled_axes(model.joints(), 0, &wall), vec![0, 1]);
     }
 
     #[test]
@@ -312,8 +316,8 @@ mod tests {
             let moved = |p: Vector3<f64>| o + rot * (p - o);
             let mut v = 0.0;
             for k in i..7 {
-                let c = (data.joint_poses[k] * Point3::from(model.bodies[k].com)).coords;
-                v -= model.bodies[k].mass * g.dot(&moved(c));
+                let c = (data.joint_poses[k] * Point3::from(model.bodies()[k].com)).coords;
+                v -= model.bodies()[k].mass * g.dot(&moved(c));
             }
             let c = (data.flange * Point3::from(Vector3::from(pl.com))).coords;
             v - pl.mass * g.dot(&moved(c))
@@ -331,7 +335,7 @@ mod tests {
                     i + 1
                 );
             }
-            let a = model.joints[i].axis;
+            let a = model.joints()[i].axis;
             assert!(
                 (a.dot(&m[i]) + tau[i]).abs() < 1e-10 * (1.0 + tau[i].abs()),
                 "joint {}: axial moment {} vs holding torque {}",

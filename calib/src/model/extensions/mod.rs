@@ -299,7 +299,7 @@ pub(crate) fn per_joint_params(
     scale: f64,
 ) -> Vec<ExtensionParam> {
     model
-        .joints
+        .joints()
         .iter()
         .enumerate()
         .map(|(i, j)| ExtensionParam {

@@ -165,7 +165,7 @@ impl Regressors {
                                 }
                             }
                             let inputs = RowInputs {
-                                joints: &model.joints,
+                                joints: model.joints(),
                                 q,
                                 tau: &tau,
                                 moment: &moment,

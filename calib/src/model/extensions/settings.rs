@@ -101,7 +101,7 @@ impl ExtensionSettings {
             return Err(CalibError::BadValue {
                 context: source.to_string(),
                 field: "robot".into(),
-                value: model.name.clone(),
+                value: model.name().to_string(),
                 problem: format!("the extension needs gravity torques: {e}"),
             });
         }

@@ -46,7 +46,7 @@ pub const MAX_AMPLITUDE_RAD: f64 = 5e-3;
 /// `table`.
 pub fn turning_joints(model: &Model, table: &MeasurementTable, rows: &[usize]) -> Vec<usize> {
     (0..model.nq())
-        .filter(|&j| model.joints[j].kind.is_rotational())
+        .filter(|&j| model.joints()[j].kind.is_rotational())
         .filter(|&j| {
             let (lo, hi) = rows
                 .iter()

@@ -342,7 +342,7 @@ pub fn diagnose_with_progress(
         });
     }
     Ok(Diagnosis {
-        robot: model.name.clone(),
+        robot: model.name().to_string(),
         n_train: split
             .train
             .rows

@@ -3,6 +3,10 @@
 //! Call [`forward_kinematics`] first; the Jacobian functions read the joint poses it stored.
 //! The spatial Jacobian `J_s` (6×n, base frame, rows `[ω; v]`) maps `q̇` to the spatial twist of the
 //! flange; the body Jacobian `J_b = Ad(T_base_flange⁻¹) J_s` to its body twist.
+//!
+//! Inverse kinematics and the reachability filter of the cell are in [`ik`].
+
+pub mod ik;
 
 use crate::lie::{Pose, adjoint_apply, pose_from};
 use crate::model::{JointKind, Model};
@@ -29,7 +33,7 @@ impl Data {
         let n = model.nq();
         Data {
             joint_poses: vec![Pose::identity(); n],
-            flange: model.home_flange,
+            flange: model.home_flange(),
             jacobian: OMatrix::<f64, U6, Dyn>::zeros(n),
             gravity_torque: nalgebra::DVector::zeros(n),
         }
@@ -57,7 +61,12 @@ pub fn forward_kinematics(model: &Model, data: &mut Data, q: &[f64]) {
     // are a few dozen multiply-adds per joint and must not go through generic matrix code.
     let mut r = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
     let mut p = [0.0; 3];
-    for ((joint, &qi), out) in model.joints.iter().zip(q).zip(data.joint_poses.iter_mut()) {
+    for ((joint, &qi), out) in model
+        .joints()
+        .iter()
+        .zip(q)
+        .zip(data.joint_poses.iter_mut())
+    {
         let po = &joint.origin.translation.vector;
         for (a, pa) in p.iter_mut().enumerate() {
             *pa += r[0][a] * po.x + r[1][a] * po.y + r[2][a] * po.z;
@@ -95,7 +104,7 @@ pub fn forward_kinematics(model: &Model, data: &mut Data, q: &[f64]) {
             Vector3::new(p[0], p[1], p[2]),
         );
     }
-    data.flange = data.joint_poses[model.nq() - 1] * model.flange_offset;
+    data.flange = data.joint_poses[model.nq() - 1] * model.flange_offset();
 }
 
 /// Turns columns `I` and `J` of `r` (given by its columns) by the angle with sine `s` and cosine `c`:
@@ -133,7 +142,7 @@ pub fn flange_pose(model: &Model, data: &mut Data, q: &[f64]) -> Pose {
 
 /// Spatial Jacobian at the configuration of the last [`forward_kinematics`] call, into `data.jacobian`.
 pub fn spatial_jacobian(model: &Model, data: &mut Data) {
-    for (i, (joint, t)) in model.joints.iter().zip(&data.joint_poses).enumerate() {
+    for (i, (joint, t)) in model.joints().iter().zip(&data.joint_poses).enumerate() {
         let w = t.rotation * joint.axis;
         let col = if joint.kind.is_rotational() {
             let v = t.translation.vector.cross(&w);
@@ -178,7 +187,7 @@ pub fn point_jacobian(
     out: &mut Matrix3xX<f64>,
 ) -> Vector3<f64> {
     let p = data.flange * nalgebra::Point3::from(*p_flange);
-    for (i, (joint, t)) in model.joints.iter().zip(&data.joint_poses).enumerate() {
+    for (i, (joint, t)) in model.joints().iter().zip(&data.joint_poses).enumerate() {
         let w = t.rotation * joint.axis;
         let col = if joint.kind.is_rotational() {
             w.cross(&(p.coords - t.translation.vector))
@@ -221,13 +230,58 @@ mod tests {
             .collect()
     }
 
+    /// A model changed through its mutators keeps its derived quantities in step: the home poses and
+    /// screw axes (product of exponentials) give the same flange as the chain of joint frames, with
+    /// a turned and shifted joint origin and flange offset on the UR5 (whose origins are not aligned
+    /// with the axes, so the rotation terms matter too).
+    #[test]
+    fn a_changed_model_recomputes_its_derived_quantities() {
+        let m = robots::load_builtin("ur5").unwrap();
+        let turn = crate::lie::pose_from(
+            *nalgebra::Rotation3::from_euler_angles(0.01, -0.02, 0.03).matrix(),
+            Vector3::new(1e-3, -2e-3, 5e-4),
+        );
+        let changed = m
+            .with_joint_origin(2, turn * m.joints()[2].origin)
+            .unwrap()
+            .with_flange_offset(turn * m.flange_offset())
+            .unwrap();
+        assert!(
+            (changed.joints()[2].home.translation.vector - m.joints()[2].home.translation.vector)
+                .amax()
+                > 1e-4
+        );
+        let mut d = Data::new(&changed);
+        for q in configs(&changed, 20) {
+            let a = flange_pose(&changed, &mut d, &q);
+            let b = poe_pose(&changed.screws(), &changed.home_flange(), &q);
+            assert!((a.translation.vector - b.translation.vector).amax() < 1e-14);
+            assert!((a.rotation.matrix() - b.rotation.matrix()).amax() < 1e-14);
+        }
+        assert!(matches!(
+            m.with_joint_origin(6, Pose::identity()),
+            Err(crate::error::SimError::JointCount {
+                expected: 6,
+                got: 7
+            })
+        ));
+        let mut parts = m.to_parts();
+        parts.bodies.pop();
+        let e = crate::model::Model::new(parts).unwrap_err().to_string();
+        assert!(e.contains("5 bodies for 6 joints"), "{e}");
+        let mut parts = m.to_parts();
+        parts.joints[1].axis *= 2.0;
+        let e = crate::model::Model::new(parts).unwrap_err().to_string();
+        assert!(e.contains("axis xyz") && e.contains("unit length"), "{e}");
+    }
+
     #[test]
     fn product_of_exponentials_equals_chain_of_urdf_frames() {
         let m = robots::load_builtin("iiwa7").unwrap();
         let mut d = Data::new(&m);
         for q in configs(&m, 50) {
             let a = flange_pose(&m, &mut d, &q);
-            let b = poe_pose(&m.screws(), &m.home_flange, &q);
+            let b = poe_pose(&m.screws(), &m.home_flange(), &q);
             assert!((a.translation.vector - b.translation.vector).amax() < 1e-14);
             assert!((a.rotation.matrix() - b.rotation.matrix()).amax() < 1e-14);
         }
@@ -286,7 +340,7 @@ mod tests {
     #[test]
     fn iiwa7_flange_at_home_is_1266_mm_above_base() {
         let m = robots::load_builtin("iiwa7").unwrap();
-        let t = m.home_flange;
+        let t = m.home_flange();
         assert!((t.translation.vector - Vector3::new(0.0, 0.0, 1.266)).amax() < 1e-15);
         assert!((t.rotation.matrix() - Matrix3::identity()).amax() < 1e-15);
     }

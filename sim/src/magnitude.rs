@@ -1,4 +1,7 @@
 //! Magnitudes: how a scenario writes a number it wants drawn (see [`crate::scenario`], "Magnitudes").
+//!
+//! Below the effects (each effect's scenario section holds magnitudes) and the scenario; it reads only
+//! the errors and the seeds. Also reachable as `sim::scenario::magnitude`.
 
 use crate::error::{Result, scenario_err};
 use crate::seeds::{STREAM_PARAMETERS, rng_for};

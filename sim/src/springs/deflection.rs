@@ -1,30 +1,14 @@
 //! Validation and axes of link-deflection compliances, shared by the deflection effect
-//! ([`super::link_deflection`]) and the rapier truth ([`crate::rapier_truth`]), which builds the
+//! ([`crate::effects::link_deflection`]) and the rapier truth ([`crate::rapier_truth`]), which builds the
 //! same bending hinges. A leaf module, so that neither of the two imports the other.
 
+use crate::effect_id::EffectId;
 use crate::error::{Result, SimError};
 use nalgebra::Vector3;
 
 /// Largest accepted compliance (rad/(N m)): 10⁻³ is already a bearing a few N m bend by a
 /// milliradian; more is almost surely a stiffness (N m/rad) given where a compliance is expected.
 pub const MAX_COMPLIANCE_RAD_PER_NM: f64 = 1e-3;
-
-/// Effect name in the errors.
-pub(crate) const EFFECT: &str = "link_deflection";
-
-/// A [`SimError::BadEffect`] of the deflection effect.
-pub(crate) fn bad(
-    field: impl Into<String>,
-    value: impl ToString,
-    problem: impl Into<String>,
-) -> SimError {
-    SimError::BadEffect {
-        effect: EFFECT,
-        field: field.into(),
-        value: value.to_string(),
-        problem: problem.into(),
-    }
-}
 
 /// The deflection axes `(u, v)` of a joint with unit axis `a` (joint frame): `u` is the joint-frame
 /// coordinate axis least aligned with `a`, made orthogonal to it, and `v = a × u`.
@@ -47,14 +31,16 @@ pub(crate) fn check_values(compliance_rad_per_nm: &[[f64; 2]]) -> Result<()> {
     for (i, c) in compliance_rad_per_nm.iter().enumerate() {
         for (k, &v) in c.iter().enumerate() {
             if !(v.is_finite() && v >= 0.0) {
-                return Err(bad(
+                return Err(SimError::bad_effect(
+                    EffectId::LinkDeflection,
                     format!("compliance_rad_per_nm[{i}][{k}]"),
                     v,
                     "must be finite and ≥ 0 rad/(N m) (0 = rigid)",
                 ));
             }
             if v > MAX_COMPLIANCE_RAD_PER_NM {
-                return Err(bad(
+                return Err(SimError::bad_effect(
+                    EffectId::LinkDeflection,
                     format!("compliance_rad_per_nm[{i}][{k}]"),
                     v,
                     format!(
@@ -70,7 +56,8 @@ pub(crate) fn check_values(compliance_rad_per_nm: &[[f64; 2]]) -> Result<()> {
 /// Checks that a compliance list has one entry per joint of an `nq`-joint robot.
 pub(crate) fn check_len(compliance_rad_per_nm: &[[f64; 2]], nq: usize) -> Result<()> {
     if compliance_rad_per_nm.len() != nq {
-        return Err(bad(
+        return Err(SimError::bad_effect(
+            EffectId::LinkDeflection,
             "compliance_rad_per_nm",
             format!("{} entries", compliance_rad_per_nm.len()),
             format!("the robot has {nq} joints"),
