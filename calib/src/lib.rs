@@ -104,4 +104,5 @@ pub mod validate;
 
 pub use error::{CalibError, Result};
 pub use fit::{Calibration, CalibrationOptions, CalibrationReport, Dataset, FitRequest, fit};
-pub use model::file::{CalibratedModel, Predictor};
+pub use model::file::CalibratedModel;
+pub use model::predict::Predictor;

@@ -4,7 +4,8 @@ mod common;
 
 use calib::fit::plan::{PlanOptions, plan_poses};
 use calib::fit::{CalibrationOptions, Dataset, FitRequest, fit};
-use calib::model::file::{CalibratedModel, Predictor};
+use calib::model::file::CalibratedModel;
+use calib::model::predict::Predictor;
 use calib::model::robot::Robot;
 use calib::model::urdf_export::calibrated_urdf;
 use common::{Truth, random_configs, rng, table};

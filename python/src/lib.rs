@@ -15,7 +15,7 @@
 //!   slice and copied once, into the table's layout) and go out as numpy arrays that own the vectors
 //!   the Rust side built (no further copy).
 
-use calib::model::file::Predictor;
+use calib::model::predict::Predictor;
 use numpy::{
     AllowTypeChange, PyArray1, PyArray2, PyArrayDyn, PyArrayLikeDyn, PyArrayMethods,
     PyReadonlyArray1, PyUntypedArrayMethods,

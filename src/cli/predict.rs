@@ -2,7 +2,8 @@
 
 use super::paths::{Inputs, check_distinct};
 use super::shared::{CliError, CliResult, print_json};
-use calib::model::file::{CalibratedModel, Predictor};
+use calib::model::file::CalibratedModel;
+use calib::model::predict::Predictor;
 use serde_json::json;
 use sim::measurement_table::{self, MeasurementTable};
 use std::path::{Path, PathBuf};

@@ -4,7 +4,8 @@ use super::calibrate::Named;
 use super::paths::Inputs;
 use super::shared::{CliError, CliResult, print_json, read_table};
 use calib::fit::register::{RegisterOptions, RegistrationReport, register as register_campaign};
-use calib::model::file::{CalibratedModel, Predictor};
+use calib::model::file::CalibratedModel;
+use calib::model::predict::Predictor;
 use serde_json::json;
 use std::path::{Path, PathBuf};
 

@@ -24,9 +24,10 @@
 //! through it.
 
 use crate::error::{CalibError, Result};
-use crate::lie3::log_rotation;
+use crate::lie3::{log_rotation, quaternion_from_rotation};
 use crate::model::chain::{Chain, ChainScratch};
-use crate::model::extensions::Regressors;
+use crate::model::extensions::{ExtensionSettings, Regressors};
+use crate::model::file::CalibratedModel;
 use crate::model::learned::LearnedResidual;
 use crate::model::learned::adjoint::AdjointModel;
 use crate::model::observations::Observations;
@@ -35,6 +36,7 @@ pub use crate::model::physical_row::{AdjointScratch, PredictScratch, RowPredicti
 use nalgebra::{DMatrix, Matrix3, Vector3};
 use rayon::prelude::*;
 use sim::Model;
+use sim::measurement_table::MeasurementTable;
 
 /// Rows per parallel work item of the batch evaluations.
 const CHUNK_ROWS: usize = 2048;
@@ -404,4 +406,189 @@ pub fn prediction_and_jacobian(
         s.r_tracker_target,
         DMatrix::from_row_slice(rows, np, &buf),
     ))
+}
+
+/// Evaluates a calibrated model.
+#[derive(Clone, Debug)]
+pub struct Predictor {
+    /// The robot.
+    pub model: Model,
+    /// The parameters.
+    pub params: KinematicParams,
+    /// Settings of the model extensions, if any.
+    pub extensions: Option<ExtensionSettings>,
+    /// Learned residual correction, if any.
+    pub learned: Option<LearnedResidual>,
+    chain: Chain,
+    scratch: ChainScratch,
+}
+
+/// Predictions for the rows of a table.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Predictions {
+    /// Pose id per row.
+    pub pose: Vec<i64>,
+    /// Predicted target position per row (tracker frame, m).
+    pub position: Vec<[f64; 3]>,
+    /// Predicted target orientation per row (unit quaternion `[qw, qx, qy, qz]`, tracker frame), when the
+    /// model has orientation.
+    pub orientation: Option<Vec<[f64; 4]>>,
+}
+
+impl Predictions {
+    /// CSV text `pose,x,y,z[,qw,qx,qy,qz]`.
+    pub fn to_csv(&self) -> String {
+        let mut header: Vec<String> = ["pose", "x", "y", "z"].map(String::from).to_vec();
+        if self.orientation.is_some() {
+            header.extend(["qw", "qx", "qy", "qz"].map(String::from));
+        }
+        let rows: Vec<(i64, Vec<f64>)> = (0..self.pose.len())
+            .map(|r| {
+                let mut v = self.position[r].to_vec();
+                if let Some(o) = &self.orientation {
+                    v.extend_from_slice(&o[r]);
+                }
+                (self.pose[r], v)
+            })
+            .collect();
+        crate::io::csv_text(&header, &rows)
+    }
+}
+
+impl Predictor {
+    /// A predictor for `model` with `params`.
+    pub fn new(model: Model, params: KinematicParams) -> Self {
+        let chain = Chain::new(&model, &params);
+        let scratch = ChainScratch::new(model.nq());
+        Predictor {
+            model,
+            params,
+            extensions: None,
+            learned: None,
+            chain,
+            scratch,
+        }
+    }
+
+    /// A predictor for a model file.
+    pub fn from_file(m: &CalibratedModel) -> Result<Self> {
+        let mut p = Predictor::new(m.robot_model()?, m.params());
+        p.extensions = m.extensions.as_ref().map(|e| e.settings.clone());
+        p.learned = m.learned.clone();
+        if let Some(s) = &p.extensions
+            && s.params(&p.model).len() != p.params.extension.len()
+        {
+            return Err(CalibError::ModelFile {
+                file: "model".into(),
+                message: format!(
+                    "key 'extensions' has {} values; its causes need {}",
+                    p.params.extension.len(),
+                    s.params(&p.model).len()
+                ),
+            });
+        }
+        Ok(p)
+    }
+
+    /// Target position (tracker frame, m) and orientation (tracker frame) at the controller's `q`, for the
+    /// kinematic part of the model only (extensions need a row's payload, directions and temperature:
+    /// use [`Predictor::predict_table`]), learned correction included.
+    ///
+    /// # Panics
+    /// If `q` has the wrong length (check tables with [`Predictor::predict_table`]).
+    pub fn predict(&mut self, q: &[f64]) -> (Vector3<f64>, Matrix3<f64>) {
+        let c = self.params.default_campaign;
+        if self.learned.as_ref().is_some_and(|l| l.adjoint().is_some()) {
+            let p = Prediction::new(&self.model, &self.params).with_learned(self.learned.as_ref());
+            let mut s = p.scratch();
+            let pos = p.row_in(&Regressors::none(), 0, q, c, &mut s);
+            return (pos, s.chain.r_tracker_target);
+        }
+        self.chain.forward_in(&mut self.scratch, q, c);
+        // The learned correction lives in the first campaign's tracker frame.
+        let frame = self.params.t_tracker_base_of(c).rotation.matrix()
+            * self.params.t_tracker_base.rotation.matrix().transpose();
+        let p = self.scratch.p_tracker
+            + frame
+                * self
+                    .learned
+                    .as_ref()
+                    .map_or(Vector3::zeros(), |l| l.predict(q));
+        (p, self.scratch.r_tracker_target)
+    }
+
+    /// The campaign index of every row of `table` (each row's `campaign`, or the model's default
+    /// campaign without the column); an id the model does not register is a one-line error naming
+    /// `file` and the row.
+    pub fn campaigns_of(&self, table: &MeasurementTable, file: &str) -> Result<Vec<usize>> {
+        let p = &self.params;
+        match &table.campaign {
+            None => Ok(vec![p.default_campaign; table.len()]),
+            Some(ids) => ids
+                .iter()
+                .enumerate()
+                .map(|(r, &id)| {
+                    p.campaign_index(id).ok_or_else(|| CalibError::BadValue {
+                        context: format!("{file}: row {}", r + 1),
+                        field: "campaign".into(),
+                        value: id.to_string(),
+                        problem: format!(
+                            "the model knows campaigns {}: this campaign's tracker registration is \
+                             unknown (register it with `robocal register`)",
+                            p.campaign_ids
+                                .iter()
+                                .map(|c| c.to_string())
+                                .collect::<Vec<_>>()
+                                .join(", ")
+                        ),
+                    })
+                })
+                .collect(),
+        }
+    }
+
+    /// Predictions for every row of `table` (its x, y, z are ignored); `file` names it in errors.
+    pub fn predict_table(&mut self, table: &MeasurementTable, file: &str) -> Result<Predictions> {
+        if table.n_joints != self.model.nq() {
+            return Err(CalibError::BadValue {
+                context: file.to_string(),
+                field: "q1..qN".into(),
+                value: format!("{} joint columns", table.n_joints),
+                problem: format!(
+                    "the model's robot '{}' has {} joints",
+                    self.model.name(),
+                    self.model.nq()
+                ),
+            });
+        }
+        let campaign = self.campaigns_of(table, file)?;
+        let orientation = self.params.r_flange_target.is_some();
+        let mut out = Predictions {
+            pose: table.pose.clone(),
+            position: Vec::with_capacity(table.len()),
+            orientation: orientation.then(|| Vec::with_capacity(table.len())),
+        };
+        let rows: Vec<usize> = (0..table.len()).collect();
+        let regs = match &self.extensions {
+            Some(s) => {
+                s.check_table(table, file)?;
+                Regressors::build(&self.model, s, table, &rows, file, &self.params.extension)?
+            }
+            None => Regressors::none(),
+        };
+        let mut position = vec![Vector3::zeros(); table.len()];
+        let mut rotation = orientation.then(|| vec![Matrix3::identity(); table.len()]);
+        Prediction::new(&self.model, &self.params)
+            .with_learned(self.learned.as_ref())
+            .positions_in(
+                &table.q,
+                &campaign,
+                &regs,
+                &mut position,
+                rotation.as_deref_mut(),
+            );
+        out.position = position.iter().map(|p| (*p).into()).collect();
+        out.orientation = rotation.map(|r| r.iter().map(quaternion_from_rotation).collect());
+        Ok(out)
+    }
 }

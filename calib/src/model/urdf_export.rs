@@ -43,8 +43,9 @@
 use crate::error::{CalibError, Result};
 use crate::lie3::rpy_from_rotation;
 use crate::model::chain::{Chain, ChainScratch};
-use crate::model::file::{CalibratedModel, Predictor};
+use crate::model::file::CalibratedModel;
 use crate::model::params::KinematicParams;
+use crate::model::predict::Predictor;
 use nalgebra::{Matrix3, Vector3, Vector6};
 use sim::lie::{Pose, exp_twist, pose_from};
 use sim::measurement_table::MeasurementTable;
