@@ -35,8 +35,9 @@ py="$venv/bin/python"
 echo "== shipped DH robots against their published tables" >&2
 "$py" scripts/check_dh_urdfs.py
 
-echo "== no import cycles between source files" >&2
+echo "== no import cycles between source files, no import up a floor of calib" >&2
 "$py" scripts/check_import_cycles.py
+"$py" scripts/check_floors.py
 
 echo "== MuJoCo reference, re-run live and compared with the stored golden files" >&2
 live="target/golden-live"

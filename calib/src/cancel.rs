@@ -1,7 +1,7 @@
 //! Cooperative cancellation of long work (a calibration, a diagnosis): a caller that can be
 //! interrupted (the Python package on Ctrl-C) runs the work inside [`with_check`], and the long loops
 //! poll [`checkpoint`] between steps: the Levenberg–Marquardt iterations ([`crate::lm::minimize`]),
-//! the stages of [`crate::fit::calibrate_model`] and each candidate fit of
+//! the stages of [`crate::fit::fit`] and each candidate fit of
 //! [`crate::select::diagnose::diagnose`]. Once the check says stop, every later checkpoint on that thread
 //! says so too (the answer is kept), and the work returns [`CalibError::Cancelled`].
 //!

@@ -227,8 +227,8 @@ pub fn run(args: Args) -> CliResult {
         .ok()
         .filter(|v| *v >= 1)
         .ok_or_else(|| input("--reps", &args.reps, "must be a whole number ≥ 1"))?;
-    if args.model != "kinematic" {
-        calib::model::spec::ModelSpec::parse(&args.model)?;
+    let model_spec = calib::model::spec::ModelSpec::parse(&args.model)?;
+    if !model_spec.is_kinematic() {
         return Err(input(
             "--model",
             &args.model,
@@ -338,7 +338,7 @@ pub fn run(args: Args) -> CliResult {
         reps,
         seed: args.seed,
         test_fraction: args.test_fraction,
-        model: "kinematic".into(),
+        model: model_spec.name(),
         selection,
         candidates: args.candidates,
         cells: runs / reps,

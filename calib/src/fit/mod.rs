@@ -600,33 +600,15 @@ pub(crate) fn kinematic_fit(
     // Before: base and target only.
     let (before_params, before) = match same_before {
         Some((params, stage)) => (params.clone(), stage.clone()),
-        None => {
-            let bt = layout.base_and_target();
-            let bt_scales: Vec<f64> = bt.iter().map(|&k| scales[k]).collect();
-            let mut ws = LmWorkspace::new(obs.len() * dim, bt.len());
-            let mut prob = KinematicProblem::new(model, &obs, start, bt);
-            let hints = match warm.and_then(|f| f.shared) {
-                Some(s) => s.before.hints(bt_scales.len()),
-                None => SolveHints::default(),
-            };
-            let (before_report, _) =
-                minimize_with(&mut prob, &bt_scales, &options.lm, &mut ws, &hints);
-            let before_params = prob.into_params();
-            crate::cancel::checkpoint()?;
-            let before = FitStage {
-                parameters: "tracker-to-base transform and target (nominal joints)".into(),
-                train: if lean {
-                    Default::default()
-                } else {
-                    residual_stats(model, &before_params, &obs)
-                },
-                test: test_obs
-                    .as_ref()
-                    .map(|t| residual_stats(model, &before_params, t)),
-                solver: before_report,
-            };
-            (before_params, before)
-        }
+        None => base_and_target(
+            model,
+            &obs,
+            test_obs.as_ref(),
+            start,
+            &layout,
+            &scales,
+            stage,
+        )?,
     };
     if !before.solver.was_successful() {
         warnings.push(format!(
@@ -650,55 +632,24 @@ pub(crate) fn kinematic_fit(
     let mut final_norms: Option<Vec<f64>> = None;
     let (report, sub) = match options.robust {
         None => {
-            let mut prob = KinematicProblem::new(model, &obs, params.clone(), all.clone());
             // A fold's first solve starts where its shared work was done (weights 1, no exclusion).
             let hints = match warm.and_then(|f| f.shared) {
                 Some(s) => s.after.hints(p),
                 None => SolveHints::default(),
             };
-            let mut out = minimize_with(&mut prob, scales.as_slice(), &options.lm, &mut ws, &hints);
-            params = prob.into_params();
-            for _ in 0..GROSS_ERROR_ROUNDS {
-                let norms = outliers::row_norms(model, &obs, &params, &all);
-                let gross =
-                    outliers::find_in(model, &obs, &params, &norms, options.gross_error_threshold);
-                if gross.is_empty() {
-                    final_norms = Some(norms);
-                    break;
-                }
-                outliers::exclude(&mut obs, &gross);
-                excluded.extend(gross);
-                let first = out.0.clone();
-                let mut prob = KinematicProblem::new(model, &obs, params.clone(), all.clone());
-                out = minimize(&mut prob, scales.as_slice(), &options.lm, &mut ws);
-                params = prob.into_params();
-                out.0.cost_initial = first.cost_initial;
-                out.0.iterations += first.iterations;
-                out.0.evaluations += first.evaluations;
-                let mut health = first.health;
-                health.merge(&out.0.health);
-                out.0.health = health;
-            }
-            // Each excluded row's error against the final fit, and its warning.
-            let prediction = crate::model::predict::Prediction::new(model, &params);
-            let campaign = prediction.campaigns_of(&obs);
-            let mut scratch = prediction.scratch();
-            for o in &mut excluded {
-                if let Some(r) = obs.source_row.iter().position(|&s| s + 1 == o.row) {
-                    let c = campaign.get(r).copied().unwrap_or(0);
-                    let p = prediction.row_in(&obs.ext, r, obs.q_row(r), c, &mut scratch);
-                    o.error_m = (p - obs.position[r]).norm();
-                }
-                warnings.push(format!(
-                    "row {} (pose {}) excluded from the fit as a gross error: {:.4} mm off the fit of \
-                     the other rows, {:.0} times the robust residual scale when found (a broken beam or \
-                     a wrong row? fix it, or use --robust to down-weight instead)",
-                    o.row,
-                    o.pose,
-                    o.error_m * 1e3,
-                    o.normalised_residual
-                ));
-            }
+            let (out, norms) = full_fit(
+                model,
+                &mut obs,
+                &mut params,
+                &all,
+                scales.as_slice(),
+                options,
+                &mut ws,
+                &hints,
+                &mut excluded,
+                &mut warnings,
+            );
+            final_norms = norms;
             out
         }
         Some(loss) => {
@@ -821,4 +772,109 @@ pub(crate) fn kinematic_fit(
         learned: None,
         physical: None,
     })
+}
+
+/// The "after" stage without a robust loss: every parameter of `all` fitted from `params` (with the
+/// solve's `hints`), then the gross-error rounds ([`GROSS_ERROR_ROUNDS`]): rows beyond
+/// [`CalibrationOptions::gross_error_threshold`] are excluded ([`outliers::exclude`], added to
+/// `excluded` with their error against the final fit and a warning) and the fit repeated. Returns the
+/// solve's report and subspace, and the rows' residual norms at the final fit when the last search had
+/// them.
+#[allow(clippy::too_many_arguments)]
+fn full_fit(
+    model: &Model,
+    obs: &mut Observations,
+    params: &mut KinematicParams,
+    all: &[usize],
+    scales: &[f64],
+    options: &CalibrationOptions,
+    ws: &mut LmWorkspace,
+    hints: &SolveHints<'_>,
+    excluded: &mut Vec<Outlier>,
+    warnings: &mut Vec<String>,
+) -> ((crate::lm::MinimizationReport, Subspace), Option<Vec<f64>>) {
+    let mut prob = KinematicProblem::new(model, obs, params.clone(), all.to_vec());
+    let mut out = minimize_with(&mut prob, scales, &options.lm, ws, hints);
+    let mut final_norms = None;
+    *params = prob.into_params();
+    for _ in 0..GROSS_ERROR_ROUNDS {
+        let norms = outliers::row_norms(model, obs, params, all);
+        let gross = outliers::find_in(model, obs, params, &norms, options.gross_error_threshold);
+        if gross.is_empty() {
+            final_norms = Some(norms);
+            break;
+        }
+        outliers::exclude(obs, &gross);
+        excluded.extend(gross);
+        let first = out.0.clone();
+        let mut prob = KinematicProblem::new(model, obs, params.clone(), all.to_vec());
+        out = minimize(&mut prob, scales, &options.lm, ws);
+        *params = prob.into_params();
+        out.0.cost_initial = first.cost_initial;
+        out.0.iterations += first.iterations;
+        out.0.evaluations += first.evaluations;
+        let mut health = first.health;
+        health.merge(&out.0.health);
+        out.0.health = health;
+    }
+    // Each excluded row's error against the final fit, and its warning.
+    let prediction = crate::model::predict::Prediction::new(model, params);
+    let campaign = prediction.campaigns_of(obs);
+    let mut scratch = prediction.scratch();
+    for o in excluded.iter_mut() {
+        if let Some(r) = obs.source_row.iter().position(|&s| s + 1 == o.row) {
+            let c = campaign.get(r).copied().unwrap_or(0);
+            let p = prediction.row_in(&obs.ext, r, obs.q_row(r), c, &mut scratch);
+            o.error_m = (p - obs.position[r]).norm();
+        }
+        warnings.push(format!(
+            "row {} (pose {}) excluded from the fit as a gross error: {:.4} mm off the fit of \
+             the other rows, {:.0} times the robust residual scale when found (a broken beam or \
+             a wrong row? fix it, or use --robust to down-weight instead)",
+            o.row,
+            o.pose,
+            o.error_m * 1e3,
+            o.normalised_residual
+        ));
+    }
+    (out, final_norms)
+}
+
+/// The "before" stage: the tracker-to-base transform and the target fitted with nominal joints
+/// (every extension at zero), from `start`; the reference for what calibration gains.
+fn base_and_target(
+    model: &Model,
+    obs: &Observations,
+    test_obs: Option<&Observations>,
+    start: KinematicParams,
+    layout: &ParamLayout,
+    scales: &nalgebra::DVector<f64>,
+    stage: &Stage<'_>,
+) -> Result<(KinematicParams, FitStage)> {
+    let options = stage.options;
+    let warm = stage.warm.filter(|f| f.fits(obs));
+    let lean = stage.warm.is_some_and(|f| f.lean);
+    let dim = obs.dim();
+    let bt = layout.base_and_target();
+    let bt_scales: Vec<f64> = bt.iter().map(|&k| scales[k]).collect();
+    let mut ws = LmWorkspace::new(obs.len() * dim, bt.len());
+    let mut prob = KinematicProblem::new(model, obs, start, bt);
+    let hints = match warm.and_then(|f| f.shared) {
+        Some(s) => s.before.hints(bt_scales.len()),
+        None => SolveHints::default(),
+    };
+    let (before_report, _) = minimize_with(&mut prob, &bt_scales, &options.lm, &mut ws, &hints);
+    let before_params = prob.into_params();
+    crate::cancel::checkpoint()?;
+    let before = FitStage {
+        parameters: "tracker-to-base transform and target (nominal joints)".into(),
+        train: if lean {
+            Default::default()
+        } else {
+            residual_stats(model, &before_params, obs)
+        },
+        test: test_obs.map(|t| residual_stats(model, &before_params, t)),
+        solver: before_report,
+    };
+    Ok((before_params, before))
 }

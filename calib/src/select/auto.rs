@@ -15,7 +15,7 @@
 //!    predicted; the pooled paired test and gain must pass as in 2. A correction that learned where a
 //!    tracker stood rather than how the robot bends fails here.
 //!
-//! What `auto` then saves is refitted on every pose ([`crate::validate::calibrate_validated`]).
+//! What `auto` then saves is refitted on every pose ([`crate::validate::fit_and_validate`]).
 
 use crate::error::{CalibError, Result};
 use crate::fit::register::{RegisterOptions, register};

@@ -400,7 +400,7 @@ fn fit_fold(
 
 /// The calibrations of the `k` folds of [`cross_validate`] (seed `seed`), in fold order, each from
 /// the closed-form start, or, with `all` (the calibration of `spec` on every row of `data`), started
-/// there as [`cross_validate_warm`] does: for inspection and for checking that both reach the same
+/// there as [`cross_validate`] with `all` does: for inspection and for checking that both reach the same
 /// minima. A fold started at `all` has no training statistics or outliers in its report, and, when
 /// its rank decision came from the shared factor, its subspace and covariance are those at `all`'s
 /// solution.
