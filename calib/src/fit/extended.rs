@@ -161,7 +161,7 @@ fn payload_com_step(
 /// [`ExtensionSettings::payload_com_m`]) by a Gauss–Newton step, until the steps still to come sum
 /// to less than 1 µm. A warm start ([`WarmStart`]) evaluates the first fit's torques at the
 /// equilibrium it starts from. The covariance treats the centre of mass as known.
-pub(super) fn calibrate_extended(
+pub(super) fn fit_at_equilibrium(
     model: &Model,
     train: &Dataset<'_>,
     test: Option<&Dataset<'_>>,
@@ -269,10 +269,10 @@ pub(super) fn calibrate_extended(
     Ok(cal)
 }
 
-/// [`calibrate_extended`] for `settings` and every alternative its causes offer
+/// [`fit_at_equilibrium`] for `settings` and every alternative its causes offer
 /// ([`ExtensionSettings::alternatives`]); keeps the calibration with the smallest training `χ²` (the
 /// first of equal ones).
-pub(super) fn calibrate_best(
+pub(super) fn best_extended_fit(
     model: &Model,
     train: &Dataset<'_>,
     test: Option<&Dataset<'_>>,
@@ -282,11 +282,11 @@ pub(super) fn calibrate_best(
 ) -> Result<Calibration> {
     let alternatives = settings.alternatives(train.table, &train.rows);
     if alternatives.is_empty() {
-        return calibrate_extended(model, train, test, options, settings, warm);
+        return fit_at_equilibrium(model, train, test, options, settings, warm);
     }
     let mut best: Option<Calibration> = None;
     for s in &alternatives {
-        let cal = calibrate_extended(model, train, test, options, s, warm)?;
+        let cal = fit_at_equilibrium(model, train, test, options, s, warm)?;
         if best
             .as_ref()
             .is_none_or(|b| cal.report.after.solver.cost_final < b.report.after.solver.cost_final)

@@ -297,7 +297,7 @@ pub fn fit(model: &Model, data: &Dataset<'_>, request: &FitRequest<'_>) -> Resul
         if let Some(com) = warm.and_then(|f| f.payload_com_m) {
             settings.payload_com_m = com;
         }
-        extended::calibrate_best(model, data, test, options, &settings, warm)?
+        extended::best_extended_fit(model, data, test, options, &settings, warm)?
     };
     cal.report.model = spec.clone();
     if let Some(kind) = spec.learned {
