@@ -86,6 +86,44 @@ pub fn document(d: &Diagnosis, data_name: &str, figures: &[(String, String)]) ->
                 .collect(),
         ));
     }
+    if d.findings.iter().any(|f| !f.parameters.is_empty()) {
+        doc.push(Block::Heading(2, "Parameters of the findings".into()));
+        doc.push(Block::Paragraph(text(
+            "Each finding's identified parameters in the joint fit of every adopted cause, with their \
+             standard deviations; z = value / σ.",
+        )));
+        let mut t = Table::new(&["finding", "parameter", "value", "σ", "z", "note"])
+            .left(1)
+            .left(5);
+        for f in &d.findings {
+            for p in &f.parameters {
+                let determined = p.sigma.is_finite() && p.sigma > 0.0;
+                let (sigma, z, note) = if determined {
+                    let remark = f.cause.model().remark(p.value);
+                    (
+                        format!("{:.1e} {}", p.sigma, p.unit),
+                        format!("{:.1}", p.value / p.sigma),
+                        remark
+                            .trim()
+                            .trim_start_matches('(')
+                            .trim_end_matches(')')
+                            .to_string(),
+                    )
+                } else {
+                    ("—".into(), "—".into(), "not determined on its own".into())
+                };
+                t.row(vec![
+                    f.cause.to_string(),
+                    p.name.clone(),
+                    format!("{:.3e} {}", p.value, p.unit),
+                    sigma,
+                    z,
+                    note,
+                ]);
+            }
+        }
+        doc.push(Block::Table(t));
+    }
     if d.findings.iter().any(|f| f.rival.is_some()) {
         doc.push(Block::Heading(2, "Rivals".into()));
         doc.push(Block::Paragraph(text(
