@@ -15,6 +15,10 @@ pub enum Part {
     FoldTraining(usize),
     /// The held-out rows of cross-validation fold `k` (1-based).
     FoldHeldOut(usize),
+    /// The training rows of validation region `k` (1-based): every pose outside the region.
+    RegionTraining(usize),
+    /// The held-out rows of validation region `k` (1-based).
+    RegionHeldOut(usize),
     /// A seeded subsample of another part (diagnose's screening).
     Subsample,
     /// Every campaign but campaign `id` (leave-one-campaign-out).
@@ -32,6 +36,8 @@ impl Part {
             Part::Test => " (test set)".into(),
             Part::FoldTraining(k) => format!(" (fold {k} training set)"),
             Part::FoldHeldOut(k) => format!(" (fold {k} held out)"),
+            Part::RegionTraining(k) => format!(" (training set without region {k})"),
+            Part::RegionHeldOut(k) => format!(" (region {k} held out)"),
             Part::Subsample => " (screening subsample)".into(),
             Part::WithoutCampaign(id) => format!(" (without campaign {id})"),
             Part::CampaignPredicted(id) => format!(" (campaign {id}, predicted poses)"),

@@ -184,7 +184,14 @@ class Model:
         model has orientation. ``data`` needs ``pose, q1..qN`` (rad) and what the model's causes read
         (``temp`` or ``t``, ``dir1..dirN``, ``payload``); ``x, y, z`` are ignored when present. Each
         row is predicted in the tracker frame of its ``campaign`` (an id the model knows); rows
-        without that column in the model's default campaign (the one :meth:`register` added last)."""
+        without that column in the model's default campaign (the one :meth:`register` added last).
+
+        Two more columns, as the command writes them: ``sigma_m``, each row's predicted standard
+        deviation (m) from the parameter covariance, with a 1 mm / 1 mrad prior on what the
+        calibration data did not determine (absent for a model file without a covariance); and
+        ``outside_support`` (0 or 1): the row lies beyond the configurations the learned correction
+        was fitted on (the correction is off there) or its ``sigma_m`` exceeds three times the
+        model's held-out error."""
         return to_frame(self._native.predict(to_table(data, configurations=True)))
 
     def register(self, data: DataLike, **options: Any) -> "Model":

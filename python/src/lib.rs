@@ -604,6 +604,14 @@ impl CalibratedModel {
             PyArray1::from_vec(py, preds.pose).into_any(),
         )];
         target_columns(py, &preds.position, preds.orientation.as_deref(), &mut out);
+        if let Some(sd) = preds.sigma_m {
+            out.push(("sigma_m".to_string(), PyArray1::from_vec(py, sd).into_any()));
+        }
+        let outside: Vec<i64> = preds.outside_support.iter().map(|&o| o as i64).collect();
+        out.push((
+            "outside_support".to_string(),
+            PyArray1::from_vec(py, outside).into_any(),
+        ));
         Ok(out)
     }
 

@@ -60,7 +60,14 @@ pub struct Options {
     /// every pose.
     #[arg(long, value_name = "F", default_value_t = 0.0)]
     pub test_fraction: f64,
-    /// Seed of the folds or the split.
+    /// Also validate on unseen regions of the configuration space: the poses clustered into K
+    /// regions (seeded k-means on sin q, cos q; docs/calibrate.md), each predicted by a model fitted
+    /// on the others; the saved model's `new_region` figure is what it promises for poses unlike
+    /// the ones it saw (0 = off). With several campaigns, each campaign is also predicted by a
+    /// model fitted on the others, registered on 20 of its poses.
+    #[arg(long, value_name = "K", default_value_t = calib::validate::regions::DEFAULT_REGIONS)]
+    pub regions: usize,
+    /// Seed of the folds or the split, and of the regions.
     #[arg(long, value_name = "N", default_value_t = 0)]
     pub seed: u64,
     /// With several campaigns (a `campaign` column), give each its own target offset (a re-seated
@@ -121,6 +128,11 @@ impl Options {
                     .into(),
             ));
         }
+        if self.regions == 1 {
+            return Err(CliError::Input(
+                "--regions 1: validation by region needs at least 2 regions (0 for none)".into(),
+            ));
+        }
         if self.folds == Some(1) {
             return Err(CliError::Input(
                 "--folds 1: cross-validation needs at least 2 folds (0 for no validation)".into(),
@@ -146,6 +158,7 @@ impl Options {
                 ValidationPlan::Split {
                     fraction: self.test_fraction,
                     seed: self.seed,
+                    regions: self.regions,
                 },
                 json!({"kind": "by_pose", "test_fraction": self.test_fraction, "seed": self.seed}),
             ),
@@ -154,8 +167,9 @@ impl Options {
                 ValidationPlan::Folds {
                     k: folds,
                     seed: self.seed,
+                    regions: self.regions,
                 },
-                json!({"kind": "cross_validation", "folds": folds, "seed": self.seed}),
+                json!({"kind": "cross_validation", "folds": folds, "seed": self.seed, "regions": self.regions}),
             ),
         }
     }
@@ -201,6 +215,7 @@ impl Outcome {
         let mut file = CalibratedModel::new(robot, &self.cal);
         if let (Some(f), Some(v)) = (file.fit.as_mut(), &self.validation) {
             f.held_out_rms_m = Some(v.final_stats().rms_m);
+            f.new_region_rms_m = v.new_region.as_ref().map(|r| r.rms_m);
         }
         file
     }
@@ -302,6 +317,16 @@ pub fn calibrate(
                 " (--folds {k} fits each fold on {}/{k} of the poses; fewer folds, or --folds 0 \
                          for no validation)",
                 k - 1
+            )),
+            (
+                CalibError::TooFewPoses {
+                    part: Part::RegionTraining(_),
+                    ..
+                },
+                ValidationPlan::Folds { regions, .. } | ValidationPlan::Split { regions, .. },
+            ) => Some(format!(
+                " (--regions {regions} fits the model without each region in turn; fewer \
+                 regions, or --regions 0 for no validation by region)"
             )),
             _ => None,
         };

@@ -3,7 +3,8 @@
 use super::paths::{Inputs, check_distinct};
 use super::shared::{CliError, CliResult, print_json};
 use calib::model::file::CalibratedModel;
-use calib::model::predict::Predictor;
+use calib::model::predict::{Predictions, Predictor, SIGMA_OUTSIDE};
+use calib::model::uncertainty::Prior;
 use serde_json::json;
 use sim::measurement_table::{self, MeasurementTable};
 use std::path::{Path, PathBuf};
@@ -25,6 +26,14 @@ pub struct Args {
     /// calibrated robot, everything else kept, base and target transforms in a comment.
     #[arg(long, value_name = "FILE.urdf")]
     urdf_out: Option<PathBuf>,
+    /// Prior standard deviation of a length the calibration data did not determine (joint twist
+    /// translations, target position), in metres: the nominal geometry's tolerance, for `sigma_m`.
+    #[arg(long, value_name = "M", default_value_t = 1e-3)]
+    prior_length: f64,
+    /// Prior standard deviation of an angle the calibration data did not determine (joint twist
+    /// rotations, zero offsets), in radians, for `sigma_m`.
+    #[arg(long, value_name = "RAD", default_value_t = 1e-3)]
+    prior_angle: f64,
     /// Print one JSON summary on stdout instead of text on stderr.
     #[arg(long)]
     json: bool,
@@ -71,8 +80,25 @@ pub fn run(args: Args) -> CliResult {
         inputs.check("--urdf-out", u)?;
         check_distinct(("--out", &args.out), ("--urdf-out", u))?;
     }
+    for (flag, v) in [
+        ("--prior-length", args.prior_length),
+        ("--prior-angle", args.prior_angle),
+    ] {
+        if !(v.is_finite() && v > 0.0) {
+            return Err(CliError::Input(format!(
+                "{flag} {v}: a prior standard deviation is a finite number > 0"
+            )));
+        }
+    }
     let file = CalibratedModel::load(&args.model)?;
     let mut predictor = Predictor::from_file(&file)?;
+    predictor.set_prior(
+        &file,
+        &Prior {
+            length_m: args.prior_length,
+            angle_rad: args.prior_angle,
+        },
+    );
     let table = read_configs(&args.data, &predictor.model)?;
     let preds = predictor.predict_table(&table, &args.data.display().to_string())?;
     sim::io::write_atomic(&args.out, preds.to_csv().as_bytes())?;
@@ -85,6 +111,8 @@ pub fn run(args: Args) -> CliResult {
             "robot": predictor.model.name(),
             "rows": table.len(),
             "orientation": preds.orientation.is_some(),
+            "sigma_m": preds.sigma_m.is_some(),
+            "outside_support": preds.n_outside_support(),
             "out": args.out.display().to_string(),
             "urdf_out": args.urdf_out.as_ref().map(|p| p.display().to_string()),
         }))
@@ -95,9 +123,35 @@ pub fn run(args: Args) -> CliResult {
             predictor.model.name(),
             args.out.display()
         );
+        eprintln!("{}", support_line(&predictor, &preds));
         if let Some(p) = &args.urdf_out {
             eprintln!("wrote {}", p.display());
         }
         Ok(())
     }
+}
+
+/// One line on stderr: how many rows lie outside the model's support, and why that matters.
+pub fn support_line(predictor: &Predictor, preds: &Predictions) -> String {
+    let n = preds.outside_support.len();
+    let outside = preds.n_outside_support();
+    let mut why = Vec::new();
+    if predictor.learned.as_ref().is_some_and(|l| l.is_active()) {
+        why.push("beyond the configurations its learned correction was fitted on (the correction is faded out there)".to_string());
+    }
+    if let Some(h) = predictor.held_out_rms_m.filter(|_| preds.sigma_m.is_some()) {
+        why.push(format!(
+            "with sigma_m above {SIGMA_OUTSIDE} × its held-out RMS ({:.4} mm)",
+            h * 1e3
+        ));
+    }
+    if why.is_empty() {
+        return format!(
+            "outside_support: {outside} of {n} rows (the model has no learned correction and no held-out error to compare sigma_m with)"
+        );
+    }
+    format!(
+        "outside_support: {outside} of {n} rows ({}): expect larger errors there",
+        why.join("; or ")
+    )
 }

@@ -52,6 +52,7 @@ impl CalibratedModel {
                     .map_or(cal.report.after.train.rms_m, |l| l.train.rms_m),
                 held_out_rms_m: None,
                 n_train_poses: cal.report.n_train_poses,
+                new_region_rms_m: None,
             }),
         }
     }

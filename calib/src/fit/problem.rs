@@ -10,7 +10,7 @@
 use crate::lie3::{left_jacobian_inverse, log_rotation};
 use crate::lm::LeastSquaresProblem;
 use crate::model::chain::Chain;
-use crate::model::extensions::Term;
+use crate::model::jacobian::{BendColumns, extension_columns, grow_columns};
 use crate::model::params::{KinematicParams, ParamLayout};
 use crate::model::physical_row::{PredictScratch, physical_row};
 use nalgebra::{DMatrix, Vector3};
@@ -18,98 +18,6 @@ use rayon::prelude::*;
 use sim::Model;
 
 pub use crate::model::observations::{NoiseModel, Observations};
-
-/// Turns the kinematic position Jacobian of `p_kin` into that of the grown prediction
-/// `p = t + (1 + γ)(p_kin − t)` (`t` the base origin, tracker frame): every column that moves `p_kin`
-/// only is multiplied by `1 + γ`; the base twist moves `p` rigidly, `[−[p], I]` at the final `p` (m).
-fn grow_columns(
-    layout: &ParamLayout,
-    campaign: usize,
-    growth: f64,
-    p: &Vector3<f64>,
-    block: &mut [f64],
-) {
-    let np = layout.len();
-    let kb = layout.campaign_base(campaign);
-    let ec_cross_p = [
-        Vector3::new(0.0, -p.z, p.y),
-        Vector3::new(p.z, 0.0, -p.x),
-        Vector3::new(-p.y, p.x, 0.0),
-    ];
-    for row in 0..3 {
-        let cols = &mut block[row * np..row * np + layout.kinematic_len()];
-        for (k, v) in cols.iter_mut().enumerate() {
-            if !(kb..kb + 6).contains(&k) {
-                *v *= 1.0 + growth;
-            }
-        }
-        for c in 0..3 {
-            cols[kb + c] = ec_cross_p[c][row];
-            cols[kb + 3 + c] = if row == c { 1.0 } else { 0.0 };
-        }
-    }
-}
-
-/// How a bending term moves the target of one row: the chain and its evaluation, the row's bends.
-struct BendColumns<'c> {
-    chain: &'c Chain,
-    scratch: &'c PredictScratch,
-    /// `1 + γ`: the growth multiplies every displacement of `p_kin`.
-    grown: f64,
-    /// `true` for the position rows (`ω × (p_kin − oᵢ)`), `false` for the orientation rows (`ω`).
-    position: bool,
-}
-
-impl BendColumns<'_> {
-    /// The column of a unit bend of joint `joint` about axis `about` of its frame (3 rows).
-    fn column(&self, joint: usize, about: usize) -> Vector3<f64> {
-        let local = Vector3::ith(about, 1.0);
-        let s = self.scratch;
-        let (w, o) = self
-            .chain
-            .bend_axis(&s.chain, joint, &local, &s.bend[joint]);
-        if self.position {
-            w.cross(&(s.chain.p_tracker - o)) * self.grown
-        } else {
-            w
-        }
-    }
-}
-
-/// Fills the extension columns of a 3-row Jacobian block (row-major, `layout.len()` columns) whose
-/// kinematic columns are set: a joint-angle term is the joint's zero-offset column times its regressor,
-/// the growth term `lever` times its regressor, a bending term the bend's own column
-/// ([`Chain::bend_axis`]) times its regressor.
-fn extension_columns(
-    layout: &ParamLayout,
-    coef: &[f64],
-    lever: &Vector3<f64>,
-    bend: &BendColumns<'_>,
-    block: &mut [f64],
-) {
-    let np = layout.len();
-    for (e, (p, &g)) in layout.extensions.iter().zip(coef).enumerate() {
-        let ke = layout.extension(e);
-        match p.term {
-            Term::JointAngle { joint } => {
-                for row in 0..3 {
-                    block[row * np + ke] = block[row * np + layout.zero_offset(joint)] * g;
-                }
-            }
-            Term::Growth => {
-                for row in 0..3 {
-                    block[row * np + ke] = lever[row] * g;
-                }
-            }
-            Term::Bend { joint, about } => {
-                let c = bend.column(joint, about);
-                for row in 0..3 {
-                    block[row * np + ke] = c[row] * g;
-                }
-            }
-        }
-    }
-}
 
 /// The kinematic calibration problem over `active` parameters of a [`ParamLayout`].
 #[derive(Clone, Debug)]

@@ -156,6 +156,10 @@ pub struct FitSummary {
     pub held_out_rms_m: Option<f64>,
     /// Distinct poses of the calibration.
     pub n_train_poses: usize,
+    /// RMS position error on held-out regions of the configuration space (m), when validated by
+    /// region: the promise for poses unlike the calibration's.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub new_region_rms_m: Option<f64>,
 }
 
 /// Covariance of the parameters.
@@ -343,6 +347,16 @@ impl CalibratedModel {
                     "absent"
                 }
             )));
+        }
+        if let Some(support) = m.learned.as_ref().and_then(|l| l.support()) {
+            support.check().map_err(&bad)?;
+            if support.n_joints != m.learned.as_ref().map_or(0, |l| l.n_joints()) {
+                return Err(bad(format!(
+                    "key 'learned.support.n_joints' is {}, but the correction takes {} joints",
+                    support.n_joints,
+                    m.learned.as_ref().map_or(0, |l| l.n_joints())
+                )));
+            }
         }
         if let Some(e) = &m.extensions {
             finite("extensions.values", &e.values)?;

@@ -3,7 +3,8 @@
 //! The kinematic parameters ([`params`]) and their product of exponentials ([`chain`]), the causes
 //! that extend it ([`extensions`], one file each), the learned corrections ([`learned`]), the model
 //! specification that names them ([`spec::ModelSpec`]), the one prediction path ([`predict`], with
-//! [`physical_row`]) and the rows it reads ([`observations`]), residual statistics ([`stats`]), the
+//! [`physical_row`]) and the rows it reads ([`observations`]), residual statistics ([`stats`]), each prediction's Jacobian ([`jacobian`]) and standard deviation
+//! ([`uncertainty`]), the
 //! model file ([`file`]) and its URDF export ([`urdf_export`]), and the robot a model belongs to
 //! ([`robot`]).
 //!
@@ -13,6 +14,7 @@
 pub mod chain;
 pub mod extensions;
 pub mod file;
+pub mod jacobian;
 pub mod learned;
 pub mod observations;
 pub mod params;
@@ -21,6 +23,7 @@ pub mod predict;
 pub mod robot;
 pub mod spec;
 pub mod stats;
+pub mod uncertainty;
 pub mod urdf_export;
 
 pub use spec::{ModelChoice, ModelSpec};

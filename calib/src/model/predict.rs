@@ -28,11 +28,13 @@ use crate::lie3::{log_rotation, quaternion_from_rotation};
 use crate::model::chain::{Chain, ChainScratch};
 use crate::model::extensions::{ExtensionSettings, Regressors};
 use crate::model::file::CalibratedModel;
+use crate::model::jacobian::position_jacobian_row;
 use crate::model::learned::LearnedResidual;
 use crate::model::learned::adjoint::AdjointModel;
 use crate::model::observations::Observations;
 use crate::model::params::{KinematicParams, ParamLayout};
 pub use crate::model::physical_row::{AdjointScratch, PredictScratch, RowPrediction, physical_row};
+use crate::model::uncertainty::{PredictionUncertainty, Prior};
 use nalgebra::{DMatrix, Matrix3, Vector3};
 use rayon::prelude::*;
 use sim::Model;
@@ -111,7 +113,12 @@ impl<'a> Prediction<'a> {
             .adjoint
             .take()
             .unwrap_or_else(|| AdjointScratch::new(&self.chain, self.params, a.n_features()));
-        a.prepare(&mut ad, self.params, q);
+        a.prepare(
+            &mut ad,
+            self.params,
+            q,
+            self.learned.map_or(1.0, |l| l.weight(q)),
+        );
         let p = physical_row(&ad.chain, &ad.params, regs, r, q, campaign, s).p_tracker;
         s.adjoint = Some(ad);
         p
@@ -419,9 +426,19 @@ pub struct Predictor {
     pub extensions: Option<ExtensionSettings>,
     /// Learned residual correction, if any.
     pub learned: Option<LearnedResidual>,
+    /// The prediction's standard deviation from the parameter covariance (with a prior on the
+    /// undetermined directions), when the model file has a covariance.
+    pub uncertainty: Option<PredictionUncertainty>,
+    /// The model's held-out RMS error (m), when it was validated: a row whose `sigma_m` exceeds
+    /// [`SIGMA_OUTSIDE`] times it is outside the model's support.
+    pub held_out_rms_m: Option<f64>,
     chain: Chain,
     scratch: ChainScratch,
 }
+
+/// A row whose predicted standard deviation exceeds this many times the model's held-out RMS error
+/// is marked `outside_support`: the calibration data did not determine its prediction.
+pub const SIGMA_OUTSIDE: f64 = 3.0;
 
 /// Predictions for the rows of a table.
 #[derive(Clone, Debug, PartialEq)]
@@ -433,25 +450,53 @@ pub struct Predictions {
     /// Predicted target orientation per row (unit quaternion `[qw, qx, qy, qz]`, tracker frame), when the
     /// model has orientation.
     pub orientation: Option<Vec<[f64; 4]>>,
+    /// Predicted standard deviation of each row's position (m; [`crate::model::uncertainty`]), when
+    /// the model has a covariance.
+    pub sigma_m: Option<Vec<f64>>,
+    /// Whether each row is outside the model's support: beyond the configurations its learned
+    /// correction was fitted on (the correction is not applied in full there), or with a `sigma_m`
+    /// above [`SIGMA_OUTSIDE`] times the held-out RMS error.
+    pub outside_support: Vec<bool>,
 }
 
 impl Predictions {
-    /// CSV text `pose,x,y,z[,qw,qx,qy,qz]`.
+    /// CSV text `pose,x,y,z[,qw,qx,qy,qz][,sigma_m],outside_support` (the flag as `0` or `1`).
     pub fn to_csv(&self) -> String {
         let mut header: Vec<String> = ["pose", "x", "y", "z"].map(String::from).to_vec();
         if self.orientation.is_some() {
             header.extend(["qw", "qx", "qy", "qz"].map(String::from));
         }
-        let rows: Vec<(i64, Vec<f64>)> = (0..self.pose.len())
-            .map(|r| {
-                let mut v = self.position[r].to_vec();
-                if let Some(o) = &self.orientation {
-                    v.extend_from_slice(&o[r]);
-                }
-                (self.pose[r], v)
-            })
-            .collect();
-        crate::io::csv_text(&header, &rows)
+        if self.sigma_m.is_some() {
+            header.push("sigma_m".into());
+        }
+        header.push("outside_support".into());
+        let mut s = header.join(",");
+        s.push('\n');
+        for r in 0..self.pose.len() {
+            s.push_str(&self.pose[r].to_string());
+            let mut push = |v: f64| {
+                s.push(',');
+                s.push_str(&format!("{v:?}"));
+            };
+            self.position[r].iter().for_each(|&v| push(v));
+            if let Some(o) = &self.orientation {
+                o[r].iter().for_each(|&v| push(v));
+            }
+            if let Some(sd) = &self.sigma_m {
+                push(sd[r]);
+            }
+            s.push_str(if self.outside_support[r] {
+                ",1\n"
+            } else {
+                ",0\n"
+            });
+        }
+        s
+    }
+
+    /// Rows outside the support.
+    pub fn n_outside_support(&self) -> usize {
+        self.outside_support.iter().filter(|&&o| o).count()
     }
 }
 
@@ -465,9 +510,41 @@ impl Predictor {
             params,
             extensions: None,
             learned: None,
+            uncertainty: None,
+            held_out_rms_m: None,
             chain,
             scratch,
         }
+    }
+
+    /// The layout of the predictor's parameters (its extensions included).
+    fn layout(&self) -> ParamLayout {
+        let ext = self
+            .extensions
+            .as_ref()
+            .map(|s| s.params(&self.model))
+            .unwrap_or_default();
+        ParamLayout::for_params(&self.model, &self.params, ext)
+    }
+
+    /// Sets the prediction uncertainty from `m`'s covariance with `prior` on the directions the
+    /// calibration did not determine; none when the file has no covariance or its parameter names
+    /// are not the model's.
+    pub fn set_prior(&mut self, m: &CalibratedModel, prior: &Prior) {
+        let layout = self.layout();
+        self.uncertainty = m.covariance.as_ref().and_then(|c| {
+            let names_agree = c.parameters.len() == layout.len()
+                && c.parameters
+                    .iter()
+                    .enumerate()
+                    .all(|(k, n)| *n == layout.name(k));
+            if !names_agree {
+                return None;
+            }
+            let p = layout.len();
+            let matrix = DMatrix::from_fn(p, p, |i, j| c.matrix[i][j]);
+            PredictionUncertainty::new(&layout, &matrix, prior)
+        });
     }
 
     /// A predictor for a model file.
@@ -475,6 +552,7 @@ impl Predictor {
         let mut p = Predictor::new(m.robot_model()?, m.params());
         p.extensions = m.extensions.as_ref().map(|e| e.settings.clone());
         p.learned = m.learned.clone();
+        p.held_out_rms_m = m.fit.as_ref().and_then(|f| f.held_out_rms_m);
         if let Some(s) = &p.extensions
             && s.params(&p.model).len() != p.params.extension.len()
         {
@@ -487,6 +565,7 @@ impl Predictor {
                 ),
             });
         }
+        p.set_prior(m, &Prior::default());
         Ok(p)
     }
 
@@ -567,6 +646,8 @@ impl Predictor {
             pose: table.pose.clone(),
             position: Vec::with_capacity(table.len()),
             orientation: orientation.then(|| Vec::with_capacity(table.len())),
+            sigma_m: None,
+            outside_support: Vec::new(),
         };
         let rows: Vec<usize> = (0..table.len()).collect();
         let regs = match &self.extensions {
@@ -589,6 +670,65 @@ impl Predictor {
             );
         out.position = position.iter().map(|p| (*p).into()).collect();
         out.orientation = rotation.map(|r| r.iter().map(quaternion_from_rotation).collect());
+        out.sigma_m = self.sigmas(table, &regs, &campaign);
+        out.outside_support = (0..table.len())
+            .into_par_iter()
+            .map(|r| {
+                let beyond_learned = self
+                    .learned
+                    .as_ref()
+                    .is_some_and(|l| l.outside_support(table.q_row(r)));
+                let beyond_sigma = match (&out.sigma_m, self.held_out_rms_m) {
+                    (Some(sd), Some(h)) => sd[r] > SIGMA_OUTSIDE * h,
+                    _ => false,
+                };
+                beyond_learned || beyond_sigma
+            })
+            .collect();
         Ok(out)
+    }
+
+    /// Every row's predicted standard deviation (m), when the predictor has an uncertainty. The
+    /// Jacobian is the physical model's ([`crate::model::jacobian::position_jacobian_row`]); a
+    /// learned correction's own uncertainty is not in it.
+    fn sigmas(
+        &self,
+        table: &MeasurementTable,
+        regs: &Regressors,
+        campaign: &[usize],
+    ) -> Option<Vec<f64>> {
+        let u = self.uncertainty.as_ref()?;
+        let layout = self.layout();
+        let np = layout.len();
+        let prediction = Prediction::new(&self.model, &self.params);
+        let chain = prediction.chain();
+        let mut out = vec![0.0; table.len()];
+        out.par_chunks_mut(CHUNK_ROWS)
+            .enumerate()
+            .for_each(|(c, dst)| {
+                let mut s = PredictScratch::new(self.model.nq());
+                let mut jac = vec![0.0; 3 * np];
+                let mut reference = vec![0.0; 3 * np];
+                for (k, sd) in dst.iter_mut().enumerate() {
+                    let r = c * CHUNK_ROWS + k;
+                    let cr = campaign.get(r).copied().unwrap_or(0);
+                    let q = table.q_row(r);
+                    let coef = if regs.is_empty() {
+                        &[][..]
+                    } else {
+                        regs.row(r)
+                    };
+                    let pred = physical_row(chain, &self.params, regs, r, q, cr, &mut s);
+                    position_jacobian_row(chain, &layout, &s, &pred, cr, coef, &mut jac);
+                    if cr == 0 {
+                        reference.copy_from_slice(&jac);
+                    } else {
+                        let pred = physical_row(chain, &self.params, regs, r, q, 0, &mut s);
+                        position_jacobian_row(chain, &layout, &s, &pred, 0, coef, &mut reference);
+                    }
+                    *sd = u.sigma(&jac, &reference);
+                }
+            });
+        Some(out)
     }
 }

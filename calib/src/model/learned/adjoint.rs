@@ -145,9 +145,20 @@ impl AdjointModel {
 
 impl AdjointModel {
     /// Prepares `s` for the configuration `q` (controller values, rad or m): the features, the
-    /// parameters of `params` with the row's error twists and zero offsets, the chain at them.
-    pub fn prepare(&self, s: &mut AdjointScratch, params: &KinematicParams, q: &[f64]) {
+    /// parameters of `params` with the row's error twists and zero offsets, the chain at them. The
+    /// polynomial changes are scaled by `weight` (1 inside the correction's support, 0 outside:
+    /// [`crate::model::learned::Support`]).
+    pub fn prepare(
+        &self,
+        s: &mut AdjointScratch,
+        params: &KinematicParams,
+        q: &[f64],
+        weight: f64,
+    ) {
         self.features(q, &mut s.phi);
+        if weight != 1.0 {
+            s.phi.iter_mut().for_each(|v| *v *= weight);
+        }
         self.apply(params, &s.phi, &mut s.params);
         s.chain.update_params(&s.params);
     }

@@ -25,6 +25,7 @@ pub mod adjoint;
 pub mod cross_validation;
 pub mod kernel;
 pub mod polynomial;
+pub mod support;
 
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
@@ -33,6 +34,7 @@ use crate::error::CalibError;
 use cross_validation::{K_FOLDS, fold_assignment, rms_norm, select_simplest};
 use kernel::KernelModel;
 use polynomial::PolynomialModel;
+pub use support::Support;
 
 /// A kind of learned residual model, as written after `learned:` in a model name.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
@@ -131,6 +133,10 @@ pub struct LearnedResidual {
     cv_rms_m: f64,
     cv_rms_before_m: f64,
     n_parameters: usize,
+    /// Where it has seen data ([`support`]): applied inside, faded at the edge, off outside. Absent in
+    /// files written before supports existed: such a correction applies everywhere.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    support: Option<Support>,
 }
 
 fn bad(field: String, value: String, problem: &str) -> CalibError {
@@ -204,13 +210,17 @@ pub fn fit(
             }
         }
     }
-    match kind {
-        LearnedKind::Kernel => fit_kernel(q, n_joints, residual_m, seed),
-        LearnedKind::Adjoint => Err(CalibError::Misuse(
-            "learned:adjoint is identified through the chain: use learned::fit_adjoint".into(),
-        )),
-        _ => Ok(fit_polynomial(kind, q, n_joints, residual_m, seed)),
-    }
+    let mut fitted = match kind {
+        LearnedKind::Kernel => fit_kernel(q, n_joints, residual_m, seed)?,
+        LearnedKind::Adjoint => {
+            return Err(CalibError::Misuse(
+                "learned:adjoint is identified through the chain: use learned::fit_adjoint".into(),
+            ));
+        }
+        _ => fit_polynomial(kind, q, n_joints, residual_m, seed),
+    };
+    fitted.support = Support::of(q, n_joints, seed);
+    Ok(fitted)
 }
 
 /// Fits `learned:adjoint` ([`adjoint`]) to the training rows `obs` of the physical model `params` of
@@ -253,6 +263,7 @@ pub fn fit_adjoint(
         cv_rms_m: f.cv_rms_m,
         cv_rms_before_m: f.cv_rms_before_m,
         n_parameters: if f.active { p } else { 0 },
+        support: Support::of(&obs.q, obs.n_joints, seed),
     };
     Ok((residual, f.params))
 }
@@ -299,6 +310,7 @@ fn fit_polynomial(
         cv_rms_m,
         cv_rms_before_m,
         n_parameters,
+        support: None,
     }
 }
 
@@ -360,6 +372,7 @@ fn fit_kernel(
         cv_rms_m,
         cv_rms_before_m,
         n_parameters,
+        support: None,
     })
 }
 
@@ -368,16 +381,39 @@ impl LearnedResidual {
     /// joint). A `q` of the wrong length gives a NaN vector (never a panic), and so does an adjoint
     /// model, which is no additive correction: [`crate::model::predict::Prediction`] evaluates it through
     /// the chain ([`LearnedResidual::adjoint`]).
+    /// The correction is weighted by [`LearnedResidual::weight`]: whole inside its support, faded at
+    /// the edge, zero outside.
     pub fn predict(&self, q: &[f64]) -> Vector3<f64> {
         if q.len() != self.n_joints {
             return Vector3::repeat(f64::NAN);
         }
-        match &self.correction {
-            Correction::Zero => Vector3::zeros(),
+        let unweighted = match &self.correction {
+            Correction::Zero => return Vector3::zeros(),
             Correction::Polynomial(p) => p.predict(q),
             Correction::Kernel(k) => k.predict(q),
-            Correction::Adjoint(_) => Vector3::repeat(f64::NAN),
+            Correction::Adjoint(_) => return Vector3::repeat(f64::NAN),
+        };
+        match self.weight(q) {
+            0.0 => Vector3::zeros(),
+            w => w * unweighted,
         }
+    }
+
+    /// Weight of the correction at `q` (rad): 1 inside its support, 0 outside, between at the edge
+    /// ([`Support::weight`]); 1 everywhere for a correction without a support (older files).
+    pub fn weight(&self, q: &[f64]) -> f64 {
+        self.support.as_ref().map_or(1.0, |s| s.weight(q))
+    }
+
+    /// Whether `q` lies outside the correction's support: the correction is not applied whole there
+    /// (weight below 1). Never for a zero correction, which has nothing to apply.
+    pub fn outside_support(&self, q: &[f64]) -> bool {
+        self.is_active() && self.weight(q) < 1.0
+    }
+
+    /// The support, when the correction has one.
+    pub fn support(&self) -> Option<&Support> {
+        self.support.as_ref()
     }
 
     /// The adjoint model, for a kept `learned:adjoint` correction.
