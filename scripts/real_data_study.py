@@ -11,8 +11,11 @@ binary as a user would.
 3. Two campaigns of the Landgraf UR10: calibrate on series A (every pose), register series B with 20
    of its poses (seeded), predict the rest of B; beside the within-series figures (5-fold) of the same
    models on A and on B.
+4. Transfer (issue 24): per robot and model, the held-out poses (5-fold) against the held-out regions
+   (`validation.new_region`, 5 regions); for the UR10, A → B and B → A (register 20 poses, predict the
+   rest) beside the promise of the series the model was fitted on.
 
-Usage: scripts/real_data_study.py [--robocal PATH] [--out DIR] [--only hidden|learned|campaigns]
+Usage: scripts/real_data_study.py [--robocal PATH] [--out DIR] [--only hidden|learned|campaigns|transfer]
 Prints markdown tables; writes every model and JSON report under DIR (default target/real_study).
 """
 
@@ -176,11 +179,69 @@ def campaigns(robocal, out):
               f"{mm(r['residual']['rms_m'])} RMS, {r['ratio']:.2f}× the model's |")
 
 
+def register_and_predict(robocal, out, model_file, rows, fields, tag):
+    """Registers the campaign `rows` on 20 of its poses (seed 1) with `model_file`; predicts the rest.
+    Returns the error statistics and the share of predicted rows outside the support."""
+    ids = sorted({r["pose"] for r in rows}, key=int)
+    random.Random(1).shuffle(ids)
+    reg_ids = set(ids[:20])
+    reg = [r for r in rows if r["pose"] in reg_ids]
+    rest = [r for r in rows if r["pose"] not in reg_ids]
+    r20, rrest = os.path.join(out, f"{tag}_register20.csv"), os.path.join(out, f"{tag}_rest.csv")
+    write_rows(r20, fields, reg)
+    write_rows(rrest, fields, rest)
+    registered = os.path.join(out, f"{tag}_registered.json")
+    run(robocal, ["register", "--model", model_file, "--data", r20, "--out", registered])
+    pred = os.path.join(out, f"{tag}_pred.csv")
+    run(robocal, ["predict", "--model", registered, "--data", rrest, "--out", pred])
+    _, p = read_rows(pred)
+    outside = sum(int(x["outside_support"]) for x in p) / len(p)
+    return errors(pred, rest), outside
+
+
+def transfer(robocal, out):
+    models = ["kinematic", "kinematic+joint_compliance", "kinematic+learned:kernel", "auto"]
+    print("\n### What transfers: held-out poses against held-out regions and the other series\n")
+    print("Mean position error in mm. *Poses*: 5-fold cross-validation by pose. *Regions*: the poses")
+    print("clustered into 5 regions (k-means on sin q, cos q, seed 0), each predicted by the model fitted")
+    print("on the others: `validation.new_region`, what the saved model promises for poses unlike its own.\n")
+    print("| robot | model | poses | regions |")
+    print("|---|---|---|---|")
+    promise = {}
+    for name, (robot, file) in FILES.items():
+        path = os.path.join(REAL, file)
+        for model in models:
+            tag = f"{name.replace(' ', '_')}_{model}"
+            so, _, secs = run(robocal, ["calibrate", "--robot", robot, "--data", path, "--model", model,
+                                         "--out", os.path.join(out, f"{tag}.json"), "--json"])
+            v = json.loads(so)
+            val = v["validation"]
+            poses = val["learned"] or val["after"]
+            region = val["new_region"]
+            promise[(name, model)] = (region["mean_m"], v["model"])
+            label = f"`{model}`" if model != "auto" else f"`auto` (`{v['model']}`)"
+            print(f"| {name} | {label} | {mm(poses['mean_m'])} | {mm(region['mean_m'])} |")
+            print(f"  {name} {model}: {secs:.0f} s", file=sys.stderr)
+    print("\n#### The promise against the other series (UR10, register 20 poses, predict the rest)\n")
+    print("| model | fitted on | promise (regions of its series) | realised on the other series | rows outside the support |")
+    print("|---|---|---|---|---|")
+    for src, dst in [("UR10 A", "UR10 B"), ("UR10 B", "UR10 A")]:
+        fields, rows = read_rows(os.path.join(REAL, FILES[dst][1]))
+        for model in models:
+            tag = f"{src.replace(' ', '_')}_{model}"
+            e, outside = register_and_predict(robocal, out, os.path.join(out, f"{tag}.json"), rows, fields,
+                                              f"{tag}_to_{dst[-1]}")
+            p, chosen = promise[(src, model)]
+            label = f"`{model}`" if model != "auto" else f"`auto` (`{chosen}`)"
+            print(f"| {label} | {src[-1]} → {dst[-1]} | {mm(p)} | {mm(e['mean'])} ({1e2 * (e['mean'] / p - 1):+.0f} %) "
+                  f"| {100 * outside:.0f} % |")
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--robocal", default=os.path.join("target", "release", "robocal"))
     ap.add_argument("--out", default=os.path.join("target", "real_study"))
-    ap.add_argument("--only", choices=["hidden", "learned", "campaigns"])
+    ap.add_argument("--only", choices=["hidden", "learned", "campaigns", "transfer"])
     a = ap.parse_args()
     os.makedirs(a.out, exist_ok=True)
     if a.only in (None, "hidden"):
@@ -189,6 +250,8 @@ def main():
         learned_models(a.robocal, a.out)
     if a.only in (None, "campaigns"):
         campaigns(a.robocal, a.out)
+    if a.only in (None, "transfer"):
+        transfer(a.robocal, a.out)
 
 
 if __name__ == "__main__":

@@ -1484,19 +1484,27 @@ fn check_output(
             }
             let text = String::from_utf8(p).map_err(|_| "predictions are not UTF-8")?;
             let mut lines = text.lines();
-            if lines.next() != Some("pose,x,y,z") {
-                return Err("predictions without the pose,x,y,z header".into());
-            }
+            let header = lines.next().unwrap_or("");
+            let width = match header {
+                "pose,x,y,z,sigma_m,outside_support" => 6,
+                "pose,x,y,z,outside_support" => 5,
+                _ => {
+                    return Err(format!(
+                        "predictions without the pose,x,y,z[,sigma_m],outside_support header: {header}"
+                    ));
+                }
+            };
             let rows: Vec<&str> = lines.collect();
             for l in &rows {
                 let cells: Vec<&str> = l.split(',').collect();
-                if cells.len() != 4
-                    || cells[1..]
-                        .iter()
-                        .any(|v| !v.parse::<f64>().is_ok_and(f64::is_finite))
+                let finite = |v: &&str| v.parse::<f64>().is_ok_and(f64::is_finite);
+                if cells.len() != width
+                    || !cells[1..width - 1].iter().all(finite)
+                    || !matches!(cells[width - 1], "0" | "1")
+                    || (width == 6 && cells[4].parse::<f64>().is_ok_and(|v| v < 0.0))
                 {
                     return Err(format!(
-                        "a prediction row that is not four finite numbers: {l}"
+                        "a prediction row that is not finite numbers, a σ ≥ 0 and a 0/1 flag: {l}"
                     ));
                 }
             }

@@ -68,9 +68,9 @@ fn model_file_round_trips_and_predicts_the_truth() {
         assert_eq!(
             header,
             if orientation {
-                "pose,x,y,z,qw,qx,qy,qz"
+                "pose,x,y,z,qw,qx,qy,qz,sigma_m,outside_support"
             } else {
-                "pose,x,y,z"
+                "pose,x,y,z,sigma_m,outside_support"
             }
         );
         assert_eq!(csv.lines().count(), qs.len() + 1);

@@ -103,7 +103,7 @@ def test_predict_gives_the_cli_predictions(cli, generated, tmp_path):
     model = robocal.load_model(tmp_path / "m.json")
     assert model.model == "kinematic+joint_compliance" and model.robot == "iiwa7" and model.report is None
     got = model.predict(robocal.read_table(data))
-    assert list(got.columns) == list(expected.columns) == ["pose", "x", "y", "z"]
+    assert list(got.columns) == list(expected.columns) == ["pose", "x", "y", "z", "sigma_m", "outside_support"]
     for c in expected.columns:
         np.testing.assert_array_equal(got[c].to_numpy(), expected[c].to_numpy(), err_msg=c)
     # Joint configurations alone, as predict reads them: only what the model needs.

@@ -271,7 +271,8 @@ pub fn calibrate(
     let model_spec = match model_spec {
         Some(s) => s,
         None => {
-            let diagnose_options = super::diagnose::options(1.0 / 3.0, options.seed, 1e-3)?;
+            let mut diagnose_options = super::diagnose::options(1.0 / 3.0, options.seed, 1e-3)?;
+            diagnose_options.regions = options.regions;
             let (d, choice) = calib::select::choose(
                 model,
                 table,

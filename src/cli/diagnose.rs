@@ -54,6 +54,11 @@ pub struct Options {
     /// large tables: each candidate of each round is fitted on every pose).
     #[arg(long, value_name = "N", default_value_t = calib::select::diagnose::screening::DEFAULT_SCREEN_POSES)]
     pub screen_poses: usize,
+    /// Regions of the configuration space every adopted cause must transfer to: the training poses
+    /// clustered into K regions (seeded k-means on sin q, cos q), the model fitted without each in
+    /// turn must predict it better with the cause than without (0 = no transfer test).
+    #[arg(long, value_name = "K", default_value_t = calib::validate::regions::DEFAULT_REGIONS)]
+    pub regions: usize,
 }
 
 impl Options {
@@ -67,6 +72,12 @@ impl Options {
             )));
         }
         o.screen_poses = self.screen_poses;
+        if self.regions == 1 {
+            return Err(CliError::Input(
+                "--regions 1: the transfer test needs at least 2 regions (0 for none)".into(),
+            ));
+        }
+        o.regions = self.regions;
         if let Some(v) = self.noise_floor {
             if !(v > 0.0 && v.is_finite() && v < 0.1) {
                 return Err(CliError::Input(format!(

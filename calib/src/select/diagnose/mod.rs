@@ -17,7 +17,11 @@
 //!    remaining causes until none is significant.
 //! 4. The joints of a finding are those whose parameter of that cause is determined on its own and
 //!    differs from zero by more than [`DiagnoseOptions::joint_z`] standard deviations.
-//! 5. What is left is examined for structure no known cause explains ([`unexplained`]): harmonics of
+//! 5. Every adopted cause must also transfer to **unseen regions** of the configuration space
+//!    ([`transfer`]): the final model fitted without each region in turn must predict it better
+//!    than the same model without the cause. One that does not is rejected, and the selection runs
+//!    again without it.
+//! 6. What is left is examined for structure no known cause explains ([`unexplained`]): harmonics of
 //!    each joint angle and the learned residual models, again judged on the test poses.
 //!
 //! The noise floor ([`noise_floor`]) comes from repeated poses when the data have enough of them, else
@@ -35,6 +39,7 @@ pub mod report;
 pub mod screening;
 mod selection;
 pub mod significance;
+mod transfer;
 pub mod unexplained;
 
 use confirm::*;
@@ -121,6 +126,7 @@ pub fn diagnose_with_progress(
     let mut round = 0;
     let mut fits = std::collections::BTreeMap::new();
     let mut rival_probes = std::collections::BTreeMap::new();
+    let mut transfer_rms = std::collections::BTreeMap::new();
     // Screened on a subsample: the kinematic model (the first step of every selection) is refitted
     // on every pose on a thread of its own while the candidates are screened, where the rounds leave
     // cores idle (a round waits for its slowest candidate). A selection that fails or is cancelled
@@ -165,7 +171,20 @@ pub fn diagnose_with_progress(
                     },
                 )?;
                 match invalid_finding(&sel, options) {
-                    None => return Ok(sel),
+                    None => match transfer::not_transferring(
+                        model,
+                        screen,
+                        &sel,
+                        options,
+                        &mut transfer::TransferMemo {
+                            fits: &fits,
+                            kinematic: &kinematic,
+                            rms: &mut transfer_rms,
+                        },
+                    )? {
+                        None => return Ok(sel),
+                        Some(r) => rejected.push(r),
+                    },
                     Some(r) => rejected.push(r),
                 }
             }

@@ -34,6 +34,14 @@ pub struct DiagnoseOptions {
     /// [`screening::DEFAULT_SCREEN_POSES`]; 0: every pose throughout).
     #[serde(default = "default_screen_poses")]
     pub screen_poses: usize,
+    /// Regions of the configuration space an adopted cause must transfer to ([`transfer`]; default
+    /// [`crate::validate::regions::DEFAULT_REGIONS`]; 0: no transfer test).
+    #[serde(default = "default_regions")]
+    pub regions: usize,
+}
+
+pub(super) fn default_regions() -> usize {
+    crate::validate::regions::DEFAULT_REGIONS
 }
 
 pub(super) fn default_screen_poses() -> usize {
@@ -54,6 +62,7 @@ impl Default for DiagnoseOptions {
             learned_kinds: vec![LearnedKind::Kernel, LearnedKind::Poly],
             noise_floor_m: None,
             screen_poses: screening::DEFAULT_SCREEN_POSES,
+            regions: default_regions(),
         }
     }
 }
