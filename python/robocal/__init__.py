@@ -247,8 +247,9 @@ def calibrate(
         model: {model_words}
         test_data: held-out measurements for validation instead of cross-validation.
         **options: the other ``calibrate`` flags: ``folds=5`` (k-fold cross-validation by pose, 0 for
-            none), or ``test_fraction=0.3`` (one split instead), ``seed=0`` (of the folds or the
-            split), ``per_campaign_target=True`` (each campaign its own target),
+            none), or ``test_fraction=0.3`` (one split instead), ``regions=5`` (also hold out
+            regions of the configuration space, 0 for none: ``validation.new_region``), ``seed=0``
+            (of the folds or the split and the regions), ``per_campaign_target=True`` (each campaign its own target),
             ``robust="huber"|"cauchy"``; :func:`options` lists them. The model is fitted on every
             pose of ``data`` whichever validation is chosen; a ``campaign`` column gives each
             campaign its own tracker registration.

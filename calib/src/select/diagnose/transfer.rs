@@ -101,19 +101,35 @@ pub(super) fn not_transferring(
     if options.regions < 2 || sel.findings.is_empty() {
         return Ok(None);
     }
+    // A cause adopted with its companion (deflection with compliance) is tested with it: the two
+    // stand for one bending, and without the companion the cause takes it up alone. The companion
+    // itself is not tested on its own.
+    let companion_of = |cause: Cause| {
+        sel.companions
+            .iter()
+            .find(|(c, _)| *c == cause)
+            .map(|(_, comp)| *comp)
+    };
+    let is_companion = |cause: Cause| sel.companions.iter().any(|(_, comp)| *comp == cause);
     let reduced = |cause: Cause| {
         let mut r = sel.current.spec.clone();
-        r.causes.retain(|c| *c != cause);
+        let comp = companion_of(cause);
+        r.causes.retain(|c| *c != cause && Some(*c) != comp);
         r
     };
+    let tested: Vec<&Finding> = sel
+        .findings
+        .iter()
+        .filter(|f| !is_companion(f.cause))
+        .collect();
     let mut specs = vec![sel.current.spec.clone()];
-    specs.extend(sel.findings.iter().map(|f| reduced(f.cause)));
+    specs.extend(tested.iter().map(|f| reduced(f.cause)));
     memo.compute(model, split, &specs, options)?;
     // Too few poses to hold out regions: the test cannot be made, the selection stands.
     let Some(with) = memo.rms[&sel.current.spec.name()] else {
         return Ok(None);
     };
-    for f in &sel.findings {
+    for f in tested {
         let Some(without) = memo.rms[&reduced(f.cause).name()] else {
             continue;
         };
