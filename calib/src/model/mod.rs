@@ -11,6 +11,7 @@
 //! `lie3`, `units`, `error`, …) and itself.
 
 pub mod chain;
+pub mod compensate;
 pub mod extensions;
 pub mod file;
 pub mod learned;

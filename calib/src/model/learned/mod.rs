@@ -380,6 +380,31 @@ impl LearnedResidual {
         }
     }
 
+    /// `∂r̂/∂qⱼ` (m/rad, tracker frame) at `q` into `out` (one per joint), in closed form for the
+    /// polynomial and kernel corrections (zero for none); `false` for an adjoint model, whose effect
+    /// goes through the chain ([`crate::model::compensate`] differentiates its chain, not its
+    /// configuration-dependent parameters).
+    pub fn jacobian(&self, q: &[f64], out: &mut [nalgebra::Vector3<f64>]) -> bool {
+        match &self.correction {
+            Correction::Zero => {
+                out.fill(Vector3::zeros());
+                true
+            }
+            Correction::Polynomial(p) => {
+                p.jacobian(q, out);
+                true
+            }
+            Correction::Kernel(k) => {
+                k.jacobian(q, out);
+                true
+            }
+            Correction::Adjoint(_) => {
+                out.fill(Vector3::zeros());
+                false
+            }
+        }
+    }
+
     /// The adjoint model, for a kept `learned:adjoint` correction.
     pub fn adjoint(&self) -> Option<&adjoint::AdjointModel> {
         match &self.correction {

@@ -1,0 +1,641 @@
+//! Compensation: the joints to command so that the calibrated robot puts the target where it should
+//! be. The inverse of the one prediction path ([`crate::model::predict`]), every part of it: the
+//! geometry, each cause at the row's payload, temperature or time and approach direction, and the
+//! learned correction.
+//!
+//! # The solve
+//! For a target `p*` (tracker frame of the row's campaign, m) and, with a model that has orientation
+//! and a target that asks for it, `R*` (tracker frame), find the commanded joints `q` nearest the
+//! nominal program's `q₀` with
+//!
+//! ```text
+//! p(q) = p*,   log(R* R(q)ᵀ) = 0          p, R: the calibrated model's prediction (predict's)
+//! ```
+//!
+//! by damped least squares from `q₀`: `Δq = Jᵀ (J Jᵀ + λ² I)⁻¹ e`, the minimum-norm step, so that on
+//! a redundant arm (the 7-joint iiwa 7 with a position target: four joints too many) every step moves
+//! the joints as little as the target allows and the answer is the solution nearest the seed along
+//! the path. `λ` = [`DAMPING_M`] is far below any well-conditioned `J Jᵀ` (0.01–1 m²): it only keeps
+//! a singular configuration from giving an infinite step; steps are capped at [`MAX_STEP_RAD`].
+//!
+//! # The Jacobian, analytic
+//! `J = J_θ · ∂θ/∂q + R_c R_0ᵀ ∂r̂/∂q`:
+//! - `J_θ`: the chain's joint columns at the effective joint values `θ` (the geometry, with the bends
+//!   of link deflection in the frames), scaled by `1 + γ` (thermal growth);
+//!   rotation rows: the joint axes;
+//! - `∂θ/∂q = (I − ∂Δθ/∂θ)⁻¹ (I + ∂Δθ/∂q)` from each cause's own file
+//!   ([`crate::model::extensions::CauseModel::angle_jacobian`]): transmission error (harmonics of the
+//!   commanded angle, on the diagonal), joint compliance (`−C ∂τ/∂θ`, the gravity torques' own
+//!   Jacobian, [`crate::model::extensions::joint_compliance::torque_jacobian`]); backlash and thermal
+//!   drift do not depend on the joints (exact zero);
+//! - `∂r̂/∂q`: the kernel and polynomial corrections in closed form
+//!   ([`crate::model::learned::LearnedResidual::jacobian`]).
+//!
+//! Left out (the solve still converges to the model's exact inverse, since every step evaluates the
+//! whole prediction; it converges linearly where a derivative is missing, at the rate of the missing
+//! term, below 10⁻³): the change of link deflection's bend with the joints (`∂φ/∂q`, a gravity
+//! moment's derivative times a bending compliance of ~10⁻⁶ rad/(N m)), and the change of a
+//! `learned:adjoint` model's error twists with the joints (its chain is differentiated at the row's
+//! parameters).
+//!
+//! # Failures
+//! A row whose solve does not bring the prediction within [`CONVERGED_M`] (and [`CONVERGED_RAD`]) of
+//! the target is out of reach; a solution beyond a joint's URDF limits is refused. Both are per-row
+//! outcomes ([`Failure`]), the row flagged `converged = 0` and named, never a silent best effort.
+
+use crate::error::{CalibError, Result};
+use crate::lie3::log_rotation;
+use crate::model::extensions::{Regressors, RowContext, RowRegressors, apply};
+use crate::model::physical_row::PredictScratch;
+use crate::model::predict::{Prediction, Predictor};
+use nalgebra::{DMatrix, DVector, Matrix3, Vector3};
+use rayon::prelude::*;
+use sim::measurement_table::MeasurementTable;
+
+/// Largest number of solver steps per target.
+pub const MAX_ITERATIONS: usize = 100;
+/// A target is reached when the predicted position is within this distance (m).
+pub const CONVERGED_M: f64 = 1e-9;
+/// A target orientation is reached within this angle (rad).
+pub const CONVERGED_RAD: f64 = 1e-9;
+/// The solve stops once the position error is below this (m) (and the angle below the same in rad).
+const STOP: f64 = 1e-13;
+/// Damping `λ` of the least-squares step (m).
+pub const DAMPING_M: f64 = 1e-7;
+/// Largest joint step per iteration (rad or m, Euclidean norm over the joints).
+pub const MAX_STEP_RAD: f64 = 0.3;
+/// Rows per parallel work item.
+const CHUNK_ROWS: usize = 32;
+
+/// Whether the learned correction applies at row `q`: outside the support of the configurations it
+/// was fitted on the correction is off (and a compensation there inverts the physical model only).
+pub fn outside_support(_predictor: &Predictor, _q: &[f64]) -> bool {
+    // issue 24 wires the learned correction's support here
+    false
+}
+
+/// What a target row asks for.
+#[derive(Clone, Debug)]
+pub struct Target<'a> {
+    /// Where the target should be (tracker frame of `campaign`, m).
+    pub p_tracker: Vector3<f64>,
+    /// The target orientation asked for (tracker frame of `campaign`), if any.
+    pub r_tracker: Option<Matrix3<f64>>,
+    /// The nominal program's joints: the seed, and what the answer stays nearest to (rad or m).
+    pub seed_q: &'a [f64],
+    /// The row's payload, approach directions, temperature and time.
+    pub context: RowContext<'a>,
+    /// Campaign index (the model's registration the target is in).
+    pub campaign: usize,
+}
+
+/// Why a row has no compensated joints.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Failure {
+    /// The solve stopped short of the target: out of the calibrated robot's reach (or at a singular
+    /// configuration).
+    OutOfReach {
+        /// The distance left (m).
+        residual_m: f64,
+        /// The angle left (rad), with an orientation target.
+        residual_rad: Option<f64>,
+    },
+    /// The solution lies beyond a joint's URDF limits.
+    JointLimit {
+        /// 0-based joint.
+        joint: usize,
+        /// The joint value (rad or m).
+        value: f64,
+        /// Lower limit (rad or m).
+        lower: f64,
+        /// Upper limit (rad or m).
+        upper: f64,
+    },
+}
+
+impl std::fmt::Display for Failure {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Failure::OutOfReach {
+                residual_m,
+                residual_rad,
+            } => {
+                write!(
+                    f,
+                    "out of reach: the nearest solution found misses the target by {residual_m:.3e} m"
+                )?;
+                if let Some(r) = residual_rad {
+                    write!(f, " and {r:.3e} rad")?;
+                }
+                Ok(())
+            }
+            Failure::JointLimit {
+                joint,
+                value,
+                lower,
+                upper,
+            } => write!(
+                f,
+                "beyond the joint limits: q{} = {value:.6} is outside [{lower}, {upper}]",
+                joint + 1
+            ),
+        }
+    }
+}
+
+/// One row's answer.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Solution {
+    /// The joints to command (rad or m).
+    pub q: Vec<f64>,
+    /// The miss the model still predicts at `q` (m).
+    pub residual_m: f64,
+    /// The orientation miss the model still predicts (rad), with an orientation target.
+    pub residual_rad: Option<f64>,
+    /// Solver steps taken.
+    pub iterations: usize,
+    /// Why the row has no answer, if it has none.
+    pub failure: Option<Failure>,
+}
+
+impl Solution {
+    /// Whether the target is reached within the joint limits.
+    pub fn converged(&self) -> bool {
+        self.failure.is_none()
+    }
+}
+
+/// The calibrated model prepared for compensation: immutable; solves write into a
+/// [`CompensateScratch`] made once per thread.
+#[derive(Debug)]
+pub struct Compensator<'a> {
+    predictor: &'a Predictor,
+    prediction: Prediction<'a>,
+    nq: usize,
+}
+
+/// Per-thread workspace of a [`Compensator`].
+#[derive(Debug)]
+pub struct CompensateScratch<'a> {
+    regs: Option<RowRegressors<'a>>,
+    none: Regressors,
+    ps: PredictScratch,
+    theta: Vec<f64>,
+    dtheta_dq: Vec<f64>,
+    work: Vec<f64>,
+    learned: Vec<Vector3<f64>>,
+    /// Position (rows 0–2) and rotation (3–5) derivatives with respect to `θ`, per joint.
+    j_theta: Vec<[f64; 6]>,
+}
+
+impl<'a> Compensator<'a> {
+    /// A compensator for `predictor`'s model.
+    pub fn new(predictor: &'a Predictor) -> Self {
+        Compensator {
+            predictor,
+            prediction: Prediction::new(&predictor.model, &predictor.params)
+                .with_learned(predictor.learned.as_ref()),
+            nq: predictor.model.nq(),
+        }
+    }
+
+    /// A workspace for [`Compensator::solve`].
+    pub fn scratch(&self) -> CompensateScratch<'a> {
+        let n = self.nq;
+        CompensateScratch {
+            regs: self
+                .predictor
+                .extensions
+                .as_ref()
+                .map(|s| RowRegressors::new(&self.predictor.model, s)),
+            none: Regressors::none(),
+            ps: self.prediction.scratch(),
+            theta: vec![0.0; n],
+            dtheta_dq: vec![0.0; n * n],
+            work: vec![0.0; 3 * n * n],
+            learned: vec![Vector3::zeros(); n],
+            j_theta: vec![[0.0; 6]; n],
+        }
+    }
+
+    /// The model's prediction at `q` for `target`'s context and campaign: the position (tracker
+    /// frame, m) and orientation, the prediction's Jacobian with respect to `q` left in `jac` when
+    /// asked (`rows × nq`, row-major: 3 position rows, m/rad; 3 rotation rows, rad/rad, with an
+    /// orientation target).
+    fn evaluate(
+        &self,
+        q: &[f64],
+        target: &Target<'_>,
+        s: &mut CompensateScratch<'a>,
+        jac: Option<&mut [f64]>,
+    ) -> std::result::Result<(Vector3<f64>, Matrix3<f64>), String> {
+        let n = self.nq;
+        let c = target.campaign;
+        let x = &self.predictor.params.extension;
+        let regs = match s.regs.as_mut() {
+            Some(rr) => {
+                rr.fill(q, &target.context, x)?;
+                rr.regressors()
+            }
+            None => &s.none,
+        };
+        let learned = self.prediction.learned();
+        let adjoint = learned.is_some_and(|l| l.adjoint().is_some());
+        let (p, growth) = if adjoint {
+            let p = self.prediction.row_in(regs, 0, q, c, &mut s.ps);
+            (p, apply(regs, x, 0, q, &mut s.theta))
+        } else {
+            let rp = self.prediction.physical_in(regs, 0, q, c, &mut s.ps);
+            let p = match learned {
+                Some(l) => rp.p_tracker + self.prediction.learned_in(l, q, c),
+                None => rp.p_tracker,
+            };
+            (p, rp.growth)
+        };
+        let r = s.ps.chain.r_tracker_target;
+        let Some(jac) = jac else {
+            return Ok((p, r));
+        };
+        let chain = match (adjoint, s.ps.adjoint.as_ref()) {
+            (true, Some(a)) => &a.chain,
+            _ => self.prediction.chain(),
+        };
+        for (j, col) in s.j_theta.iter_mut().enumerate() {
+            let d = chain.joint_direction(&s.ps.chain, j) * (1.0 + growth);
+            let w = if chain.is_rotational(j) {
+                chain.axis_now(&s.ps.chain, j)
+            } else {
+                Vector3::zeros()
+            };
+            *col = [d.x, d.y, d.z, w.x, w.y, w.z];
+        }
+        match s.regs.as_mut() {
+            Some(rr) => rr.angle_jacobian(q, &target.context, x, &mut s.work, &mut s.dtheta_dq),
+            None => {
+                s.dtheta_dq.fill(0.0);
+                for j in 0..n {
+                    s.dtheta_dq[j * n + j] = 1.0;
+                }
+            }
+        }
+        let rows = jac.len() / n;
+        for row in 0..rows {
+            for k in 0..n {
+                let mut v = 0.0;
+                for (j, col) in s.j_theta.iter().enumerate() {
+                    v += col[row] * s.dtheta_dq[j * n + k];
+                }
+                jac[row * n + k] = v;
+            }
+        }
+        if let Some(l) = learned
+            && !adjoint
+            && l.jacobian(q, &mut s.learned)
+        {
+            let frame = self.prediction.learned_frame(c);
+            for (k, d) in s.learned.iter().enumerate() {
+                let d = frame * d;
+                for row in 0..3 {
+                    jac[row * n + k] += d[row];
+                }
+            }
+        }
+        Ok((p, r))
+    }
+
+    /// The joints nearest `target.seed_q` at which the calibrated model puts the target at
+    /// `target.p_tracker` (and `target.r_tracker`). Errors only for a model that cannot evaluate
+    /// (a robot without the inertial data its causes need): the message, for the caller to name
+    /// the row.
+    pub fn solve(
+        &self,
+        target: &Target<'_>,
+        s: &mut CompensateScratch<'a>,
+    ) -> std::result::Result<Solution, String> {
+        let n = self.nq;
+        let rows = if target.r_tracker.is_some() { 6 } else { 3 };
+        let mut q = target.seed_q.to_vec();
+        let mut jac = vec![0.0; rows * n];
+        let mut e = DVector::zeros(rows);
+        let mut err_m: f64;
+        let mut err_rad = 0.0;
+        let mut iterations = 0;
+        let mut best = (f64::INFINITY, q.clone(), 0.0);
+        let mut since_best = 0;
+        loop {
+            let (p, r) = self.evaluate(&q, target, s, Some(&mut jac))?;
+            let ep = target.p_tracker - p;
+            err_m = ep.norm();
+            e.fixed_rows_mut::<3>(0).copy_from(&ep);
+            if let Some(rt) = &target.r_tracker {
+                let er = log_rotation(&(rt * r.transpose()));
+                err_rad = er.norm();
+                e.fixed_rows_mut::<3>(3).copy_from(&er);
+            }
+            let size = err_m + err_rad;
+            if size < best.0 {
+                best = (size, q.clone(), err_rad);
+                since_best = 0;
+            } else {
+                since_best += 1;
+            }
+            if (err_m < STOP && err_rad < STOP)
+                || iterations >= MAX_ITERATIONS
+                || since_best >= 8
+                || !size.is_finite()
+            {
+                break;
+            }
+            let jm = DMatrix::from_row_slice(rows, n, &jac);
+            let mut a = &jm * jm.transpose();
+            for i in 0..rows {
+                a[(i, i)] += DAMPING_M * DAMPING_M;
+            }
+            let Some(y) = a.cholesky().map(|ch| ch.solve(&e)) else {
+                break;
+            };
+            let mut dq = jm.transpose() * y;
+            let norm = dq.norm();
+            if norm > MAX_STEP_RAD {
+                dq *= MAX_STEP_RAD / norm;
+            }
+            for (qi, d) in q.iter_mut().zip(dq.iter()) {
+                *qi += d;
+            }
+            iterations += 1;
+        }
+        // The best point of the path (the last one whenever the solve converges).
+        if best.0 < err_m + err_rad || !(err_m + err_rad).is_finite() {
+            q = best.1;
+            let (p, r) = self.evaluate(&q, target, s, None)?;
+            err_m = (target.p_tracker - p).norm();
+            err_rad = target
+                .r_tracker
+                .as_ref()
+                .map_or(0.0, |rt| log_rotation(&(rt * r.transpose())).norm());
+        }
+        let residual_rad = target.r_tracker.is_some().then_some(err_rad);
+        let mut failure = None;
+        if !(err_m <= CONVERGED_M && err_rad <= CONVERGED_RAD) {
+            failure = Some(Failure::OutOfReach {
+                residual_m: err_m,
+                residual_rad,
+            });
+        } else {
+            for (j, (joint, &v)) in self.predictor.model.joints().iter().zip(&q).enumerate() {
+                if let Some(l) = &joint.limits
+                    && !(l.lower..=l.upper).contains(&v)
+                {
+                    failure = Some(Failure::JointLimit {
+                        joint: j,
+                        value: v,
+                        lower: l.lower,
+                        upper: l.upper,
+                    });
+                    break;
+                }
+            }
+        }
+        Ok(Solution {
+            q,
+            residual_m: err_m,
+            residual_rad,
+            iterations,
+            failure,
+        })
+    }
+}
+
+/// Where the targets of a table are.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Targets {
+    /// `x, y, z` (and `qw..qz`) in the tracker frame of the row's campaign.
+    Tracker,
+    /// `x, y, z` (and `qw..qz`) in the robot's base frame.
+    Base,
+    /// A nominal joint program (no `x, y, z`): each row's target is where the nominal robot puts the
+    /// target at the row's joints, in the calibrated registration of its campaign (and, with a model
+    /// that has orientation, its orientation there).
+    Program,
+}
+
+/// The compensated rows of a table.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Compensations {
+    /// Joints per row.
+    pub nq: usize,
+    /// Pose id per row.
+    pub pose: Vec<i64>,
+    /// Every row's solution (its joints are the best found when it failed).
+    pub solutions: Vec<Solution>,
+    /// Per row: outside the learned correction's support ([`outside_support`]).
+    pub outside_support: Vec<bool>,
+    /// Context columns passed through, so the output is a pose file of the same program: names and
+    /// per-row values.
+    pub context: Vec<(String, Vec<f64>)>,
+}
+
+impl Compensations {
+    /// Rows whose target was not reached, with why (0-based row).
+    pub fn failures(&self) -> impl Iterator<Item = (usize, &Failure)> {
+        self.solutions
+            .iter()
+            .enumerate()
+            .filter_map(|(r, s)| s.failure.as_ref().map(|f| (r, f)))
+    }
+
+    /// CSV text: `pose, q1..qN, residual_m, outside_support, converged`, then the context columns
+    /// of the input (`t, temp, dir1..dirN, payload, campaign`, those it has).
+    pub fn to_csv(&self) -> String {
+        let mut s = String::from("pose");
+        for j in 1..=self.nq {
+            s.push_str(&format!(",q{j}"));
+        }
+        s.push_str(",residual_m,outside_support,converged");
+        for (name, _) in &self.context {
+            s.push(',');
+            s.push_str(name);
+        }
+        s.push('\n');
+        for (r, sol) in self.solutions.iter().enumerate() {
+            s.push_str(&self.pose[r].to_string());
+            for v in &sol.q {
+                s.push_str(&format!(",{v:?}"));
+            }
+            s.push_str(&format!(
+                ",{:?},{},{}",
+                sol.residual_m,
+                u8::from(self.outside_support[r]),
+                u8::from(sol.converged())
+            ));
+            for (name, values) in &self.context {
+                let v = values[r];
+                if name.starts_with("dir") || name == "campaign" {
+                    s.push_str(&format!(",{}", v as i64));
+                } else {
+                    s.push_str(&format!(",{v:?}"));
+                }
+            }
+            s.push('\n');
+        }
+        s
+    }
+}
+
+/// Compensates every row of `table` (`file` names it in errors) with `predictor`'s model: the
+/// targets per `targets`, the seeds its joint values, the context its columns.
+///
+/// # Errors
+/// A table the model cannot read (joint count, a column a cause reads, an unknown campaign, an
+/// orientation the model has not), a row the model cannot evaluate: one line naming the file, the row
+/// and the column. Unreached targets are not errors: see [`Compensations::failures`].
+pub fn compensate_table(
+    predictor: &Predictor,
+    table: &MeasurementTable,
+    file: &str,
+    targets: Targets,
+) -> Result<Compensations> {
+    let model = &predictor.model;
+    let n = model.nq();
+    if table.n_joints != n {
+        return Err(CalibError::BadValue {
+            context: file.to_string(),
+            field: "q1..qN".into(),
+            value: format!("{} joint columns", table.n_joints),
+            problem: format!("the model's robot '{}' has {n} joints", model.name()),
+        });
+    }
+    if let Some(s) = &predictor.extensions {
+        s.check_table(table, file)?;
+    }
+    let orientation = predictor.params.r_flange_target.is_some();
+    if table.orientation.is_some() && !orientation && targets != Targets::Program {
+        return Err(CalibError::BadValue {
+            context: file.to_string(),
+            field: "qw".into(),
+            value: String::new(),
+            problem: "the model has no target orientation (it was calibrated on positions only): \
+                      drop the qw, qx, qy, qz columns"
+                .into(),
+        });
+    }
+    let campaign = predictor.campaigns_of(table, file)?;
+    let params = &predictor.params;
+    // The targets, tracker frame of each row's campaign.
+    let mut p_target = Vec::with_capacity(table.len());
+    let mut r_target: Vec<Option<Matrix3<f64>>> = Vec::with_capacity(table.len());
+    let mut data = sim::Data::new(model);
+    for r in 0..table.len() {
+        let c = campaign[r];
+        let t_tb = params.t_tracker_base_of(c);
+        match targets {
+            Targets::Tracker | Targets::Base => {
+                let p = Vector3::from(table.position[r]);
+                let rot = table.orientation.as_ref().map(|o| {
+                    let [w, x, y, z] = o[r];
+                    *nalgebra::UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(
+                        w, x, y, z,
+                    ))
+                    .to_rotation_matrix()
+                    .matrix()
+                });
+                if targets == Targets::Base {
+                    p_target.push((t_tb * nalgebra::Point3::from(p)).coords);
+                    r_target.push(rot.map(|m| t_tb.rotation.matrix() * m));
+                } else {
+                    p_target.push(p);
+                    r_target.push(rot);
+                }
+            }
+            Targets::Program => {
+                sim::kinematics::forward_kinematics(model, &mut data, table.q_row(r));
+                let t_tf = t_tb * data.flange;
+                p_target
+                    .push((t_tf * nalgebra::Point3::from(*params.p_flange_target_of(c))).coords);
+                r_target.push(
+                    params
+                        .r_flange_target_of(c)
+                        .map(|rf| t_tf.rotation.matrix() * rf),
+                );
+            }
+        }
+    }
+    let compensator = Compensator::new(predictor);
+    let rows: Vec<usize> = (0..table.len()).collect();
+    let chunks: Vec<Result<Vec<Solution>>> = rows
+        .par_chunks(CHUNK_ROWS)
+        .map(|chunk| {
+            let mut s = compensator.scratch();
+            chunk
+                .iter()
+                .map(|&r| {
+                    let target = Target {
+                        p_tracker: p_target[r],
+                        r_tracker: r_target[r],
+                        seed_q: table.q_row(r),
+                        context: RowContext {
+                            payload_kg: table.payload.as_ref().map_or(0.0, |p| p[r]),
+                            dir: table.dir_row(r),
+                            temp_c: table.temp.as_ref().map(|t| t[r]),
+                            t_s: table.t.as_ref().map(|t| t[r]),
+                        },
+                        campaign: campaign[r],
+                    };
+                    compensator
+                        .solve(&target, &mut s)
+                        .map_err(|e| CalibError::BadValue {
+                            context: format!("{file}: row {}", r + 1),
+                            field: "q1..qN".into(),
+                            value: String::new(),
+                            problem: format!("the model cannot be evaluated here: {e}"),
+                        })
+                })
+                .collect()
+        })
+        .collect();
+    let mut solutions = Vec::with_capacity(table.len());
+    for c in chunks {
+        solutions.extend(c?);
+    }
+    let outside = solutions
+        .iter()
+        .map(|s| outside_support(predictor, &s.q))
+        .collect();
+    Ok(Compensations {
+        nq: n,
+        pose: table.pose.clone(),
+        solutions,
+        outside_support: outside,
+        context: context_columns(table),
+    })
+}
+
+/// The context columns of `table` it has, by name, as numbers per row.
+fn context_columns(table: &MeasurementTable) -> Vec<(String, Vec<f64>)> {
+    let mut out = Vec::new();
+    if let Some(t) = &table.t {
+        out.push(("t".to_string(), t.clone()));
+    }
+    if let Some(t) = &table.temp {
+        out.push(("temp".to_string(), t.clone()));
+    }
+    if let Some(d) = &table.dir {
+        let n = table.n_joints;
+        for j in 0..n {
+            out.push((
+                format!("dir{}", j + 1),
+                (0..table.len()).map(|r| f64::from(d[r * n + j])).collect(),
+            ));
+        }
+    }
+    if let Some(p) = &table.payload {
+        out.push(("payload".to_string(), p.clone()));
+    }
+    if let Some(c) = &table.campaign {
+        out.push((
+            "campaign".to_string(),
+            c.iter().map(|&v| v as f64).collect(),
+        ));
+    }
+    out
+}
