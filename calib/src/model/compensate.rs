@@ -62,6 +62,9 @@ pub const CONVERGED_RAD: f64 = 1e-9;
 const STOP: f64 = 1e-13;
 /// Damping `λ` of the least-squares step (m).
 pub const DAMPING_M: f64 = 1e-7;
+/// The damping `λ²` (m²) beyond which a target that no step brings closer is given up: steps of
+/// 10⁻⁴ of the gradient's.
+const MAX_DAMPING2: f64 = 1e4;
 /// Largest joint step per iteration (rad or m, Euclidean norm over the joints).
 pub const MAX_STEP_RAD: f64 = 0.3;
 /// Rows per parallel work item.
@@ -315,64 +318,64 @@ impl<'a> Compensator<'a> {
         let n = self.nq;
         let rows = if target.r_tracker.is_some() { 6 } else { 3 };
         let mut q = target.seed_q.to_vec();
+        let mut trial = q.clone();
         let mut jac = vec![0.0; rows * n];
+        let mut jac_trial = jac.clone();
         let mut e = DVector::zeros(rows);
-        let mut err_m: f64;
-        let mut err_rad = 0.0;
-        let mut iterations = 0;
-        let mut best = (f64::INFINITY, q.clone(), 0.0);
-        let mut since_best = 0;
-        loop {
-            let (p, r) = self.evaluate(&q, target, s, Some(&mut jac))?;
+        let mut e_trial = DVector::zeros(rows);
+        // The error at `q`: position (m) and rotation vector (rad) into `e`; its two norms.
+        let error = |p: Vector3<f64>, r: Matrix3<f64>, e: &mut DVector<f64>| -> (f64, f64) {
             let ep = target.p_tracker - p;
-            err_m = ep.norm();
             e.fixed_rows_mut::<3>(0).copy_from(&ep);
+            let mut rad = 0.0;
             if let Some(rt) = &target.r_tracker {
                 let er = log_rotation(&(rt * r.transpose()));
-                err_rad = er.norm();
+                rad = er.norm();
                 e.fixed_rows_mut::<3>(3).copy_from(&er);
             }
-            let size = err_m + err_rad;
-            if size < best.0 {
-                best = (size, q.clone(), err_rad);
-                since_best = 0;
-            } else {
-                since_best += 1;
-            }
-            if (err_m < STOP && err_rad < STOP)
-                || iterations >= MAX_ITERATIONS
-                || since_best >= 8
-                || !size.is_finite()
-            {
-                break;
-            }
+            (ep.norm(), rad)
+        };
+        let (p, r) = self.evaluate(&q, target, s, Some(&mut jac))?;
+        let (mut err_m, mut err_rad) = error(p, r, &mut e);
+        let mut iterations = 0;
+        // Levenberg–Marquardt damping: a step that does not reduce the error is retried with ten
+        // times the damping (shorter, towards the gradient); an accepted one relaxes it again.
+        let mut lambda2 = DAMPING_M * DAMPING_M;
+        while (err_m >= STOP || err_rad >= STOP)
+            && iterations < MAX_ITERATIONS
+            && lambda2 < MAX_DAMPING2
+            && (err_m + err_rad).is_finite()
+        {
             let jm = DMatrix::from_row_slice(rows, n, &jac);
             let mut a = &jm * jm.transpose();
             for i in 0..rows {
-                a[(i, i)] += DAMPING_M * DAMPING_M;
+                a[(i, i)] += lambda2;
             }
             let Some(y) = a.cholesky().map(|ch| ch.solve(&e)) else {
-                break;
+                lambda2 *= 10.0;
+                iterations += 1;
+                continue;
             };
             let mut dq = jm.transpose() * y;
             let norm = dq.norm();
             if norm > MAX_STEP_RAD {
                 dq *= MAX_STEP_RAD / norm;
             }
-            for (qi, d) in q.iter_mut().zip(dq.iter()) {
-                *qi += d;
+            for ((t, qi), d) in trial.iter_mut().zip(&q).zip(dq.iter()) {
+                *t = qi + d;
             }
             iterations += 1;
-        }
-        // The best point of the path (the last one whenever the solve converges).
-        if best.0 < err_m + err_rad || !(err_m + err_rad).is_finite() {
-            q = best.1;
-            let (p, r) = self.evaluate(&q, target, s, None)?;
-            err_m = (target.p_tracker - p).norm();
-            err_rad = target
-                .r_tracker
-                .as_ref()
-                .map_or(0.0, |rt| log_rotation(&(rt * r.transpose())).norm());
+            let (p, r) = self.evaluate(&trial, target, s, Some(&mut jac_trial))?;
+            let (m, rad) = error(p, r, &mut e_trial);
+            if m * m + rad * rad < err_m * err_m + err_rad * err_rad {
+                std::mem::swap(&mut q, &mut trial);
+                std::mem::swap(&mut jac, &mut jac_trial);
+                std::mem::swap(&mut e, &mut e_trial);
+                (err_m, err_rad) = (m, rad);
+                lambda2 = (lambda2 * 0.1).max(DAMPING_M * DAMPING_M);
+            } else {
+                lambda2 *= 10.0;
+            }
         }
         let residual_rad = target.r_tracker.is_some().then_some(err_rad);
         let mut failure = None;
@@ -414,8 +417,8 @@ pub enum Targets {
     /// `x, y, z` (and `qw..qz`) in the robot's base frame.
     Base,
     /// A nominal joint program (no `x, y, z`): each row's target is where the nominal robot puts the
-    /// target at the row's joints, in the calibrated registration of its campaign (and, with a model
-    /// that has orientation, its orientation there).
+    /// target at the row's joints, registered to the calibrated robot over the program's rows of its
+    /// campaign ([`nominal_registration`]). Positions only: an orientation target is not derived.
     Program,
 }
 
@@ -524,7 +527,6 @@ pub fn compensate_table(
     // The targets, tracker frame of each row's campaign.
     let mut p_target = Vec::with_capacity(table.len());
     let mut r_target: Vec<Option<Matrix3<f64>>> = Vec::with_capacity(table.len());
-    let mut data = sim::Data::new(model);
     for r in 0..table.len() {
         let c = campaign[r];
         let t_tb = params.t_tracker_base_of(c);
@@ -548,17 +550,13 @@ pub fn compensate_table(
                 }
             }
             Targets::Program => {
-                sim::kinematics::forward_kinematics(model, &mut data, table.q_row(r));
-                let t_tf = t_tb * data.flange;
-                p_target
-                    .push((t_tf * nalgebra::Point3::from(*params.p_flange_target_of(c))).coords);
-                r_target.push(
-                    params
-                        .r_flange_target_of(c)
-                        .map(|rf| t_tf.rotation.matrix() * rf),
-                );
+                p_target.push(Vector3::zeros());
+                r_target.push(None);
             }
         }
+    }
+    if targets == Targets::Program {
+        program_targets(predictor, table, file, &campaign, &mut p_target)?;
     }
     let compensator = Compensator::new(predictor);
     let rows: Vec<usize> = (0..table.len()).collect();
@@ -608,6 +606,106 @@ pub fn compensate_table(
         outside_support: outside,
         context: context_columns(table),
     })
+}
+
+/// The targets of a nominal joint program: where the nominal robot puts the target at each row's
+/// joints, placed in the tracker frame by the registration of the nominal robot to the calibrated
+/// one ([`nominal_registration`]) over the program's rows of each campaign, into `p_target`.
+fn program_targets(
+    predictor: &Predictor,
+    table: &MeasurementTable,
+    file: &str,
+    campaign: &[usize],
+    p_target: &mut [Vector3<f64>],
+) -> Result<()> {
+    let model = &predictor.model;
+    let params = &predictor.params;
+    let rows: Vec<usize> = (0..table.len()).collect();
+    let regs = match &predictor.extensions {
+        Some(s) => Regressors::build(model, s, table, &rows, file, &params.extension)?,
+        None => Regressors::none(),
+    };
+    let mut predicted = vec![Vector3::zeros(); table.len()];
+    Prediction::new(model, params)
+        .with_learned(predictor.learned.as_ref())
+        .positions_in(&table.q, campaign, &regs, &mut predicted, None);
+    let mut data = sim::Data::new(model);
+    let flange: Vec<sim::lie::Pose> = (0..table.len())
+        .map(|r| {
+            sim::kinematics::forward_kinematics(model, &mut data, table.q_row(r));
+            data.flange
+        })
+        .collect();
+    for c in 0..params.n_campaigns() {
+        let rows: Vec<usize> = (0..table.len()).filter(|&r| campaign[r] == c).collect();
+        if rows.is_empty() {
+            continue;
+        }
+        let t_tb = params.t_tracker_base_of(c);
+        let (rot, t, p_ft) = nominal_registration(
+            rows.iter().map(|&r| (&flange[r], &predicted[r])),
+            *t_tb.rotation.matrix(),
+            t_tb.translation.vector,
+            *params.p_flange_target_of(c),
+        );
+        for &r in &rows {
+            let f = &flange[r];
+            p_target[r] = rot * (f.rotation * p_ft + f.translation.vector) + t;
+        }
+    }
+    Ok(())
+}
+
+/// The registration of the nominal robot to the calibrated one: `T_tracker_base = (R, t)` and the
+/// target in the flange frame `p_ft` (m) minimising `Σ |R (T_base_flange(qᵢ) p_ft) + t − p̂ᵢ|²` over
+/// the rows `(T_base_flange(qᵢ)` of the nominal robot, `p̂ᵢ` the calibrated prediction, tracker frame
+/// m), by Gauss–Newton from the model's own registration `(r0, t0, p0)`: a rotation step `ω` moves a
+/// point by `ω × R x`, `t` by itself, `p_ft` by `R R_base_flange`. Directions the rows do not
+/// determine (one pose, or all poses at one flange orientation) keep their start value (pseudo-
+/// inverse).
+///
+/// Why not the model's registration itself: with the nominal robot it is not meaningful. A calibration
+/// determines the robot only up to combinations the data cannot see (a turn of the target about the
+/// last joint and that joint's zero offset; the base's place and the first joint's error twist), so
+/// its `T_tracker_base` and `p_flange_target` are one choice among equivalent ones, and the nominal
+/// robot placed by them can be centimetres from the calibrated one. Registered by least squares, the
+/// nominal program's targets are the ones a user who placed the nominal robot in the cell with the
+/// tracker would have, whatever the calibration's choice.
+pub fn nominal_registration<'p>(
+    rows: impl Iterator<Item = (&'p sim::lie::Pose, &'p Vector3<f64>)> + Clone,
+    r0: Matrix3<f64>,
+    t0: Vector3<f64>,
+    p0: Vector3<f64>,
+) -> (Matrix3<f64>, Vector3<f64>, Vector3<f64>) {
+    let (mut rot, mut t, mut p_ft) = (r0, t0, p0);
+    let m = rows.clone().count();
+    for _ in 0..30 {
+        let mut jac = DMatrix::zeros(3 * m, 9);
+        let mut res = DVector::zeros(3 * m);
+        for (i, (f, p_hat)) in rows.clone().enumerate() {
+            let x = rot * (f.rotation * p_ft + f.translation.vector);
+            let e = p_hat - (x + t);
+            res.fixed_rows_mut::<3>(3 * i).copy_from(&e);
+            // ω × x = −[x] ω.
+            let skew = Matrix3::new(0.0, x.z, -x.y, -x.z, 0.0, x.x, x.y, -x.x, 0.0);
+            jac.fixed_view_mut::<3, 3>(3 * i, 0).copy_from(&skew);
+            jac.fixed_view_mut::<3, 3>(3 * i, 3)
+                .copy_from(&Matrix3::identity());
+            jac.fixed_view_mut::<3, 3>(3 * i, 6)
+                .copy_from(&(rot * f.rotation.matrix()));
+        }
+        let svd = jac.svd(true, true);
+        let Ok(step) = svd.solve(&res, 1e-9 * svd.singular_values.max()) else {
+            break;
+        };
+        rot = crate::lie3::exp_rotation(&step.fixed_rows::<3>(0).into_owned()) * rot;
+        t += step.fixed_rows::<3>(3);
+        p_ft += step.fixed_rows::<3>(6);
+        if step.norm() < 1e-14 {
+            break;
+        }
+    }
+    (rot, t, p_ft)
 }
 
 /// The context columns of `table` it has, by name, as numbers per row.
