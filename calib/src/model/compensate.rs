@@ -189,6 +189,8 @@ pub struct CompensateScratch<'a> {
     learned: Vec<Vector3<f64>>,
     /// Position (rows 0–2) and rotation (3–5) derivatives with respect to `θ`, per joint.
     j_theta: Vec<[f64; 6]>,
+    /// The growth factor `γ` of the last evaluation.
+    growth: f64,
 }
 
 impl<'a> Compensator<'a> {
@@ -218,6 +220,7 @@ impl<'a> Compensator<'a> {
             work: vec![0.0; 3 * n * n],
             learned: vec![Vector3::zeros(); n],
             j_theta: vec![[0.0; 6]; n],
+            growth: 0.0,
         }
     }
 
@@ -232,7 +235,6 @@ impl<'a> Compensator<'a> {
         s: &mut CompensateScratch<'a>,
         jac: Option<&mut [f64]>,
     ) -> std::result::Result<(Vector3<f64>, Matrix3<f64>), String> {
-        let n = self.nq;
         let c = target.campaign;
         let x = &self.predictor.params.extension;
         let regs = match s.regs.as_mut() {
@@ -256,9 +258,28 @@ impl<'a> Compensator<'a> {
             (p, rp.growth)
         };
         let r = s.ps.chain.r_tracker_target;
-        let Some(jac) = jac else {
-            return Ok((p, r));
-        };
+        s.growth = growth;
+        if let Some(jac) = jac {
+            self.jacobian(q, target, s, jac);
+        }
+        Ok((p, r))
+    }
+
+    /// The Jacobian of the prediction with respect to `q` (see [`Compensator::evaluate`]) at the row
+    /// last evaluated into `s` (at `q`).
+    fn jacobian(
+        &self,
+        q: &[f64],
+        target: &Target<'_>,
+        s: &mut CompensateScratch<'a>,
+        jac: &mut [f64],
+    ) {
+        let n = self.nq;
+        let c = target.campaign;
+        let x = &self.predictor.params.extension;
+        let growth = s.growth;
+        let learned = self.prediction.learned();
+        let adjoint = learned.is_some_and(|l| l.adjoint().is_some());
         let chain = match (adjoint, s.ps.adjoint.as_ref()) {
             (true, Some(a)) => &a.chain,
             _ => self.prediction.chain(),
@@ -303,7 +324,6 @@ impl<'a> Compensator<'a> {
                 }
             }
         }
-        Ok((p, r))
     }
 
     /// The joints nearest `target.seed_q` at which the calibrated model puts the target at
@@ -320,7 +340,6 @@ impl<'a> Compensator<'a> {
         let mut q = target.seed_q.to_vec();
         let mut trial = q.clone();
         let mut jac = vec![0.0; rows * n];
-        let mut jac_trial = jac.clone();
         let mut e = DVector::zeros(rows);
         let mut e_trial = DVector::zeros(rows);
         // The error at `q`: position (m) and rotation vector (rad) into `e`; its two norms.
@@ -365,12 +384,15 @@ impl<'a> Compensator<'a> {
                 *t = qi + d;
             }
             iterations += 1;
-            let (p, r) = self.evaluate(&trial, target, s, Some(&mut jac_trial))?;
+            let (p, r) = self.evaluate(&trial, target, s, None)?;
             let (m, rad) = error(p, r, &mut e_trial);
             if m * m + rad * rad < err_m * err_m + err_rad * err_rad {
                 std::mem::swap(&mut q, &mut trial);
-                std::mem::swap(&mut jac, &mut jac_trial);
                 std::mem::swap(&mut e, &mut e_trial);
+                // The Jacobian only where another step follows.
+                if m >= STOP || rad >= STOP {
+                    self.jacobian(&q, target, s, &mut jac);
+                }
                 (err_m, err_rad) = (m, rad);
                 lambda2 = (lambda2 * 0.1).max(DAMPING_M * DAMPING_M);
             } else {
@@ -678,24 +700,26 @@ pub fn nominal_registration<'p>(
     p0: Vector3<f64>,
 ) -> (Matrix3<f64>, Vector3<f64>, Vector3<f64>) {
     let (mut rot, mut t, mut p_ft) = (r0, t0, p0);
-    let m = rows.clone().count();
     for _ in 0..30 {
-        let mut jac = DMatrix::zeros(3 * m, 9);
-        let mut res = DVector::zeros(3 * m);
-        for (i, (f, p_hat)) in rows.clone().enumerate() {
+        // Normal equations `JᵀJ δ = Jᵀe`, accumulated row by row (9 unknowns).
+        let mut jtj = nalgebra::SMatrix::<f64, 9, 9>::zeros();
+        let mut jte = nalgebra::SVector::<f64, 9>::zeros();
+        for (f, p_hat) in rows.clone() {
             let x = rot * (f.rotation * p_ft + f.translation.vector);
             let e = p_hat - (x + t);
-            res.fixed_rows_mut::<3>(3 * i).copy_from(&e);
+            let mut j = nalgebra::SMatrix::<f64, 3, 9>::zeros();
             // ω × x = −[x] ω.
             let skew = Matrix3::new(0.0, x.z, -x.y, -x.z, 0.0, x.x, x.y, -x.x, 0.0);
-            jac.fixed_view_mut::<3, 3>(3 * i, 0).copy_from(&skew);
-            jac.fixed_view_mut::<3, 3>(3 * i, 3)
+            j.fixed_view_mut::<3, 3>(0, 0).copy_from(&skew);
+            j.fixed_view_mut::<3, 3>(0, 3)
                 .copy_from(&Matrix3::identity());
-            jac.fixed_view_mut::<3, 3>(3 * i, 6)
+            j.fixed_view_mut::<3, 3>(0, 6)
                 .copy_from(&(rot * f.rotation.matrix()));
+            jtj += j.transpose() * j;
+            jte += j.transpose() * e;
         }
-        let svd = jac.svd(true, true);
-        let Ok(step) = svd.solve(&res, 1e-9 * svd.singular_values.max()) else {
+        let svd = jtj.svd(true, true);
+        let Ok(step) = svd.solve(&jte, 1e-12 * svd.singular_values.max()) else {
             break;
         };
         rot = crate::lie3::exp_rotation(&step.fixed_rows::<3>(0).into_owned()) * rot;
