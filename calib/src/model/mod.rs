@@ -4,7 +4,7 @@
 //! that extend it ([`extensions`], one file each), the learned corrections ([`learned`]), the model
 //! specification that names them ([`spec::ModelSpec`]), the one prediction path ([`predict`], with
 //! [`physical_row`]) and the rows it reads ([`observations`]), residual statistics ([`stats`]), the
-//! model file ([`file`]) and its URDF export ([`urdf_export`]), and the robot a model belongs to
+//! model file ([`file`]) and its URDF export ([`urdf_export`]) and UR's kinematics file ([`ur_kinematics`]), and the robot a model belongs to
 //! ([`robot`]).
 //!
 //! Nothing here fits, validates or chooses: this floor imports only the ground floor (`lm`, `linalg`,
@@ -22,6 +22,7 @@ pub mod predict;
 pub mod robot;
 pub mod spec;
 pub mod stats;
+pub mod ur_kinematics;
 pub mod urdf_export;
 
 pub use spec::{ModelChoice, ModelSpec};
