@@ -551,6 +551,9 @@ fn target_columns<'py>(
     }
 }
 
+/// Named columns for a DataFrame: `(name, numpy array)` in order.
+type Columns<'py> = Vec<(String, Bound<'py, PyAny>)>;
+
 /// A calibrated model: the same content as the command line's MODEL.json.
 #[pyclass(frozen, module = "robocal._robocal")]
 struct CalibratedModel {
@@ -616,7 +619,7 @@ impl CalibratedModel {
         py: Python<'py>,
         table: &Table,
         args: Vec<String>,
-    ) -> PyResult<(Vec<(String, Bound<'py, PyAny>)>, Vec<String>)> {
+    ) -> PyResult<(Columns<'py>, Vec<String>)> {
         let options: comp_cli::Options = quick(py, flags::parse("compensate", &args))?;
         let (c, warnings) = work(py, || {
             let robot = self.file.robot_model()?;

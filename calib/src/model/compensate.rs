@@ -326,6 +326,22 @@ impl<'a> Compensator<'a> {
         }
     }
 
+    /// The model's prediction (tracker frame, m) at `q` for `target`'s context and campaign, and its
+    /// analytic Jacobian with respect to `q` (3 × nq, m/rad; 6 × nq with an orientation target, the
+    /// rotation rows in rad/rad): what each solver step uses, for checks against finite differences.
+    /// Errors as [`Compensator::solve`].
+    pub fn prediction_jacobian(
+        &self,
+        q: &[f64],
+        target: &Target<'_>,
+        s: &mut CompensateScratch<'a>,
+    ) -> std::result::Result<(Vector3<f64>, DMatrix<f64>), String> {
+        let rows = if target.r_tracker.is_some() { 6 } else { 3 };
+        let mut jac = vec![0.0; rows * self.nq];
+        let (p, _) = self.evaluate(q, target, s, Some(&mut jac))?;
+        Ok((p, DMatrix::from_row_slice(rows, self.nq, &jac)))
+    }
+
     /// The joints nearest `target.seed_q` at which the calibrated model puts the target at
     /// `target.p_tracker` (and `target.r_tracker`). Errors only for a model that cannot evaluate
     /// (a robot without the inertial data its causes need): the message, for the caller to name

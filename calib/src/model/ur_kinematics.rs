@@ -307,8 +307,14 @@ mod tests {
         for rpy in [
             [0.3, -0.7, 1.9],
             [-2.5, 0.2, -0.4],
-            [1.570796327, 0.0, 0.0],
-            [1.5707963267948966, 3.141592653589793, 3.141592653589793],
+            // ur_description's rounded π/2 (1.570796327 in default_kinematics.yaml) and its wrist_3
+            // rotation.
+            [std::f64::consts::FRAC_PI_2 + 3e-10, 0.0, 0.0],
+            [
+                std::f64::consts::FRAC_PI_2,
+                std::f64::consts::PI,
+                std::f64::consts::PI,
+            ],
         ] {
             let r = rotation_from_rpy(rpy);
             let want = axis(Vector3::z(), rpy[2])
