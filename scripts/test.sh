@@ -95,6 +95,9 @@ print(found[0] if found else "")')
 echo "== the calibrated URDF: XML diff and MuJoCo forward kinematics against robocal predict" >&2
 "$py" scripts/check_urdf_out.py "$robocal"
 
+echo "== UR's kinematics file (--ur-kinematics): ur_description's ur.urdf.xacro expanded with it, against robocal predict" >&2
+"$py" scripts/check_ur_kinematics.py "$robocal"
+
 if [ -z "${ROBOCAL_SKIP_SLURM:-}" ]; then
   echo "== a sweep as a Slurm job array on a one-node cluster, merged: the bytes of one machine" >&2
   ROBOCAL="$robocal" ./scripts/slurm_check.sh

@@ -71,8 +71,8 @@ def _check_options(command: str, given: dict[str, Any]) -> None:
 
 
 def options(command: str) -> list[str]:
-    """The keyword options of ``command`` (``"calibrate"``, ``"diagnose"``, ``"generate"``,
-    ``"register"``): the command line's value flags, ``--test-fraction`` as ``test_fraction``."""
+    """The keyword options of ``command`` (``"calibrate"``, ``"compensate"``, ``"diagnose"``,
+    ``"generate"``, ``"register"``): the command line's value flags, ``--test-fraction`` as ``test_fraction``."""
     return list(_robocal.options(command))
 
 
@@ -193,6 +193,30 @@ class Model:
         was fitted on (the correction is off there) or its ``sigma_m`` exceeds three times the
         model's held-out error."""
         return to_frame(self._native.predict(to_table(data, configurations=True)))
+
+    def compensate(self, data: DataLike, **options: Any) -> "pd.DataFrame":
+        """The joints to command so that the calibrated robot puts the target where it should be, as
+        ``robocal compensate``: every part of the model inverted (geometry, each cause at the row's
+        payload, temperature or time and approach direction, the learned correction).
+
+        ``data`` needs ``pose``, ``x, y, z`` (where the target should be, m, in the tracker frame of
+        the row's campaign; ``frame="base"`` for the robot's base frame), ``q1..qN`` (the nominal
+        joints: the seed, and the answer is the solution nearest them), optionally ``qw..qz`` (a
+        model with orientation), and the context columns the model reads (``payload``, ``temp`` or
+        ``t``, ``dir1..dirN``, ``campaign``). With ``program=True`` it is a nominal joint program
+        (no ``x, y, z``): the targets are where the nominal robot puts the target, registered to the
+        calibrated robot.
+
+        Returns:
+            A DataFrame ``pose, q1..qN, residual_m, outside_support, converged`` and the input's
+            context columns. A row not reached (out of reach, beyond the joint limits) has
+            ``converged == 0`` and is named in a ``DataWarning``.
+        """
+        _check_options("compensate", options)
+        columns, _failures = self._native.compensate(
+            to_table(data, configurations=bool(options.get("program"))), flags(options)
+        )
+        return to_frame(columns)
 
     def register(self, data: DataLike, **options: Any) -> "Model":
         """A new measurement campaign (the tracker was moved), as ``robocal register``: the

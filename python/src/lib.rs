@@ -24,8 +24,8 @@ use pyo3::exceptions::PyTypeError;
 use pyo3::prelude::*;
 use pyo3::types::PyType;
 use robocal::cli::{
-    calibrate as cal_cli, diagnose as diag_cli, flags, generate as gen_cli, predict,
-    register as reg_cli,
+    calibrate as cal_cli, compensate as comp_cli, diagnose as diag_cli, flags, generate as gen_cli,
+    predict, register as reg_cli,
 };
 use robocal::error::CliError;
 use sim::measurement_table::{self, Column, ColumnValues, MeasurementTable};
@@ -551,6 +551,9 @@ fn target_columns<'py>(
     }
 }
 
+/// Named columns for a DataFrame: `(name, numpy array)` in order.
+type Columns<'py> = Vec<(String, Bound<'py, PyAny>)>;
+
 /// A calibrated model: the same content as the command line's MODEL.json.
 #[pyclass(frozen, module = "robocal._robocal")]
 struct CalibratedModel {
@@ -613,6 +616,60 @@ impl CalibratedModel {
             PyArray1::from_vec(py, outside).into_any(),
         ));
         Ok(out)
+    }
+
+    /// Compensated joints for the rows of `table` as `robocal compensate` with the value flags
+    /// `args` (`["--program"]`, `["--frame=base"]`): `(columns, failures)` with columns `pose,
+    /// q1..qN, residual_m, outside_support, converged` and the input's context columns; `failures`
+    /// the one-line messages naming each row not reached (also issued as `DataWarning`s).
+    fn compensate<'py>(
+        &self,
+        py: Python<'py>,
+        table: &Table,
+        args: Vec<String>,
+    ) -> PyResult<(Columns<'py>, Vec<String>)> {
+        let options: comp_cli::Options = quick(py, flags::parse("compensate", &args))?;
+        let (c, warnings) = work(py, || {
+            let robot = self.file.robot_model()?;
+            let warnings = predict::check_configurations(&table.table, &robot, &table.source)?;
+            let c = comp_cli::compensate(&self.file, &table.table, &table.source, &options)?;
+            Ok((c, warnings))
+        })?;
+        warn(py, &warnings, 2)?;
+        let failures = comp_cli::failure_lines(&c, &table.source, usize::MAX);
+        warn(py, &failures, 2)?;
+        let f = |v: Vec<f64>| PyArray1::from_vec(py, v).into_any();
+        let i = |v: Vec<i64>| PyArray1::from_vec(py, v).into_any();
+        let mut out = vec![("pose".to_string(), i(c.pose.clone()))];
+        for j in 0..c.nq {
+            out.push((
+                format!("q{}", j + 1),
+                f(c.solutions.iter().map(|s| s.q[j]).collect()),
+            ));
+        }
+        out.push((
+            "residual_m".into(),
+            f(c.solutions.iter().map(|s| s.residual_m).collect()),
+        ));
+        out.push((
+            "outside_support".into(),
+            i(c.outside_support.iter().map(|&o| i64::from(o)).collect()),
+        ));
+        out.push((
+            "converged".into(),
+            i(c.solutions
+                .iter()
+                .map(|s| i64::from(s.converged()))
+                .collect()),
+        ));
+        for (name, values) in &c.context {
+            if name.starts_with("dir") || name == "campaign" {
+                out.push((name.clone(), i(values.iter().map(|&v| v as i64).collect())));
+            } else {
+                out.push((name.clone(), f(values.clone())));
+            }
+        }
+        Ok((out, failures))
     }
 
     /// The calibrated robot's name.
@@ -746,10 +803,11 @@ fn options(py: Python<'_>, command: &str) -> PyResult<Vec<String>> {
         "diagnose" => Ok(flags::keywords::<diag_cli::Options>("diagnose")),
         "generate" => Ok(flags::keywords::<gen_cli::Options>("generate")),
         "register" => Ok(flags::keywords::<reg_cli::Options>("register")),
+        "compensate" => Ok(flags::keywords::<comp_cli::Options>("compensate")),
         other => Err(raise(
             py,
             CliError::Input(format!(
-                "'{other}': not one of calibrate, diagnose, generate, register"
+                "'{other}': not one of calibrate, compensate, diagnose, generate, register"
             )),
         )),
     }

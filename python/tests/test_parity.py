@@ -111,6 +111,32 @@ def test_predict_gives_the_cli_predictions(cli, generated, tmp_path):
     np.testing.assert_array_equal(model.predict(frame)[["x", "y", "z"]].to_numpy(), expected[["x", "y", "z"]].to_numpy())
 
 
+def test_compensate_gives_the_cli_joints(cli, generated, tmp_path):
+    """`Model.compensate` returns the CLI's `compensate` output, column for column and bit for bit, in
+    both modes (x, y, z targets in the tracker frame; a nominal joint program)."""
+    data = generated / "measurements.parquet"
+    model_path = tmp_path / "m.json"
+    cli.run("calibrate", "--data", data, "--model", "kinematic+joint_compliance+gear_backlash", "--out", model_path)
+    model = robocal.load_model(model_path)
+    frame = robocal.read_table(data).head(40)
+    targets = tmp_path / "targets.csv"
+    frame.to_csv(targets, index=False, float_format="%.17g")
+    program = tmp_path / "program.csv"
+    frame.drop(columns=["x", "y", "z", "sigma"]).to_csv(program, index=False, float_format="%.17g")
+    for source, options, flags in [(targets, {}, []), (program, {"program": True}, ["--program"])]:
+        out = tmp_path / f"q_{source.stem}.csv"
+        cli.run("compensate", "--model", model_path, "--targets", source, "--out", out, *flags)
+        expected = pd.read_csv(out)
+        got = model.compensate(pd.read_csv(source), **options)
+        assert list(got.columns) == list(expected.columns)
+        assert list(got.columns[:11]) == ["pose"] + [f"q{j}" for j in range(1, 8)] + ["residual_m", "outside_support", "converged"]
+        for c in expected.columns:
+            np.testing.assert_array_equal(got[c].to_numpy(), expected[c].to_numpy(), err_msg=c)
+        assert (got["converged"] == 1).all()
+    with pytest.raises(TypeError, match="unexpected keyword argument 'frame_'"):
+        model.compensate(str(targets), frame_="base")
+
+
 DIAGNOSE_FLAGS = [{}, {"test_fraction": 0.25, "seed": 2, "alpha": 0.01}, {"noise_floor": 2e-05}]
 
 

@@ -713,6 +713,32 @@ fn grid_and_file_campaigns_use_the_stated_joint_positions() {
         assert_eq!(plan.q_row(2 * k), want);
         assert_eq!(plan.q_row(2 * k + 1), want);
     }
+    // A joint program (no x, y, z) with context columns: each pose takes the file's payload,
+    // temperature, time and directions (cycled with the poses; a repeat adds seconds_per_repeat,
+    // 1 s by default), not the campaign's rules.
+    let csv = "pose,q1,q2,q3,q4,q5,q6,q7,payload,temp,t,dir1,dir2,dir3,dir4,dir5,dir6,dir7\n\
+               7,0.1,0.2,0.3,0.4,0.5,0.6,0.7,2.5,31.5,100,1,-1,1,-1,1,-1,0\n\
+               3,-0.1,-0.2,-0.3,-0.4,-0.5,-0.6,-0.7,0,18,7,-1,-1,-1,1,1,1,1\n";
+    std::fs::write(dir.join("poses.csv"), csv).unwrap();
+    let res = Scenario::load(&dir.join("file.toml"))
+        .unwrap()
+        .resolve(&Overrides::default())
+        .unwrap();
+    let plan = generate::plan_of(&res).unwrap();
+    assert_eq!((plan.n_poses, plan.len()), (5, 10));
+    for k in 0..5 {
+        let (mass, temp, t, dir): (f64, f64, f64, [i8; 7]) = if k % 2 == 0 {
+            (2.5, 31.5, 100.0, [1, -1, 1, -1, 1, -1, 0])
+        } else {
+            (0.0, 18.0, 7.0, [-1, -1, -1, 1, 1, 1, 1])
+        };
+        for r in [2 * k, 2 * k + 1] {
+            assert_eq!(plan.payload_kg[r], mass, "row {r}");
+            assert_eq!(plan.temp_c[r], temp, "row {r}");
+            assert_eq!(plan.t_s[r], t + (r % 2) as f64, "row {r}");
+            assert_eq!(plan.dir_row(r), Some(&dir[..]), "row {r}");
+        }
+    }
     let _ = std::fs::remove_dir_all(dir);
 }
 

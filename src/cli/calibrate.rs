@@ -36,6 +36,10 @@ pub struct Args {
     /// calibrated robot, everything else kept, base and target transforms in a comment.
     #[arg(long, value_name = "FILE.urdf")]
     urdf_out: Option<PathBuf>,
+    /// Also write the calibrated geometry in ur_description's kinematics format (a UR arm: pass it to
+    /// ur.urdf.xacro as kinematics_params); non-geometric causes are left out.
+    #[arg(long, value_name = "FILE.yaml")]
+    ur_kinematics: Option<PathBuf>,
     /// Print one JSON document on stdout instead of text on stderr.
     #[arg(long)]
     json: bool,
@@ -361,6 +365,13 @@ pub fn run(args: Args) -> CliResult {
         inputs.check("--urdf-out", u)?;
         check_distinct(("--out", &args.out), ("--urdf-out", u))?;
     }
+    if let Some(u) = &args.ur_kinematics {
+        inputs.check("--ur-kinematics", u)?;
+        check_distinct(("--out", &args.out), ("--ur-kinematics", u))?;
+        if let Some(v) = &args.urdf_out {
+            check_distinct(("--urdf-out", v), ("--ur-kinematics", u))?;
+        }
+    }
     args.options.resolve(args.test_data.is_some())?;
     let spec = ChainSpec {
         base_link: args.robot.base_link.clone(),
@@ -412,6 +423,13 @@ pub fn run(args: Args) -> CliResult {
     if let Some(path) = &args.urdf_out {
         super::urdf_out::write(path, &file, &table, &data_name)?;
     }
+    if let Some(path) = &args.ur_kinematics {
+        let ur = calib::model::ur_kinematics::ur_kinematics(&file)?;
+        for w in &ur.warnings {
+            eprintln!("warning: {}: {w}", path.display());
+        }
+        sim::io::write_atomic(path, ur.text.as_bytes())?;
+    }
     if args.json {
         print_json(&outcome.json(
             &robot,
@@ -424,6 +442,9 @@ pub fn run(args: Args) -> CliResult {
         eprint!("{}", outcome.validation_text());
         eprintln!("wrote {}", args.out.display());
         if let Some(p) = &args.urdf_out {
+            eprintln!("wrote {}", p.display());
+        }
+        if let Some(p) = &args.ur_kinematics {
             eprintln!("wrote {}", p.display());
         }
         Ok(())

@@ -4,6 +4,7 @@
 //! glue between reading its inputs and writing its outputs in functions of its own.
 
 pub mod calibrate;
+pub mod compensate;
 mod dataset;
 mod demo;
 pub mod diagnose;
@@ -44,6 +45,9 @@ enum Command {
     Calibrate(calibrate::Args),
     /// Predict target positions with a calibrated model.
     Predict(predict::Args),
+    /// Compensated joint targets: the joints to command so that the calibrated robot puts the target
+    /// where it should be (every cause inverted).
+    Compensate(compensate::Args),
     /// Register a new measurement campaign (the tracker was moved) for a calibrated model.
     Register(register::Args),
     /// Choose the poses that determine the parameters best.
@@ -68,6 +72,7 @@ pub fn run(cli: Cli) -> CliResult {
         Command::Generate(a) => generate::run(a),
         Command::Calibrate(a) => calibrate::run(a),
         Command::Predict(a) => predict::run(a),
+        Command::Compensate(a) => compensate::run(a),
         Command::Register(a) => register::run(a),
         Command::PlanPoses(a) => plan_poses::run(a),
         Command::Diagnose(a) => diagnose::run(a),

@@ -116,6 +116,12 @@ impl Chain {
         c
     }
 
+    /// Whether joint `i` (0-based) turns (revolute or continuous) rather than slides.
+    #[inline]
+    pub fn is_rotational(&self, i: usize) -> bool {
+        self.kind[i].is_rotational()
+    }
+
     /// Number of joints.
     #[inline]
     pub fn nq(&self) -> usize {
@@ -282,7 +288,7 @@ impl Chain {
     /// Joint `i`'s axis (tracker frame) at the last evaluation: the frame's axis, or with a bent chain
     /// the axis before the bend.
     #[inline]
-    fn axis_now(&self, s: &ChainScratch, i: usize) -> Vector3<f64> {
+    pub fn axis_now(&self, s: &ChainScratch, i: usize) -> Vector3<f64> {
         if s.bent {
             s.axes[i]
         } else {

@@ -81,6 +81,17 @@ impl<'a> Prediction<'a> {
         self.params
     }
 
+    /// The learned correction, if any.
+    pub fn learned(&self) -> Option<&'a LearnedResidual> {
+        self.learned
+    }
+
+    /// `R_c R_0ᵀ` of campaign `c`: the learned correction's frame (the first campaign's tracker frame)
+    /// to campaign `c`'s.
+    pub fn learned_frame(&self, c: usize) -> &Matrix3<f64> {
+        &self.learned_frame[c]
+    }
+
     /// The prepared chain.
     pub fn chain(&self) -> &Chain {
         &self.chain
@@ -185,7 +196,12 @@ impl<'a> Prediction<'a> {
 
     /// The learned correction at `q` in campaign `campaign`'s tracker frame (m).
     #[inline]
-    fn learned_in(&self, l: &LearnedResidual, q: &[f64], campaign: usize) -> Vector3<f64> {
+    pub(crate) fn learned_in(
+        &self,
+        l: &LearnedResidual,
+        q: &[f64],
+        campaign: usize,
+    ) -> Vector3<f64> {
         if campaign == 0 {
             l.predict(q)
         } else {

@@ -18,8 +18,12 @@
 //!   `P1 → P2 → … → P5 → P1 …` as in the standard's test cycles.
 //! * **grid**: a regular grid in joint space (`points_per_joint[i]` values evenly spaced over the
 //!   shrunk limits, the midpoint for 1), last joint fastest, filtered by [`Reachability`].
-//! * **file**: the joint positions of a measurement table (CSV or Parquet): the `q` of the first row of
-//!   each pose id, in order of first appearance.
+//! * **file**: the joint positions of a table (CSV or Parquet; the measurement contract with `x, y, z`
+//!   optional, so a joint program `pose, q1..qN` serves): the `q` of the first row of each pose id, in
+//!   order of first appearance. Where the file has context columns (`payload`, `temp`, `t`,
+//!   `dir1..dirN`), the pose's value replaces the rules below (its repeats add `seconds_per_repeat`
+//!   to its `t`): so `robocal generate` can run a given program, in its own context, on the hidden
+//!   robot (`robocal compensate`'s check against the truth).
 //!
 //! For the list sources (iso9283, grid, file) a pose count cycles through the list (`pose k` uses
 //! entry `k mod len`); without a count the list is used once.

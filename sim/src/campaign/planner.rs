@@ -2,7 +2,7 @@
 //! [`plan`] makes them all at once.
 
 use super::err;
-use super::sources::{PoseSource, grid_point, pose_source};
+use super::sources::{FileContext, PoseSource, grid_point, pose_source};
 use super::spec::{CampaignSpec, DirectionRule, PayloadRule, check_model_free};
 use crate::error::Result;
 use crate::kinematics::ik::reachable;
@@ -110,6 +110,9 @@ pub struct Planner<'a> {
     seed: u64,
     file: String,
     source: PoseSource,
+    /// A pose file's context columns (payload, temperature, time, directions), which replace the
+    /// campaign's rules where the file has them.
+    context: Option<FileContext>,
     n_poses: usize,
     rows: usize,
     /// The next row to plan.
@@ -131,7 +134,7 @@ impl<'a> Planner<'a> {
     pub fn new(model: &'a Model, spec: &'a CampaignSpec, seed: u64, file: &str) -> Result<Self> {
         let n = model.nq();
         check_model_free(spec, file)?;
-        let (source, n_poses) = pose_source(model, spec, file)?;
+        let (source, n_poses, context) = pose_source(model, spec, file)?;
         let rows = n_poses
             .checked_mul(spec.repeats)
             .filter(|&r| r as u64 <= MAX_FORMAT_ROWS)
@@ -200,6 +203,7 @@ impl<'a> Planner<'a> {
             seed,
             file: file.to_string(),
             source,
+            context,
             n_poses,
             rows,
             next_row: 0,
@@ -227,7 +231,20 @@ impl<'a> Planner<'a> {
     }
     /// Whether the rows have `dir` columns.
     pub fn has_dir(&self) -> bool {
-        self.spec.directions != DirectionRule::Unknown
+        self.spec.directions != DirectionRule::Unknown || self.file_dir().is_some()
+    }
+
+    /// A pose file's directions (row-major per list entry), when it has them.
+    fn file_dir(&self) -> Option<&[i8]> {
+        self.context.as_ref().and_then(|c| c.dir.as_deref())
+    }
+
+    /// The list entry of pose `k` (list sources cycle).
+    fn entry(&self, k: usize) -> usize {
+        match &self.source {
+            PoseSource::List(list) => k % (list.len() / self.model.nq()).max(1),
+            _ => k,
+        }
     }
 
     /// The next at most `max_rows` rows (at least 1), or `None` when every row is planned. A pose's
@@ -266,8 +283,13 @@ impl<'a> Planner<'a> {
         for row in r0..r1 {
             let (k, r) = (row / repeats, row % repeats);
             let i = k - k0;
+            let file = self.context.as_ref();
+            let e = self.entry(k);
             if row == r0 || r == 0 {
                 mass = match &self.spec.payload {
+                    _ if file.is_some_and(|c| c.payload_kg.is_some()) => file
+                        .and_then(|c| c.payload_kg.as_ref())
+                        .map_or(0.0, |p| p[e]),
                     PayloadRule::Fixed(m) => *m,
                     PayloadRule::Choice(v) => {
                         let mut rng = rng_for(self.seed, STREAM_PAYLOAD, k as u64);
@@ -275,10 +297,17 @@ impl<'a> Planner<'a> {
                     }
                 };
             }
-            let t = k as f64 * self.spec.seconds_per_pose + r as f64 * self.spec.seconds_per_repeat;
+            let t0 = match file.and_then(|c| c.t_s.as_ref()) {
+                Some(t) => t[e],
+                None => k as f64 * self.spec.seconds_per_pose,
+            };
+            let t = t0 + r as f64 * self.spec.seconds_per_repeat;
             plan.pose.push(k as i64);
             plan.q.extend_from_slice(&qs[i * n..(i + 1) * n]);
-            let temp = self.spec.temperature.temp_at(t);
+            let temp = match file.and_then(|c| c.temp_c.as_ref()) {
+                Some(v) => v[e],
+                None => self.spec.temperature.temp_at(t),
+            };
             let (low, high) = crate::measurement_table::TEMP_RANGE_C;
             if !(low..=high).contains(&temp) {
                 return Err(err(
@@ -370,6 +399,15 @@ impl<'a> Planner<'a> {
     /// Directions of poses `ks` (row-major), whose joint values are `qs`; `None` without `dir`.
     fn directions(&mut self, ks: std::ops::Range<usize>, qs: &[f64]) -> Option<Vec<i8>> {
         let n = self.model.nq();
+        if let Some(d) = self.file_dir() {
+            return Some(
+                ks.flat_map(|k| {
+                    let e = self.entry(k);
+                    d[e * n..(e + 1) * n].to_vec()
+                })
+                .collect(),
+            );
+        }
         match self.spec.directions {
             DirectionRule::Unknown => None,
             DirectionRule::Random => Some(

@@ -67,6 +67,44 @@ pub(super) enum PoseSource {
     },
 }
 
+/// The context columns of a pose file, one entry per pose of its list (the first row of each pose
+/// id): where the file has a column, its value replaces the campaign's rule for that pose.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub(super) struct FileContext {
+    /// Payload mass per pose (kg).
+    pub payload_kg: Option<Vec<f64>>,
+    /// Robot temperature per pose (°C).
+    pub temp_c: Option<Vec<f64>>,
+    /// Time of the pose's first measurement (s).
+    pub t_s: Option<Vec<f64>>,
+    /// Approach directions per pose, row-major (−1, 0, +1).
+    pub dir: Option<Vec<i8>>,
+}
+
+impl FileContext {
+    /// The context of `table`'s poses `by_pose` (pose id, its rows).
+    fn of(
+        table: &crate::measurement_table::MeasurementTable,
+        by_pose: &[(i64, Vec<usize>)],
+    ) -> Self {
+        let first = |c: &Option<Vec<f64>>| {
+            c.as_ref()
+                .map(|v| by_pose.iter().map(|(_, rows)| v[rows[0]]).collect())
+        };
+        FileContext {
+            payload_kg: first(&table.payload),
+            temp_c: first(&table.temp),
+            t_s: first(&table.t),
+            dir: table.dir.as_ref().map(|_| {
+                by_pose
+                    .iter()
+                    .flat_map(|(_, rows)| table.dir_row(rows[0]).unwrap_or(&[]).to_vec())
+                    .collect()
+            }),
+        }
+    }
+}
+
 /// Value `k` of `count` evenly spaced over `(lo, hi)` (the midpoint for one value).
 fn grid_value((lo, hi): (f64, f64), count: usize, k: usize) -> f64 {
     if count == 1 {
@@ -96,7 +134,7 @@ pub(super) fn pose_source(
     model: &Model,
     spec: &CampaignSpec,
     file: &str,
-) -> Result<(PoseSource, usize)> {
+) -> Result<(PoseSource, usize, Option<FileContext>)> {
     let n = model.nq();
     let p_flange = Vector3::from(spec.p_flange_m);
     // A list source: cycled to the pose count, or used once (or 150 times round for ISO 9283).
@@ -132,12 +170,13 @@ pub(super) fn pose_source(
                     max_tries: *max_tries_per_pose,
                 },
                 spec.poses.unwrap_or(100),
+                None,
             ))
         }
         Sampling::Iso9283(iso) => {
             let list = iso9283_list(model, iso, &p_flange, file)?;
             let poses = count(5, false)?;
-            Ok((PoseSource::List(list), poses))
+            Ok((PoseSource::List(list), poses, None))
         }
         Sampling::Grid {
             points_per_joint,
@@ -214,6 +253,7 @@ pub(super) fn pose_source(
                     ranges,
                 },
                 poses,
+                None,
             ))
         }
         Sampling::List { q } => {
@@ -230,10 +270,11 @@ pub(super) fn pose_source(
                 }
             }
             let poses = count(q.len(), true)?;
-            Ok((PoseSource::List(q.concat()), poses))
+            Ok((PoseSource::List(q.concat()), poses, None))
         }
         Sampling::File { path, .. } => {
-            let table = crate::measurement_table::read(path)?;
+            // A pose file needs no measured positions: `pose, q1..qN` (and context columns).
+            let table = crate::measurement_table::read_configurations(path)?;
             if table.n_joints != n {
                 return Err(err(
                     file,
@@ -252,7 +293,11 @@ pub(super) fn pose_source(
                 list.extend_from_slice(table.q_row(rows[0]));
             }
             let poses = count(by_pose.len(), true)?;
-            Ok((PoseSource::List(list), poses))
+            Ok((
+                PoseSource::List(list),
+                poses,
+                Some(FileContext::of(&table, &by_pose)),
+            ))
         }
     }
 }

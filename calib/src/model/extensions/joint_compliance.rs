@@ -57,6 +57,24 @@ impl CauseModel for JointCompliance {
         }
     }
 
+    /// `Δθᵢ = −cᵢ τᵢ(θ)`: `∂Δθᵢ/∂θⱼ = −cᵢ ∂τᵢ/∂θⱼ` (exact; [`torque_jacobian`]).
+    fn angle_jacobian(
+        &self,
+        _settings: &ExtensionSettings,
+        row: &RowInputs<'_>,
+        torque_jacobian: &[f64],
+        x: &[f64],
+        _d_dq: &mut [f64],
+        d_dtheta: &mut [f64],
+    ) {
+        let n = row.q.len();
+        for (i, c) in x.iter().enumerate() {
+            for j in 0..n {
+                d_dtheta[i * n + j] -= c * torque_jacobian[i * n + j];
+            }
+        }
+    }
+
     fn evidence_subject(&self, joints: &str) -> String {
         format!("the gravity torque of {joints}")
     }
@@ -84,6 +102,105 @@ impl CauseModel for JointCompliance {
                 "holding torque of joint {} (N m)",
                 term.joint().map_or(0, |j| j + 1)
             ),
+        }
+    }
+}
+
+/// `∂τᵢ/∂θⱼ` (N m per rad; N per rad, N m per m, N per m for prismatic joints), row-major `nq × nq`
+/// into `out`, of the holding torques `τ` that [`sim::statics::gravity_torques`] left in `data` (its
+/// joint frames at `θ`), for `gravity` (base frame, m/s²) and `payload`.
+///
+/// With `wᵢ`, `oᵢ` joint `i`'s axis and origin (base frame), `mᵢ` and `Sᵢ = Σ m c` the mass and first
+/// moment of everything beyond joint `i` (its link, the links after it, the payload), and
+/// `dᵢ = Sᵢ − mᵢ oᵢ`, a rotational joint holds `τᵢ = −wᵢ · (dᵢ × g)`, a prismatic one `τᵢ = −wᵢ · g mᵢ`.
+/// A turn of a rotational joint `j ≥ i` moves only what is beyond `j`: `δSᵢ = wⱼ × dⱼ`; a turn of
+/// `j < i` turns `wᵢ`, `oᵢ` and `dᵢ` together, which is gravity turned the other way:
+/// `δτᵢ = −wᵢ · (dᵢ × (−wⱼ × g))` (`−(wⱼ × wᵢ) · g mᵢ` for a prismatic `i`). A slide of a prismatic
+/// joint `j > i` shifts the first moment by `mⱼ wⱼ`; one of `j < i` shifts `oᵢ` with it (no change).
+pub fn torque_jacobian(
+    model: &Model,
+    data: &sim::Data,
+    gravity: &nalgebra::Vector3<f64>,
+    payload: Option<&sim::statics::Payload>,
+    out: &mut [f64],
+) {
+    use nalgebra::{Point3, Vector3};
+    let n = model.nq();
+    assert_eq!(out.len(), n * n, "nq × nq");
+    let mut mass = vec![0.0; n];
+    let mut lever = vec![Vector3::zeros(); n];
+    let mut axis = vec![Vector3::zeros(); n];
+    let (mut m, mut first) = (0.0, Vector3::zeros());
+    if let Some(pl) = payload {
+        let c = data.flange * Point3::from(Vector3::from(pl.com));
+        m += pl.mass;
+        first += c.coords * pl.mass;
+    }
+    for i in (0..n).rev() {
+        let t = &data.joint_poses[i];
+        let body = &model.bodies()[i];
+        let c = t * Point3::from(body.com);
+        m += body.mass;
+        first += c.coords * body.mass;
+        mass[i] = m;
+        lever[i] = first - t.translation.vector * m;
+        axis[i] = t.rotation * model.joints()[i].axis;
+    }
+    let joints = model.joints();
+    for i in 0..n {
+        let wi = axis[i];
+        for j in 0..n {
+            let wj = axis[j];
+            let rot_i = joints[i].kind.is_rotational();
+            let rot_j = joints[j].kind.is_rotational();
+            out[i * n + j] = match (rot_i, rot_j, j >= i) {
+                (true, true, true) => -wi.dot(&wj.cross(&lever[j]).cross(gravity)),
+                (true, true, false) => -wi.dot(&lever[i].cross(&(-wj.cross(gravity)))),
+                (false, true, true) => 0.0,
+                (false, true, false) => -(wj.cross(&wi)).dot(gravity) * mass[i],
+                (true, false, true) if j > i => -wi.dot(&(wj * mass[j]).cross(gravity)),
+                _ => 0.0,
+            };
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The analytic `∂τ/∂θ` against central differences of the simulator's gravity torques.
+    #[test]
+    fn torque_jacobian_matches_central_differences() {
+        let model = sim::robots::load_builtin("iiwa7").unwrap();
+        let n = model.nq();
+        let g = nalgebra::Vector3::from(sim::statics::DEFAULT_GRAVITY);
+        let payload = sim::statics::Payload {
+            mass: 3.0,
+            com: [0.01, -0.02, 0.08],
+        };
+        let mut data = sim::Data::new(&model);
+        let q = [0.3, 0.7, -0.4, -1.1, 0.5, 0.9, -0.2];
+        sim::statics::gravity_torques(&model, &mut data, &q, &g, Some(&payload)).unwrap();
+        let mut jac = vec![0.0; n * n];
+        torque_jacobian(&model, &data, &g, Some(&payload), &mut jac);
+        let h = 1e-6;
+        for j in 0..n {
+            let mut qp = q;
+            qp[j] += h;
+            sim::statics::gravity_torques(&model, &mut data, &qp, &g, Some(&payload)).unwrap();
+            let tp = data.gravity_torque.clone();
+            qp[j] -= 2.0 * h;
+            sim::statics::gravity_torques(&model, &mut data, &qp, &g, Some(&payload)).unwrap();
+            let tm = data.gravity_torque.clone();
+            for i in 0..n {
+                let fd = (tp[i] - tm[i]) / (2.0 * h);
+                assert!(
+                    (fd - jac[i * n + j]).abs() < 1e-6 * (1.0 + fd.abs()),
+                    "dtau{i}/dq{j}: analytic {} against {fd}",
+                    jac[i * n + j]
+                );
+            }
         }
     }
 }

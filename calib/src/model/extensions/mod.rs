@@ -36,7 +36,9 @@ mod settings;
 pub mod thermal_drift;
 pub mod transmission_error;
 
-pub use regressors::{EQUILIBRIUM_ITERATIONS, Regressors, RowInputs, apply, bends};
+pub use regressors::{
+    EQUILIBRIUM_ITERATIONS, Regressors, RowContext, RowInputs, RowRegressors, apply, bends,
+};
 pub use settings::{BacklashSign, ExtensionSettings, ThermalInput};
 
 use crate::error::Result;
@@ -140,6 +142,24 @@ pub trait CauseModel: Sync {
     /// (e.g. "turns the joint about its own axis in proportion to its gravity torque"): the evidence
     /// sentence of a finding says why this cause and not its nearest rival with it.
     fn signature(&self) -> &'static str;
+
+    /// How this cause's joint-angle terms move with the joints, for the Jacobian of the compensation
+    /// ([`crate::model::compensate`]). With `Δθᵢ = Σₑ xₑ gₑ` over this cause's [`Term::JointAngle`]
+    /// parameters (values `x`, [`CauseModel::params`] order), adds `∂Δθ/∂q` through the commanded
+    /// joint values to `d_dq` and `∂Δθ/∂θ` through the link angles the torques are evaluated at to
+    /// `d_dtheta` (both `nq × nq`, row-major, rad per rad). `torque_jacobian` is `∂τ/∂θ` (N m per
+    /// rad, `nq × nq` row-major) when a cause reads the torques. Default: no dependence (the terms
+    /// read only the direction, the temperature or the time).
+    fn angle_jacobian(
+        &self,
+        _settings: &ExtensionSettings,
+        _row: &RowInputs<'_>,
+        _torque_jacobian: &[f64],
+        _x: &[f64],
+        _d_dq: &mut [f64],
+        _d_dtheta: &mut [f64],
+    ) {
+    }
 
     /// The highest harmonic of the joint's own angle that this cause models as an angle error of that
     /// joint (transmission error: 3), or 0. Diagnose does not hold the probe of an error periodic in

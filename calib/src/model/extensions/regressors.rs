@@ -91,24 +91,6 @@ impl Regressors {
         let params = settings.params(model);
         let n = params.len();
         let mut coef = vec![0.0; rows.len() * n];
-        let needs_moment = settings.needs_gravity_moment();
-        let needs_tau = settings.needs_gravity_torque() || needs_moment;
-        let g = Vector3::from(settings.gravity_base);
-        let widths: Vec<(Cause, usize)> = settings
-            .causes
-            .iter()
-            .map(|c| (*c, params.iter().filter(|p| p.cause == *c).count()))
-            .collect();
-        // Only joint-angle terms move the links the torques are evaluated at.
-        let moves_links = params
-            .iter()
-            .any(|p| matches!(p.term, Term::JointAngle { .. }));
-        let iterations =
-            if needs_tau && moves_links && at.len() == n && at.iter().any(|x| *x != 0.0) {
-                EQUILIBRIUM_ITERATIONS
-            } else {
-                1
-            };
         let bends = params.iter().any(|p| matches!(p.term, Term::Bend { .. }));
         if n > 0 {
             // Rows are independent: blocks of them in parallel, each with its own scratch; the first
@@ -117,76 +99,23 @@ impl Regressors {
                 .par_chunks_mut(BUILD_BLOCK_ROWS * n)
                 .zip(rows.par_chunks(BUILD_BLOCK_ROWS))
                 .map(|(out, rows)| {
-                    let mut data = sim::Data::new(model);
-                    let mut tau = vec![0.0; model.nq()];
-                    let mut moment = vec![Vector3::zeros(); model.nq()];
-                    // One row's regressors, to evaluate θ with [`apply`] between the fixed-point
-                    // steps.
-                    let mut one = Regressors {
-                        params: params.clone(),
-                        coef: vec![0.0; n],
-                        bends,
-                    };
-                    let mut theta = vec![0.0; model.nq()];
+                    let mut one = RowRegressors::new(model, settings);
                     for (k, &r) in rows.iter().enumerate() {
-                        let q = table.q_row(r);
-                        theta.copy_from_slice(q);
-                        for it in 0..iterations {
-                            if needs_tau {
-                                let mass = table.payload.as_ref().map_or(0.0, |p| p[r]);
-                                let payload = (mass > 0.0).then_some(sim::statics::Payload {
-                                    mass,
-                                    com: settings.payload_com_m,
-                                });
-                                sim::statics::gravity_torques(
-                                    model,
-                                    &mut data,
-                                    &theta,
-                                    &g,
-                                    payload.as_ref(),
-                                )
-                                .map_err(|e| {
-                                    CalibError::BadValue {
-                                        context: format!("{source}: row {}", r + 1),
-                                        field: "q1..qN".into(),
-                                        value: String::new(),
-                                        problem: format!("gravity torques: {e}"),
-                                    }
-                                })?;
-                                tau.copy_from_slice(data.gravity_torque.as_slice());
-                                if needs_moment {
-                                    super::link_deflection::gravity_moments(
-                                        model,
-                                        &data,
-                                        &g,
-                                        payload.as_ref(),
-                                        &mut moment,
-                                    );
-                                }
+                        let context = RowContext {
+                            payload_kg: table.payload.as_ref().map_or(0.0, |p| p[r]),
+                            dir: table.dir_row(r),
+                            temp_c: table.temp.as_ref().map(|t| t[r]),
+                            t_s: table.t.as_ref().map(|t| t[r]),
+                        };
+                        one.fill(table.q_row(r), &context, at).map_err(|e| {
+                            CalibError::BadValue {
+                                context: format!("{source}: row {}", r + 1),
+                                field: "q1..qN".into(),
+                                value: String::new(),
+                                problem: format!("gravity torques: {e}"),
                             }
-                            let inputs = RowInputs {
-                                joints: model.joints(),
-                                q,
-                                tau: &tau,
-                                moment: &moment,
-                                dir: table.dir_row(r),
-                                temp_c: table.temp.as_ref().map(|t| t[r]),
-                                t_s: table.t.as_ref().map(|t| t[r]),
-                            };
-                            let mut col = 0;
-                            for &(c, width) in &widths {
-                                c.model().regressors(
-                                    settings,
-                                    &inputs,
-                                    &mut one.coef[col..col + width],
-                                );
-                                col += width;
-                            }
-                            if it + 1 < iterations {
-                                apply(&one, at, 0, q, &mut theta);
-                            }
-                        }
-                        out[k * n..(k + 1) * n].copy_from_slice(&one.coef);
+                        })?;
+                        out[k * n..(k + 1) * n].copy_from_slice(&one.regressors().coef);
                     }
                     Ok(())
                 })
@@ -198,6 +127,239 @@ impl Regressors {
             coef,
             bends,
         })
+    }
+}
+
+/// What a row gives the regressors besides its joint values: the context columns of the measurement
+/// table (or of a compensation target).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct RowContext<'a> {
+    /// Mass carried at the flange (kg; 0 without payload).
+    pub payload_kg: f64,
+    /// Approach direction sign of each joint (−1, 0, +1), when known.
+    pub dir: Option<&'a [i8]>,
+    /// Robot temperature (°C), when known.
+    pub temp_c: Option<f64>,
+    /// Time since the start of the campaign (s), when known.
+    pub t_s: Option<f64>,
+}
+
+/// The regressors of one row at a time, with the workspace they need (statics, torques, moments):
+/// made once per thread, then [`RowRegressors::fill`]ed row after row without allocating. What
+/// [`Regressors::build`] does for a table, and what the compensation does at every step of its solve
+/// (the regressors depend on the joints it commands).
+#[derive(Clone, Debug)]
+pub struct RowRegressors<'m> {
+    model: &'m Model,
+    settings: &'m ExtensionSettings,
+    widths: Vec<(Cause, usize)>,
+    needs_tau: bool,
+    needs_moment: bool,
+    moves_links: bool,
+    gravity_base: Vector3<f64>,
+    data: sim::Data,
+    /// Holding torques against gravity and payload at the last `θ` (N m; N for prismatic joints).
+    tau: Vec<f64>,
+    /// Gravity moments each joint transmits at the last `θ` (N m, joint frame).
+    moment: Vec<Vector3<f64>>,
+    /// The last row's regressors, as a one-row [`Regressors`].
+    one: Regressors,
+    /// Link angles `θ` the torques were last evaluated at (rad or m).
+    theta: Vec<f64>,
+}
+
+impl<'m> RowRegressors<'m> {
+    /// A workspace for the regressors of `settings` on `model`.
+    pub fn new(model: &'m Model, settings: &'m ExtensionSettings) -> Self {
+        let params = settings.params(model);
+        let n = params.len();
+        let needs_moment = settings.needs_gravity_moment();
+        let needs_tau = settings.needs_gravity_torque() || needs_moment;
+        let widths: Vec<(Cause, usize)> = settings
+            .causes
+            .iter()
+            .map(|c| (*c, params.iter().filter(|p| p.cause == *c).count()))
+            .collect();
+        // Only joint-angle terms move the links the torques are evaluated at.
+        let moves_links = params
+            .iter()
+            .any(|p| matches!(p.term, Term::JointAngle { .. }));
+        let bends = params.iter().any(|p| matches!(p.term, Term::Bend { .. }));
+        RowRegressors {
+            model,
+            settings,
+            widths,
+            needs_tau,
+            needs_moment,
+            moves_links,
+            gravity_base: Vector3::from(settings.gravity_base),
+            data: sim::Data::new(model),
+            tau: vec![0.0; model.nq()],
+            moment: vec![Vector3::zeros(); model.nq()],
+            one: Regressors {
+                params,
+                coef: vec![0.0; n],
+                bends,
+            },
+            theta: vec![0.0; model.nq()],
+        }
+    }
+
+    /// The regressors of the row at the controller's joints `q` with `context`, the gravity torques
+    /// taken where the links are under the extension values `at` (see [`Regressors::build`]); the
+    /// result is [`RowRegressors::regressors`]. Errors: a robot without the inertial data the
+    /// torques need (the message of [`sim::statics::gravity_torques`]).
+    pub fn fill(
+        &mut self,
+        q: &[f64],
+        context: &RowContext<'_>,
+        at: &[f64],
+    ) -> std::result::Result<(), String> {
+        let n = self.one.params.len();
+        let iterations = if self.needs_tau
+            && self.moves_links
+            && at.len() == n
+            && at.iter().any(|x| *x != 0.0)
+        {
+            EQUILIBRIUM_ITERATIONS
+        } else {
+            1
+        };
+        self.theta.copy_from_slice(q);
+        for it in 0..iterations {
+            if self.needs_tau {
+                let payload = (context.payload_kg > 0.0).then_some(sim::statics::Payload {
+                    mass: context.payload_kg,
+                    com: self.settings.payload_com_m,
+                });
+                sim::statics::gravity_torques(
+                    self.model,
+                    &mut self.data,
+                    &self.theta,
+                    &self.gravity_base,
+                    payload.as_ref(),
+                )
+                .map_err(|e| e.to_string())?;
+                self.tau
+                    .copy_from_slice(self.data.gravity_torque.as_slice());
+                if self.needs_moment {
+                    super::link_deflection::gravity_moments(
+                        self.model,
+                        &self.data,
+                        &self.gravity_base,
+                        payload.as_ref(),
+                        &mut self.moment,
+                    );
+                }
+            }
+            let inputs = RowInputs {
+                joints: self.model.joints(),
+                q,
+                tau: &self.tau,
+                moment: &self.moment,
+                dir: context.dir,
+                temp_c: context.temp_c,
+                t_s: context.t_s,
+            };
+            let mut col = 0;
+            for &(c, width) in &self.widths {
+                c.model()
+                    .regressors(self.settings, &inputs, &mut self.one.coef[col..col + width]);
+                col += width;
+            }
+            if it + 1 < iterations {
+                apply(&self.one, at, 0, q, &mut self.theta);
+            }
+        }
+        Ok(())
+    }
+
+    /// `∂θ/∂q` (rad per rad, `nq × nq` row-major, into `out`) of the effective joint values
+    /// `θ = q + Δθ(q, θ)` at the last [`RowRegressors::fill`]ed row (joint values `q`, `context`) under
+    /// the extension values `x`: `(I − ∂Δθ/∂θ)⁻¹ (I + ∂Δθ/∂q)`, each cause adding its pieces
+    /// ([`super::CauseModel::angle_jacobian`]). `work` is scratch of at least `3 nq²` values.
+    pub fn angle_jacobian(
+        &mut self,
+        q: &[f64],
+        context: &RowContext<'_>,
+        x: &[f64],
+        work: &mut [f64],
+        out: &mut [f64],
+    ) {
+        let n = self.model.nq();
+        let (d_dq, rest) = work.split_at_mut(n * n);
+        let (d_dtheta, torque_jac) = rest.split_at_mut(n * n);
+        let torque_jac = &mut torque_jac[..n * n];
+        d_dq.fill(0.0);
+        d_dtheta.fill(0.0);
+        torque_jac.fill(0.0);
+        if self.needs_tau {
+            let payload = (context.payload_kg > 0.0).then_some(sim::statics::Payload {
+                mass: context.payload_kg,
+                com: self.settings.payload_com_m,
+            });
+            super::joint_compliance::torque_jacobian(
+                self.model,
+                &self.data,
+                &self.gravity_base,
+                payload.as_ref(),
+                torque_jac,
+            );
+        }
+        let inputs = RowInputs {
+            joints: self.model.joints(),
+            q,
+            tau: &self.tau,
+            moment: &self.moment,
+            dir: context.dir,
+            temp_c: context.temp_c,
+            t_s: context.t_s,
+        };
+        let mut col = 0;
+        for &(c, width) in &self.widths {
+            c.model().angle_jacobian(
+                self.settings,
+                &inputs,
+                torque_jac,
+                &x[col..col + width],
+                d_dq,
+                d_dtheta,
+            );
+            col += width;
+        }
+        // out = (I − D_θ)⁻¹ (I + D_q), by LU of the small matrix.
+        let a = nalgebra::DMatrix::from_fn(n, n, |i, j| {
+            f64::from(u8::from(i == j)) - d_dtheta[i * n + j]
+        });
+        let b =
+            nalgebra::DMatrix::from_fn(n, n, |i, j| f64::from(u8::from(i == j)) + d_dq[i * n + j]);
+        let sol = a.lu().solve(&b).unwrap_or(b);
+        for i in 0..n {
+            for j in 0..n {
+                out[i * n + j] = sol[(i, j)];
+            }
+        }
+    }
+
+    /// The last [`RowRegressors::fill`]ed row's regressors: a one-row [`Regressors`] (row 0).
+    pub fn regressors(&self) -> &Regressors {
+        &self.one
+    }
+
+    /// The statics of the last evaluation (joint frames and torques at the last `θ`), when the
+    /// regressors read torques.
+    pub fn statics(&self) -> Option<&sim::Data> {
+        self.needs_tau.then_some(&self.data)
+    }
+
+    /// The holding torques of the last evaluation (N m; zeros when no cause reads them).
+    pub fn torques(&self) -> &[f64] {
+        &self.tau
+    }
+
+    /// The gravity moments of the last evaluation (N m, joint frames; zeros when no cause reads them).
+    pub fn moments(&self) -> &[Vector3<f64>] {
+        &self.moment
     }
 }
 

@@ -133,6 +133,32 @@ impl CauseModel for TransmissionError {
         }
     }
 
+    /// `∂Δθⱼ/∂qⱼ = Σₖ k (aⱼₖ cos k qⱼ − bⱼₖ sin k qⱼ)`: exact, on the diagonal.
+    fn angle_jacobian(
+        &self,
+        settings: &ExtensionSettings,
+        row: &RowInputs<'_>,
+        _torque_jacobian: &[f64],
+        x: &[f64],
+        d_dq: &mut [f64],
+        _d_dtheta: &mut [f64],
+    ) {
+        let n = row.q.len();
+        for (&j, xs) in settings
+            .transmission_joints
+            .iter()
+            .zip(x.chunks_exact(2 * HARMONICS))
+        {
+            let mut d = 0.0;
+            for k in 1..=HARMONICS {
+                let (sn, cs) = (k as f64 * row.q[j]).sin_cos();
+                let (a, b) = (xs[2 * (k - 1)], xs[2 * (k - 1) + 1]);
+                d += k as f64 * (a * cs - b * sn);
+            }
+            d_dq[j * n + j] += d;
+        }
+    }
+
     fn impossible(&self, value: f64) -> Option<&'static str> {
         (value.abs() > MAX_AMPLITUDE_RAD)
             .then_some("a harmonic amplitude beyond 5 mrad: no gear errs by that much")

@@ -242,6 +242,44 @@ impl KernelModel {
         out
     }
 
+    /// `∂r̂/∂qⱼ` (m/rad, tracker frame) at `q` into `out` (one per joint): the kernel's derivative in
+    /// closed form. With `dⱼ = zⱼ − z'ⱼ`, `kⱼ = exp(−dⱼ²/2ℓ²)`, `A = Σ kⱼ` and the full term `F`,
+    /// `∂k/∂zⱼ = [∂kⱼ/n + (A − kⱼ) ∂kⱼ / C(n, 2) − F dⱼ/(nℓ²)] / terms` with `∂kⱼ = −kⱼ dⱼ/ℓ²`.
+    pub fn jacobian(&self, q: &[f64], out: &mut [Vector3<f64>]) {
+        let n = self.q_mean.len();
+        let nf = n as f64;
+        let ell2 = self.length_scale * self.length_scale;
+        let inv = 1.0 / (2.0 * ell2);
+        let terms = if n > 1 { 3.0 } else { 2.0 };
+        let pairs = if n > 1 { 0.5 * nf * (nf - 1.0) } else { 1.0 };
+        out.fill(Vector3::zeros());
+        let mut d = vec![0.0; n];
+        let mut k = vec![0.0; n];
+        let z: Vec<f64> = (0..n)
+            .map(|j| (q[j] - self.q_mean[j]) / self.q_scale[j])
+            .collect();
+        for (zi, a) in self.z_train.chunks_exact(n).zip(self.alpha.chunks_exact(3)) {
+            let (mut additive, mut squared) = (0.0, 0.0);
+            for j in 0..n {
+                d[j] = z[j] - zi[j];
+                k[j] = (-d[j] * d[j] * inv).exp();
+                additive += k[j];
+                squared += d[j] * d[j];
+            }
+            let full = (-squared * inv / nf).exp();
+            for j in 0..n {
+                let dk = -k[j] * d[j] / ell2;
+                let pair = if n > 1 {
+                    (additive - k[j]) * dk / pairs
+                } else {
+                    0.0
+                };
+                let g = (dk / nf + pair - full * d[j] / (nf * ell2)) / terms / self.q_scale[j];
+                out[j] += g * Vector3::new(a[0], a[1], a[2]);
+            }
+        }
+    }
+
     /// Number of training rows the model holds.
     pub fn n_train(&self) -> usize {
         self.alpha.len() / 3

@@ -416,6 +416,44 @@ impl LearnedResidual {
         self.support.as_ref()
     }
 
+    /// `∂r̂/∂qⱼ` (m/rad, tracker frame) at `q` into `out` (one per joint) of the correction as
+    /// [`LearnedResidual::predict`] applies it, weighted by its support: `w ∂r/∂qⱼ + r ∂w/∂qⱼ`, in
+    /// closed form for the polynomial and kernel corrections (zero for none); `false` for an adjoint
+    /// model, whose effect goes through the chain ([`crate::model::compensate`] differentiates its
+    /// chain, not its configuration-dependent parameters).
+    pub fn jacobian(&self, q: &[f64], out: &mut [nalgebra::Vector3<f64>]) -> bool {
+        match &self.correction {
+            Correction::Zero => {
+                out.fill(Vector3::zeros());
+                return true;
+            }
+            Correction::Polynomial(p) => p.jacobian(q, out),
+            Correction::Kernel(k) => k.jacobian(q, out),
+            Correction::Adjoint(_) => {
+                out.fill(Vector3::zeros());
+                return false;
+            }
+        }
+        let Some(support) = &self.support else {
+            return true;
+        };
+        let w = support.weight(q);
+        if w == 1.0 {
+            return true;
+        }
+        let r = match &self.correction {
+            Correction::Polynomial(p) => p.predict(q),
+            Correction::Kernel(k) => k.predict(q),
+            _ => Vector3::zeros(),
+        };
+        let mut dw = vec![0.0; q.len()];
+        support.weight_gradient(q, &mut dw);
+        for (o, g) in out.iter_mut().zip(&dw) {
+            *o = *o * w + r * *g;
+        }
+        true
+    }
+
     /// The adjoint model, for a kept `learned:adjoint` correction.
     pub fn adjoint(&self) -> Option<&adjoint::AdjointModel> {
         match &self.correction {

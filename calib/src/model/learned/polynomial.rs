@@ -329,6 +329,29 @@ impl PolynomialModel {
         out
     }
 
+    /// `∂r̂/∂qⱼ` (m/rad, tracker frame) at `q` into `out` (one per joint): each monomial's product
+    /// rule, divided by its feature scale and the joint's standardisation scale.
+    pub fn jacobian(&self, q: &[f64], out: &mut [Vector3<f64>]) {
+        let n = self.q_mean.len();
+        let z: Vec<f64> = (0..n)
+            .map(|j| (q[j] - self.q_mean[j]) / self.q_scale[j])
+            .collect();
+        out.fill(Vector3::zeros());
+        for (k, m) in self.monomials.iter().enumerate() {
+            let w = &self.coefficients[3 * k..3 * k + 3];
+            let w = Vector3::new(w[0], w[1], w[2]) / self.feature_scale[k];
+            for (l, &j) in m.iter().enumerate() {
+                let others: f64 = m
+                    .iter()
+                    .enumerate()
+                    .filter(|&(o, _)| o != l)
+                    .map(|(_, &i)| z[i])
+                    .product();
+                out[j] += w * (others / self.q_scale[j]);
+            }
+        }
+    }
+
     /// Number of coefficients: (features + intercept) × 3 components.
     pub fn n_coefficients(&self) -> usize {
         3 * (self.monomials.len() + 1)

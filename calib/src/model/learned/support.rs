@@ -168,6 +168,33 @@ impl Support {
         }
     }
 
+    /// The weight's gradient `∂w/∂q` (1/rad) at `q` into `out` (one per joint): zero inside and
+    /// outside, the smoothstep's slope along the direction away from the nearest centre across the
+    /// edge. `out` must have `n_joints` entries.
+    pub fn weight_gradient(&self, q: &[f64], out: &mut [f64]) {
+        out.fill(0.0);
+        if q.len() != self.n_joints || out.len() != self.n_joints {
+            return;
+        }
+        let Some(centre) = self
+            .centres
+            .chunks(self.n_joints)
+            .min_by(|a, b| dist2(a, q).total_cmp(&dist2(b, q)))
+        else {
+            return;
+        };
+        let d = dist2(centre, q).sqrt();
+        if d <= self.inner_rad || d >= self.outer_rad {
+            return;
+        }
+        let width = self.outer_rad - self.inner_rad;
+        let t = (d - self.inner_rad) / width;
+        let dw_dd = (6.0 * t * t - 6.0 * t) / width;
+        for ((o, qi), ci) in out.iter_mut().zip(q).zip(centre) {
+            *o = dw_dd * (qi - ci) / d;
+        }
+    }
+
     /// Number of centres.
     pub fn n_centres(&self) -> usize {
         self.centres.len() / self.n_joints
@@ -252,6 +279,44 @@ mod tests {
         let t = (d0 - s.inner_rad) / (s.outer_rad - s.inner_rad);
         assert!((s.weight(&[mid]) - (1.0 - t * t * (3.0 - 2.0 * t))).abs() < 1e-15);
         assert_eq!(s.weight(&[0.0, 1.0]), 0.0, "wrong length: off");
+    }
+
+    /// The weight's gradient against central differences across the fade (1-D and 3-D).
+    #[test]
+    fn weight_gradient_matches_differences() {
+        let q: Vec<f64> = (0..21).map(|i| i as f64 * 0.1).collect();
+        let s = Support::of(&q, 1, 3).unwrap();
+        // Points inside the fade of the outermost centres (not on its edges, where the slope is 0
+        // and a central difference straddles the kink of the clamp), inside, and far outside.
+        let last = s.centres.iter().fold(f64::NEG_INFINITY, |m, v| m.max(*v));
+        let first = s.centres.iter().fold(f64::INFINITY, |m, v| m.min(*v));
+        let width = s.outer_rad - s.inner_rad;
+        for x in [
+            last + s.inner_rad + 0.37 * width,
+            first - s.inner_rad - 0.81 * width,
+            1.0,
+            10.0,
+        ] {
+            let h = 1e-7;
+            let fd = (s.weight(&[x + h]) - s.weight(&[x - h])) / (2.0 * h);
+            let mut g = [0.0];
+            s.weight_gradient(&[x], &mut g);
+            assert!((g[0] - fd).abs() < 1e-6, "{x}: {} against {fd}", g[0]);
+        }
+        let q3: Vec<f64> = (0..60).map(|i| ((i * 13) % 17) as f64 * 0.05).collect();
+        let s = Support::of(&q3, 3, 1).unwrap();
+        let mid = 0.5 * (s.inner_rad + s.outer_rad);
+        let p = [q3[0] + mid * 0.6, q3[1] - mid * 0.8, q3[2] + 0.3 * mid];
+        let mut g = [0.0; 3];
+        s.weight_gradient(&p, &mut g);
+        for k in 0..3 {
+            let h = 1e-7;
+            let (mut a, mut b) = (p, p);
+            a[k] += h;
+            b[k] -= h;
+            let fd = (s.weight(&a) - s.weight(&b)) / (2.0 * h);
+            assert!((g[k] - fd).abs() < 1e-6, "joint {k}: {} against {fd}", g[k]);
+        }
     }
 
     /// Repeated rows count once; a single configuration has a point support.
