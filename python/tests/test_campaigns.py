@@ -55,7 +55,7 @@ def test_a_campaign_column_and_folds_match_the_cli(cli, two, tmp_path):
     out = tmp_path / "cli.json"
     expected = cli.json("calibrate", "--data", data, "--out", out, "--folds", "3", "--seed", "4")
     model = robocal.calibrate(both, robot="iiwa7", folds=3, seed=4)
-    assert model.report["split"] == {"kind": "cross_validation", "folds": 3, "seed": 4}
+    assert model.report["split"] == {"kind": "cross_validation", "folds": 3, "seed": 4, "regions": 5}
     for key in ("report", "validation", "split", "model"):
         assert model.report[key] == expected[key], key
     assert model.to_json() == out.read_text()
