@@ -92,13 +92,14 @@ pub fn run(args: Args) -> CliResult {
     }
     let file = CalibratedModel::load(&args.model)?;
     let mut predictor = Predictor::from_file(&file)?;
-    predictor.set_prior(
-        &file,
-        &Prior {
-            length_m: args.prior_length,
-            angle_rad: args.prior_angle,
-        },
-    );
+    let prior = Prior {
+        length_m: args.prior_length,
+        angle_rad: args.prior_angle,
+    };
+    // The predictor comes with the default prior; another one is set up once more.
+    if prior != Prior::default() {
+        predictor.set_prior(&file, &prior);
+    }
     let table = read_configs(&args.data, &predictor.model)?;
     let preds = predictor.predict_table(&table, &args.data.display().to_string())?;
     sim::io::write_atomic(&args.out, preds.to_csv().as_bytes())?;

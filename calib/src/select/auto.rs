@@ -256,17 +256,14 @@ fn campaign_out(
         .unwrap_or_default();
     let learned = out.learned.unwrap_or_default();
     let (b, a) = (rms(&out.physical), rms(&learned));
+    let before = per_pose(&out.physical, &out.keys);
     Ok(CampaignOutTest {
         kind,
-        n_poses: per_pose(&out.physical, &out.keys).len(),
+        n_poses: before.len(),
         rms_m_before: b,
         rms_m_after: a,
         gain: if b > 0.0 { 1.0 - a / b } else { 0.0 },
-        z: paired(
-            &per_pose(&out.physical, &out.keys),
-            &per_pose(&learned, &out.keys),
-        )
-        .z,
+        z: paired(&before, &per_pose(&learned, &out.keys)).z,
         passed: false,
     })
 }

@@ -205,6 +205,14 @@ impl<'m> RowRegressors<'m> {
         }
     }
 
+    /// The row's payload (`context.payload_kg` at the settings' centre of mass), if it has one.
+    fn payload(&self, context: &RowContext<'_>) -> Option<sim::statics::Payload> {
+        (context.payload_kg > 0.0).then_some(sim::statics::Payload {
+            mass: context.payload_kg,
+            com: self.settings.payload_com_m,
+        })
+    }
+
     /// The regressors of the row at the controller's joints `q` with `context`, the gravity torques
     /// taken where the links are under the extension values `at` (see [`Regressors::build`]); the
     /// result is [`RowRegressors::regressors`]. Errors: a robot without the inertial data the
@@ -228,10 +236,7 @@ impl<'m> RowRegressors<'m> {
         self.theta.copy_from_slice(q);
         for it in 0..iterations {
             if self.needs_tau {
-                let payload = (context.payload_kg > 0.0).then_some(sim::statics::Payload {
-                    mass: context.payload_kg,
-                    com: self.settings.payload_com_m,
-                });
+                let payload = self.payload(context);
                 sim::statics::gravity_torques(
                     self.model,
                     &mut self.data,
@@ -294,10 +299,7 @@ impl<'m> RowRegressors<'m> {
         d_dtheta.fill(0.0);
         torque_jac.fill(0.0);
         if self.needs_tau {
-            let payload = (context.payload_kg > 0.0).then_some(sim::statics::Payload {
-                mass: context.payload_kg,
-                com: self.settings.payload_com_m,
-            });
+            let payload = self.payload(context);
             super::joint_compliance::torque_jacobian(
                 self.model,
                 &self.data,

@@ -437,7 +437,8 @@ impl LearnedResidual {
         let Some(support) = &self.support else {
             return true;
         };
-        let w = support.weight(q);
+        let mut dw = vec![0.0; q.len()];
+        let w = support.weight_and_gradient(q, &mut dw);
         if w == 1.0 {
             return true;
         }
@@ -446,8 +447,6 @@ impl LearnedResidual {
             Correction::Kernel(k) => k.predict(q),
             _ => Vector3::zeros(),
         };
-        let mut dw = vec![0.0; q.len()];
-        support.weight_gradient(q, &mut dw);
         for (o, g) in out.iter_mut().zip(&dw) {
             *o = *o * w + r * *g;
         }

@@ -168,24 +168,28 @@ impl Support {
         }
     }
 
-    /// The weight's gradient `∂w/∂q` (1/rad) at `q` into `out` (one per joint): zero inside and
-    /// outside, the smoothstep's slope along the direction away from the nearest centre across the
-    /// edge. `out` must have `n_joints` entries.
-    pub fn weight_gradient(&self, q: &[f64], out: &mut [f64]) {
+    /// The weight at `q` ([`Support::weight`]), with its gradient `∂w/∂q` (1/rad) into `out` (one
+    /// per joint) from the same search for the nearest centre: zero inside and outside, the
+    /// smoothstep's slope along the direction away from the nearest centre across the edge. A `q` or
+    /// `out` of the wrong length gives weight 0 and a zero gradient, as [`Support::weight`] does.
+    pub fn weight_and_gradient(&self, q: &[f64], out: &mut [f64]) -> f64 {
         out.fill(0.0);
         if q.len() != self.n_joints || out.len() != self.n_joints {
-            return;
+            return 0.0;
         }
         let Some(centre) = self
             .centres
             .chunks(self.n_joints)
             .min_by(|a, b| dist2(a, q).total_cmp(&dist2(b, q)))
         else {
-            return;
+            return 0.0;
         };
         let d = dist2(centre, q).sqrt();
-        if d <= self.inner_rad || d >= self.outer_rad {
-            return;
+        if d <= self.inner_rad {
+            return 1.0;
+        }
+        if d >= self.outer_rad {
+            return 0.0;
         }
         let width = self.outer_rad - self.inner_rad;
         let t = (d - self.inner_rad) / width;
@@ -193,6 +197,7 @@ impl Support {
         for ((o, qi), ci) in out.iter_mut().zip(q).zip(centre) {
             *o = dw_dd * (qi - ci) / d;
         }
+        1.0 - t * t * (3.0 - 2.0 * t)
     }
 
     /// Number of centres.
@@ -300,7 +305,7 @@ mod tests {
             let h = 1e-7;
             let fd = (s.weight(&[x + h]) - s.weight(&[x - h])) / (2.0 * h);
             let mut g = [0.0];
-            s.weight_gradient(&[x], &mut g);
+            assert_eq!(s.weight_and_gradient(&[x], &mut g), s.weight(&[x]));
             assert!((g[0] - fd).abs() < 1e-6, "{x}: {} against {fd}", g[0]);
         }
         let q3: Vec<f64> = (0..60).map(|i| ((i * 13) % 17) as f64 * 0.05).collect();
@@ -308,7 +313,7 @@ mod tests {
         let mid = 0.5 * (s.inner_rad + s.outer_rad);
         let p = [q3[0] + mid * 0.6, q3[1] - mid * 0.8, q3[2] + 0.3 * mid];
         let mut g = [0.0; 3];
-        s.weight_gradient(&p, &mut g);
+        assert_eq!(s.weight_and_gradient(&p, &mut g), s.weight(&p));
         for k in 0..3 {
             let h = 1e-7;
             let (mut a, mut b) = (p, p);
