@@ -728,9 +728,20 @@ fn calibrate(
     warn(py, &warnings, 2)?;
     let report = outcome.json(robot, &data.source, None, None);
     let failure = outcome.failure();
-    let model = failure.is_none().then(|| CalibratedModel {
-        file: outcome.model_file(robot),
-    });
+    let model = match failure {
+        Some(_) => None,
+        None => Some(CalibratedModel {
+            file: work(py, || {
+                Ok(outcome.model_file(
+                    robot,
+                    cal_cli::Named {
+                        table: &data.table,
+                        name: &data.source,
+                    },
+                )?)
+            })?,
+        }),
+    };
     Ok((model, report.to_string(), failure))
 }
 

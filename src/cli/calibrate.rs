@@ -214,14 +214,18 @@ impl Outcome {
         })
     }
 
-    /// The model file: the calibration, with the validation's held-out RMS in its fit summary.
-    pub fn model_file(&self, robot: &Robot) -> CalibratedModel {
+    /// The model file: the calibration, with the validation's held-out RMS in its fit summary and
+    /// the predicted standard deviation over the calibration data `data`
+    /// ([`CalibratedModel::record_calibration_sigma`]).
+    pub fn model_file(&self, robot: &Robot, data: Named<'_>) -> calib::Result<CalibratedModel> {
         let mut file = CalibratedModel::new(robot, &self.cal);
         if let (Some(f), Some(v)) = (file.fit.as_mut(), &self.validation) {
             f.held_out_rms_m = Some(v.final_stats().rms_m);
             f.new_region_rms_m = v.new_region.as_ref().map(|r| r.rms_m);
         }
-        file
+        let rows: Vec<usize> = (0..data.table.len()).collect();
+        file.record_calibration_sigma(data.table, &rows, data.name)?;
+        Ok(file)
     }
 
     /// The validation's text (empty without one).
@@ -418,7 +422,13 @@ pub fn run(args: Args) -> CliResult {
         }
         return Err(CliError::Runtime(msg));
     }
-    let file = outcome.model_file(&robot);
+    let file = outcome.model_file(
+        &robot,
+        Named {
+            table: &table,
+            name: &data_name,
+        },
+    )?;
     sim::io::write_atomic(&args.out, file.to_json().as_bytes())?;
     if let Some(path) = &args.urdf_out {
         super::urdf_out::write(path, &file, &table, &data_name)?;

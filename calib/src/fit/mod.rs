@@ -297,7 +297,14 @@ pub fn fit(model: &Model, data: &Dataset<'_>, request: &FitRequest<'_>) -> Resul
         if let Some(com) = warm.and_then(|f| f.payload_com_m) {
             settings.payload_com_m = com;
         }
-        extended::best_extended_fit(model, data, test, options, &settings, warm)?
+        let mut cal = extended::best_extended_fit(model, data, test, options, &settings, warm)?;
+        if !request.lean {
+            for c in &spec.causes {
+                let notes = c.model().notes(&settings, model, data.table, &data.rows);
+                cal.report.warnings.extend(notes);
+            }
+        }
+        cal
     };
     cal.report.model = spec.clone();
     if let Some(kind) = spec.learned {

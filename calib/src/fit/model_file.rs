@@ -53,10 +53,49 @@ impl CalibratedModel {
                 held_out_rms_m: None,
                 n_train_poses: cal.report.n_train_poses,
                 new_region_rms_m: None,
+                calibration_sigma_m: None,
             }),
         }
     }
 
+    /// Records in the fit summary the 95th percentile of the predicted standard deviation over the
+    /// calibration rows `rows` of `table` ([`FitSummary::calibration_sigma_m`]; at most
+    /// [`SIGMA_SAMPLE_ROWS`] of them, evenly spaced), with the default prior. Nothing without a
+    /// covariance or a fit summary; errors as `predict`'s on `table`.
+    pub fn record_calibration_sigma(
+        &mut self,
+        table: &sim::measurement_table::MeasurementTable,
+        rows: &[usize],
+        name: &str,
+    ) -> crate::error::Result<()> {
+        if self.covariance.is_none() || self.fit.is_none() || rows.is_empty() {
+            return Ok(());
+        }
+        let stride = rows.len().div_ceil(SIGMA_SAMPLE_ROWS);
+        let sample: Vec<usize> = rows.iter().step_by(stride).copied().collect();
+        let mut predictor = crate::model::predict::Predictor::from_file(self)?;
+        let predictions = predictor.predict_table(&table.select_rows(&sample), name)?;
+        let Some(mut sigma) = predictions.sigma_m else {
+            return Ok(());
+        };
+        sigma.retain(|s| s.is_finite());
+        if sigma.is_empty() {
+            return Ok(());
+        }
+        sigma.sort_by(f64::total_cmp);
+        let p95 = sigma[((sigma.len() - 1) as f64 * 0.95).round() as usize];
+        if let Some(f) = self.fit.as_mut() {
+            f.calibration_sigma_m = Some(p95);
+        }
+        Ok(())
+    }
+}
+
+/// Most calibration rows whose predicted standard deviation [`CalibratedModel::record_calibration_sigma`]
+/// computes.
+pub const SIGMA_SAMPLE_ROWS: usize = 10_000;
+
+impl CalibratedModel {
     /// The model with a campaign registered by [`crate::fit::register::register`] (`reg`): its
     /// parameters, the default campaign, and the covariance grown by the registration's block (a
     /// registration is conditional on the robot: no cross terms). `model` is the embedded robot.

@@ -160,6 +160,12 @@ pub struct FitSummary {
     /// region: the promise for poses unlike the calibration's.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub new_region_rms_m: Option<f64>,
+    /// The 95th percentile of the predicted standard deviation `sigma_m` over the calibration's rows
+    /// (m): the uncertainty of the predictions its validation tested. `predict` marks a row whose
+    /// `sigma_m` exceeds [`crate::model::predict::SIGMA_BEYOND_CALIBRATION`] times it
+    /// `outside_support`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub calibration_sigma_m: Option<f64>,
 }
 
 /// Covariance of the parameters.

@@ -20,6 +20,7 @@
 //! them it leaves out the repeatability scatter that averaging removes.
 
 pub mod campaigns;
+pub mod gauss_newton;
 mod groups;
 pub mod regions;
 mod stats;

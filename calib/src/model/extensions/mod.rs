@@ -114,6 +114,19 @@ pub trait CauseModel: Sync {
         Ok(())
     }
 
+    /// What a user should know of these settings on the training rows `rows` of `table`, for the
+    /// calibration report's warnings (a joint left without its terms because the data do not
+    /// determine them, say). Default: nothing.
+    fn notes(
+        &self,
+        _settings: &ExtensionSettings,
+        _model: &Model,
+        _table: &MeasurementTable,
+        _rows: &[usize],
+    ) -> Vec<String> {
+        Vec::new()
+    }
+
     /// The regressors `gₑ` of one row into `out` (one per parameter, [`CauseModel::params`] order).
     fn regressors(&self, settings: &ExtensionSettings, row: &RowInputs<'_>, out: &mut [f64]);
 

@@ -47,16 +47,19 @@ pub const MAX_AMPLITUDE_RAD: f64 = 5e-3;
 pub fn turning_joints(model: &Model, table: &MeasurementTable, rows: &[usize]) -> Vec<usize> {
     (0..model.nq())
         .filter(|&j| model.joints()[j].kind.is_rotational())
-        .filter(|&j| {
-            let (lo, hi) = rows
-                .iter()
-                .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &r| {
-                    let v = table.q_row(r)[j];
-                    (lo.min(v), hi.max(v))
-                });
-            hi - lo >= MIN_SPAN_RAD
-        })
+        .filter(|&j| span_rad(table, rows, j) >= MIN_SPAN_RAD)
         .collect()
+}
+
+/// The span (rad) of joint `j`'s angles (0-based) over `rows` of `table`: largest minus smallest.
+fn span_rad(table: &MeasurementTable, rows: &[usize], j: usize) -> f64 {
+    let (lo, hi) = rows
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &r| {
+            let v = table.q_row(r)[j];
+            (lo.min(v), hi.max(v))
+        });
+    (hi - lo).max(0.0)
 }
 
 /// Parameter names, in order: sine and cosine of each harmonic.
@@ -100,6 +103,57 @@ impl CauseModel for TransmissionError {
     ) -> crate::error::Result<()> {
         settings.transmission_joints = turning_joints(model, table, rows);
         Ok(())
+    }
+
+    /// The rotational joints left without harmonics, with the span they turn through, and the
+    /// harmonic joints that turn through less than a full revolution, whose first harmonic is then
+    /// told from a smooth error only by its curvature (it predicts beyond the span they turned
+    /// through as a smooth error would not).
+    fn notes(
+        &self,
+        settings: &ExtensionSettings,
+        model: &Model,
+        table: &MeasurementTable,
+        rows: &[usize],
+    ) -> Vec<String> {
+        let spans = |joints: &[usize]| {
+            let word = if joints.len() == 1 { "joint" } else { "joints" };
+            let list = joints
+                .iter()
+                .map(|&j| format!("{} ({:.1}°)", j + 1, span_rad(table, rows, j).to_degrees()))
+                .collect::<Vec<_>>()
+                .join(", ");
+            format!("{word} {list}")
+        };
+        let left_out: Vec<usize> = (0..model.nq())
+            .filter(|&j| model.joints()[j].kind.is_rotational())
+            .filter(|j| !settings.transmission_joints.contains(j))
+            .collect();
+        let part_turn: Vec<usize> = settings
+            .transmission_joints
+            .iter()
+            .copied()
+            .filter(|&j| span_rad(table, rows, j) < 2.0 * std::f64::consts::PI)
+            .collect();
+        let mut notes = Vec::new();
+        if !left_out.is_empty() {
+            notes.push(format!(
+                "transmission_error: no harmonics at {} (their angles span less than half a \
+                 revolution, {:.0}°, in the training data, where an error periodic in the angle is \
+                 not told from a smooth one)",
+                spans(&left_out),
+                MIN_SPAN_RAD.to_degrees()
+            ));
+        }
+        if !part_turn.is_empty() {
+            notes.push(format!(
+                "transmission_error: the angles of {} span less than a full revolution in \
+                 the training data: their harmonics are determined over that span only, and \
+                 predict angles beyond it as extrapolations (check validation.new_region)",
+                spans(&part_turn)
+            ));
+        }
+        notes
     }
 
     fn needs_gravity_torque(&self, _settings: &ExtensionSettings) -> bool {
@@ -211,5 +265,55 @@ mod tests {
                 assert!((out[2 * k + 1] - kq.cos()).abs() < 1e-14);
             }
         }
+    }
+
+    /// The report names the joints left without harmonics and those fitted over part of a turn,
+    /// with their spans, and says nothing of a joint that turned through a full revolution.
+    #[test]
+    fn notes_name_the_joints_by_the_span_they_turned() {
+        use sim::measurement_table::{OptionalColumns, Row};
+        let model = sim::robots::load_builtin("iiwa7").unwrap();
+        let mut table = MeasurementTable::new(7, OptionalColumns::NONE);
+        // Joint 1 over a full turn (−π to π), joint 2 over 200°, joint 3 over 90°, the rest fixed.
+        let n = 101;
+        for pose in 0..n {
+            let t = pose as f64 / (n - 1) as f64;
+            let q = [
+                -std::f64::consts::PI + t * std::f64::consts::TAU,
+                (t - 0.5) * 200f64.to_radians(),
+                (t - 0.5) * 90f64.to_radians(),
+                0.0,
+                0.0,
+                0.0,
+                0.0,
+            ];
+            table
+                .push_row(&Row {
+                    pose: pose as i64,
+                    q: &q,
+                    position: [0.0; 3],
+                    ..Row::default()
+                })
+                .unwrap();
+        }
+        let rows: Vec<usize> = (0..n).collect();
+        let settings =
+            ExtensionSettings::for_data(&model, &[Cause::TransmissionError], &table, &rows, "test")
+                .unwrap();
+        assert_eq!(settings.transmission_joints, vec![0, 1]);
+        let notes = TransmissionError.notes(&settings, &model, &table, &rows);
+        assert_eq!(notes.len(), 2, "{notes:?}");
+        assert!(
+            notes[0].contains(
+                "no harmonics at joints 3 (90.0°), 4 (0.0°), 5 (0.0°), 6 (0.0°), 7 (0.0°)"
+            ),
+            "{}",
+            notes[0]
+        );
+        assert!(
+            notes[1].contains("the angles of joint 2 (200.0°) span less than a full revolution"),
+            "{}",
+            notes[1]
+        );
     }
 }

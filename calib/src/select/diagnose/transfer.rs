@@ -12,9 +12,12 @@
 
 #[allow(unused_imports)]
 use super::*;
+use crate::validate::gauss_newton::region_rms_gauss_newton;
 use crate::validate::validate_by_region;
 
-/// The leave-one-region-out RMS (m) of `spec` on the training poses of `split`, started at `start`.
+/// The leave-one-region-out RMS (m) of `spec` on the training poses of `split`: from `start` (its fit
+/// on those poses) by Gauss–Newton steps when it has one ([`region_rms_gauss_newton`], which agrees
+/// with the regions' full fits to 10⁻⁵ of the RMS at a fraction of their cost), else by the full fits.
 fn region_rms(
     model: &Model,
     split: &Split<'_>,
@@ -23,6 +26,18 @@ fn region_rms(
     start: Option<&Calibration>,
 ) -> Result<f64> {
     let request = FitRequest::new(spec, &options.calibration);
+    if let Some(all) = start
+        && let Some(rms) = region_rms_gauss_newton(
+            model,
+            &split.train,
+            &request,
+            options.regions,
+            options.seed,
+            all,
+        )?
+    {
+        return Ok(rms);
+    }
     let r = validate_by_region(
         model,
         &split.train,
