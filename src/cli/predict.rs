@@ -3,7 +3,9 @@
 use super::paths::{Inputs, check_distinct};
 use super::shared::{CliError, CliResult, print_json};
 use calib::model::file::CalibratedModel;
-use calib::model::predict::{Predictions, Predictor, SIGMA_OUTSIDE};
+use calib::model::predict::{
+    Predictions, Predictor, SIGMA_BEYOND_CALIBRATION, SIGMA_MATTERS, SIGMA_OUTSIDE,
+};
 use calib::model::uncertainty::Prior;
 use serde_json::json;
 use sim::measurement_table::{self, MeasurementTable};
@@ -143,6 +145,18 @@ pub fn support_line(predictor: &Predictor, preds: &Predictions) -> String {
     if let Some(h) = predictor.held_out_rms_m.filter(|_| preds.sigma_m.is_some()) {
         why.push(format!(
             "with sigma_m above {SIGMA_OUTSIDE} × its held-out RMS ({:.4} mm)",
+            h * 1e3
+        ));
+    }
+    if let (Some(c), Some(h)) = (
+        predictor.calibration_sigma_m,
+        predictor.held_out_rms_m.filter(|_| preds.sigma_m.is_some()),
+    ) {
+        why.push(format!(
+            "with sigma_m above both {SIGMA_BEYOND_CALIBRATION} × its 95th percentile on the calibration poses \
+             ({:.4} mm) and {SIGMA_MATTERS:.2} × the held-out RMS ({:.4} mm; enough to raise the error by 20 %): \
+             parameter combinations the calibration determined far less well than where it was validated",
+            c * 1e3,
             h * 1e3
         ));
     }

@@ -20,7 +20,9 @@
 //!     "default_campaign": 0                                   // campaign of rows without a `campaign`
 //!   },
 //!   "covariance": {"parameters": ["joint 1 twist ω_x", …], "matrix": [[…], …], "variance_factor": 1.02},
-//!   "fit": {"train_rms_m": 1.1e-5, "held_out_rms_m": 1.2e-5, "n_train_poses": 200}
+//!   "fit": {"train_rms_m": 1.1e-5, "held_out_rms_m": 1.2e-5, "n_train_poses": 200,
+//!           "new_region_rms_m": 1.4e-5,          // held-out regions (absent: not validated by region)
+//!           "calibration_sigma_m": 3.1e-6}        // 95th percentile of sigma_m on the calibration rows
 //! }
 //! ```
 //! Format version 1 (before campaigns) is still read: one campaign, id 0.
@@ -162,8 +164,8 @@ pub struct FitSummary {
     pub new_region_rms_m: Option<f64>,
     /// The 95th percentile of the predicted standard deviation `sigma_m` over the calibration's rows
     /// (m): the uncertainty of the predictions its validation tested. `predict` marks a row whose
-    /// `sigma_m` exceeds [`crate::model::predict::SIGMA_BEYOND_CALIBRATION`] times it
-    /// `outside_support`.
+    /// `sigma_m` exceeds [`crate::model::predict::SIGMA_BEYOND_CALIBRATION`] times it (and
+    /// [`crate::model::predict::SIGMA_MATTERS`] times `held_out_rms_m`) `outside_support`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub calibration_sigma_m: Option<f64>,
 }
