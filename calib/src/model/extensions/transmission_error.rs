@@ -20,8 +20,12 @@
 //! joint that depends on its own angle alone*, smooth at the scale of a third of a turn: gear and
 //! encoder eccentricity, a harmonic drive's two-per-revolution error, a wrong gear ratio. Below half
 //! a turn even the third harmonic is 80 % a cubic and the amplitudes lose their meaning, so such a
-//! joint gets none. An amplitude beyond [`MAX_AMPLITUDE_RAD`] is no gear's ([`CauseModel::impossible`]):
-//! it is what harmonics fitted to something else over part of a turn look like.
+//! joint gets none.
+//!
+//! # Plausibility bounds
+//! `|aᵢₖ|, |bᵢₖ| ≤` [`MAX_AMPLITUDE_RAD`] (5 mrad, either sign: a harmonic has no preferred phase). An
+//! amplitude beyond that is no gear's ([`CauseModel::implausible`]): it is what harmonics fitted to
+//! something else over part of a turn look like.
 
 use super::{Cause, CauseModel, ExtensionParam, ExtensionSettings, PlotAxis, RowInputs, Term};
 use crate::units::Unit;
@@ -159,9 +163,9 @@ impl CauseModel for TransmissionError {
         }
     }
 
-    fn impossible(&self, value: f64) -> Option<&'static str> {
+    fn implausible(&self, _param: &ExtensionParam, value: f64) -> Option<String> {
         (value.abs() > MAX_AMPLITUDE_RAD)
-            .then_some("a harmonic amplitude beyond 5 mrad: no gear errs by that much")
+            .then(|| "a harmonic amplitude beyond 5 mrad: no gear errs by that much".into())
     }
 
     fn evidence_subject(&self, joints: &str) -> String {

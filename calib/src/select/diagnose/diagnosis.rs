@@ -55,6 +55,10 @@ pub struct Finding {
     pub train_z: f64,
     /// The cause's identified parameters.
     pub parameters: Vec<FoundParameter>,
+    /// 1-based joints the cause is fitted at in the adopted model when diagnose limited it to some of
+    /// its joints ([`JointSelection`]; the model name reads `cause@2,4`); absent when it acts at all.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub fitted_joints: Option<Vec<usize>>,
     /// The nearest rival when it was adopted: the other candidate cause, or the probe for structure no
     /// cause explains, that gained most on the held-out poses in that round.
     #[serde(default)]
@@ -88,6 +92,27 @@ pub struct Rejected {
     pub test_z: f64,
     /// The impossible parameters (value at least [`DiagnoseOptions::joint_z`] standard deviations on the
     /// impossible side).
+    pub parameters: Vec<FoundParameter>,
+    /// One sentence for people.
+    pub evidence: String,
+}
+
+/// Joints diagnose dropped from a cause: a parameter the final joint fit named at some joints was
+/// impossible or implausible, so the cause was refitted at its other named joints (`cause@kept`)
+/// instead of being rejected as a whole.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct JointSelection {
+    /// The cause.
+    pub cause: Cause,
+    /// 1-based joints it was refitted at.
+    pub kept: Vec<usize>,
+    /// 1-based joints dropped: the implausible ones and those whose parameters were insignificant.
+    pub dropped: Vec<usize>,
+    /// 1-based joints dropped for an impossible or implausible parameter.
+    pub implausible: Vec<usize>,
+    /// What was implausible (of the first such parameter).
+    pub reason: String,
+    /// The implausible parameters, as fitted before the drop.
     pub parameters: Vec<FoundParameter>,
     /// One sentence for people.
     pub evidence: String,
@@ -175,6 +200,10 @@ pub struct Diagnosis {
     /// counted: empty when all were clean.
     #[serde(default)]
     pub health: Health,
+    /// Joints dropped from a cause for an impossible or implausible parameter, in the order dropped
+    /// (each time the cause was refitted at the joints kept).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub joint_selection: Vec<JointSelection>,
     /// Candidate causes this robot and table cannot feed (never tried), with the reason: a robot
     /// without inertials cannot be checked for joint compliance, a table without `temp` or `t` for
     /// thermal drift.
