@@ -151,8 +151,25 @@ pub fn document(d: &Diagnosis, data_name: &str, figures: &[(String, String)]) ->
         }
         doc.push(Block::Table(t));
     }
+    if !d.joint_selection.is_empty() {
+        doc.push(Block::Heading(2, "Joints dropped from a cause".into()));
+        doc.push(Block::List(
+            d.joint_selection
+                .iter()
+                .map(|s| {
+                    vec![
+                        Span::Strong(s.cause.to_string()),
+                        Span::Text(format!(": {}.", s.evidence)),
+                    ]
+                })
+                .collect(),
+        ));
+    }
     if !d.unexplained.rejected.is_empty() {
-        doc.push(Block::Heading(2, "Rejected for impossible physics".into()));
+        doc.push(Block::Heading(
+            2,
+            "Rejected for impossible or implausible physics".into(),
+        ));
         doc.push(Block::List(
             d.unexplained
                 .rejected
