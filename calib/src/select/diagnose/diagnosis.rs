@@ -76,8 +76,9 @@ pub struct Rival {
     pub why_not: String,
 }
 
-/// A cause that would have gained on the held-out poses but whose identified physics is impossible:
-/// not adopted, and reported as evidence of an error no known cause explains.
+/// A cause that would have gained on the held-out poses but whose identified physics is impossible or
+/// implausible (outside the cause's plausibility bounds) at every joint it names: not adopted, and
+/// reported as evidence of an error no known cause explains.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Rejected {
     /// The cause.
@@ -149,8 +150,9 @@ pub struct Trial {
     /// The unexplained-structure probe that predicts the test poses at least as well, if any: then the
     /// residual is not this cause's, whatever its significance.
     pub beaten_by: Option<String>,
-    /// Why its identified physics is impossible, if it is (a negative stiffness or lost motion): then
-    /// it is not adopted whatever its significance.
+    /// Why its identified physics is impossible or implausible, if it is (a negative stiffness or
+    /// lost motion, a half lost motion above 2 mrad): then it is not adopted as it is, whatever its
+    /// significance (in the final joint fit, the joints concerned are dropped from the cause).
     #[serde(default)]
     pub impossible: Option<String>,
     /// True when no parameter of it is determined on its own and differs from zero by

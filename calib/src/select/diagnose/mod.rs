@@ -17,6 +17,11 @@
 //!    remaining causes until none is significant.
 //! 4. The joints of a finding are those whose parameter of that cause is determined on its own and
 //!    differs from zero by more than [`DiagnoseOptions::joint_z`] standard deviations.
+//!    A parameter named there must also lie within its cause's plausibility bounds
+//!    ([`crate::model::extensions::CauseModel::implausible`]): a cause with an implausible named
+//!    parameter at some joints is refitted without them and without its insignificant joints
+//!    (`cause@kept`, `selection::narrowed`) and the selection runs again; a cause left with nothing
+//!    plausible is rejected (reported as evidence of another error).
 //! 5. Every adopted cause must also transfer to **unseen regions** of the configuration space
 //!    ([`transfer`]): the final model fitted without each region in turn must predict it better
 //!    than the same model without the cause. One that does not is rejected, and the selection runs
@@ -355,8 +360,15 @@ pub fn diagnose_with_progress(
     };
     crate::cancel::checkpoint()?;
     progress("unexplained structure");
-    let unexplained =
-        unexplained::analyse(model, &split, &current, noise_floor_m, options, rejected)?;
+    let unexplained = unexplained::analyse(
+        model,
+        &split,
+        &current,
+        noise_floor_m,
+        options,
+        rejected,
+        &joint_selection,
+    )?;
     plots.test_errors_final_m = current.test_err.iter().map(|e| e.norm()).collect();
     if let Some(j) = unexplained.correlates_with.as_ref().and_then(|p| p.joint) {
         plots.unexplained = Some(report::RegressorPlot {

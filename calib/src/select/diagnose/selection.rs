@@ -348,15 +348,14 @@ pub(super) fn narrowed(
         .copied()
         .filter(|j| !bad.contains(j))
         .collect();
-    let was = spec.with_joints(cause, spec.joints_of(cause));
     let now = spec.with_joints(cause, Some(&kept.iter().map(|j| j - 1).collect::<Vec<_>>()));
     let evidence = format!(
-        "{cause} fitted at {} needs {} at {}{}: {} dropped{}, and {cause} refitted at {} \
+        "{cause} fitted at {} needs {} at {} ({}): {} dropped{}, and {cause} refitted at {} \
          ({} instead of {})",
         joint_words(&before),
         rejection.reason,
         joint_words(&bad),
-        format_args!(" ({})", parameter_values(cause, &rejection.parameters)),
+        parameter_values(cause, &rejection.parameters),
         joint_words(&bad),
         if insignificant.is_empty() {
             String::new()
@@ -365,7 +364,7 @@ pub(super) fn narrowed(
         },
         joint_words(&kept),
         now.name(),
-        was.name()
+        spec.name()
     );
     Some(JointSelection {
         cause,
