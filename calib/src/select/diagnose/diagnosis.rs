@@ -137,6 +137,9 @@ pub struct Trial {
     pub round: usize,
     /// The cause.
     pub cause: Cause,
+    /// 1-based joints it was tried at when limited to some ([`JointSelection`]); absent when at all.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub fitted_joints: Option<Vec<usize>>,
     /// Test RMS with it (m).
     pub test_rms_m: f64,
     /// Paired test `z`.

@@ -110,6 +110,9 @@ pub(super) fn select(
             book.trials.push(Trial {
                 round,
                 cause,
+                fitted_joints: spec
+                    .joints_of(cause)
+                    .map(|js| js.iter().map(|j| j + 1).collect()),
                 test_rms_m: cand.step.test_rms_m,
                 test_z: tz,
                 train_z: trz,
