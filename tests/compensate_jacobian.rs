@@ -97,6 +97,9 @@ fn the_compensation_jacobian_matches_central_differences() {
     // that cross-validation keeps them (checked).
     for model in [
         "kinematic+joint_compliance+gear_backlash+thermal_drift+transmission_error",
+        // Causes at some of their joints (issue 25): the angle Jacobian of a limited cause sees
+        // zeros at the joints left out.
+        "kinematic+joint_compliance@2,4,6+gear_backlash@1,3+transmission_error@1,7",
         "kinematic+learned:kernel",
         "kinematic+learned:poly",
     ] {

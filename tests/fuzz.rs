@@ -1079,7 +1079,7 @@ fn table_parquet_case(c: &Corpus, rng: &mut Xoshiro256PlusPlus) -> Drawn {
 fn model_case(c: &Corpus, rng: &mut Xoshiro256PlusPlus) -> Drawn {
     let file = "model.json".to_string();
     let mut doc: serde_json::Value = serde_json::from_str(&c.model).unwrap();
-    let (what, text, expect): (String, String, Expect) = match rng.random_range(0..10u32) {
+    let (what, text, expect): (String, String, Expect) = match rng.random_range(0..11u32) {
         0 => {
             let j = rng.random_range(0..6);
             let k = rng.random_range(0..6);
@@ -1115,6 +1115,21 @@ fn model_case(c: &Corpus, rng: &mut Xoshiro256PlusPlus) -> Drawn {
                 format!("truncated at {cut}"),
                 t[..floor_boundary(&t, cut)].to_string(),
                 invalid(std::slice::from_ref(&file)),
+            )
+        }
+        10 => {
+            // A cause at some joints (issue 25): a joint the robot does not have, or a list on a
+            // part that takes none, is refused naming the key.
+            let name = [
+                "kinematic+gear_backlash@9",
+                "kinematic@2",
+                "kinematic+joint_compliance@0",
+            ][rng.random_range(0..3)];
+            doc["model"] = serde_json::json!(name);
+            (
+                format!("model name {name}"),
+                serde_json::to_string_pretty(&doc).unwrap(),
+                invalid(&[file.clone(), "model".into()]),
             )
         }
         4 => (

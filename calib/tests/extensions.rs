@@ -68,7 +68,8 @@ fn extension_columns_match_central_differences() {
     let t = table_with_columns(&model, 15, 3);
     let rows: Vec<usize> = (0..t.len()).collect();
     let spec = ModelSpec::parse("kinematic+joint_compliance+gear_backlash+thermal_drift").unwrap();
-    let settings = ExtensionSettings::for_data(&model, &spec.causes, &t, &rows, "t").unwrap();
+    let settings =
+        ExtensionSettings::for_data(&model, &spec.causes, &spec.joints, &t, &rows, "t").unwrap();
     let data = Dataset::all(&t, "t");
     let n_ext = settings.params(&model).len();
     // Torques at a non-trivial equilibrium, and a linearisation point with every extension non-zero.
@@ -270,6 +271,88 @@ fn the_model_file_carries_extensions_and_learned_correction_to_predict() {
         .unwrap_err()
         .to_string();
     assert!(e.contains("m.json") && e.contains("extensions"), "{e}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// A cause limited to some joints (`joint_compliance@2,4`): only their parameters are in the fit
+/// (the others absent, not zero), they recover the truth within their standard deviations, and the
+/// model file carries the limit to `predict`, which rebuilds the same regressors. A file written
+/// before the limits existed (no `joints` key) loads as the cause at every joint.
+#[test]
+fn a_cause_at_some_of_its_joints_fits_only_those_and_round_trips() {
+    let model = robots::load_builtin("iiwa7").unwrap();
+    let dir = std::env::temp_dir().join(format!("robocal_ext_subset_{}", std::process::id()));
+    let (k2, k4) = (1.2e4, 9e3);
+    let t = simulate(
+        &format!(
+            "[effects.compliance]\nstiffness_nm_per_rad = [inf, {k2:e}, inf, {k4:e}, inf, inf, inf]\n"
+        ),
+        11,
+        &dir,
+    );
+    let spec = ModelSpec::parse("joint_compliance@4,2").unwrap();
+    assert_eq!(spec.name(), "kinematic+joint_compliance@2,4");
+    let data = Dataset::all(&t, "sim");
+    let options = CalibrationOptions::default();
+    let cal = fit(&model, &data, &FitRequest::new(&spec, &options)).unwrap();
+    let names: Vec<String> = cal.layout.extensions.iter().map(|p| p.name()).collect();
+    assert_eq!(names, ["joint 2 compliance", "joint 4 compliance"]);
+    for (e, truth) in [(0, 1.0 / k2), (1, 1.0 / k4)] {
+        let kk = cal.layout.extension(e);
+        let sigma = cal.covariance[(kk, kk)].sqrt();
+        let z = (cal.params.extension[e] - truth) / sigma;
+        assert!(z.abs() < 4.0, "{}: z = {z:.2}", names[e]);
+    }
+    let robot = Robot::load("iiwa7", &sim::ChainSpec::default()).unwrap();
+    let text = CalibratedModel::new(&robot, &cal).to_json();
+    let file = CalibratedModel::from_json(&text, "model.json").unwrap();
+    assert_eq!(file.model, spec);
+    assert_eq!(file.to_json(), text, "serialisation is not stable");
+    let mut pred = Predictor::from_file(&file).unwrap();
+    let out = pred.predict_table(&t, "sim").unwrap();
+    let obs = observations(
+        &model,
+        &data,
+        &options,
+        cal.extensions.as_ref(),
+        &cal.params.extension,
+    )
+    .unwrap();
+    let err = position_errors(&model, &cal.params, &obs);
+    for (r, e) in err.iter().enumerate() {
+        let expect = obs.position[r] + e;
+        let got = Vector3::from(out.position[r]);
+        assert!((got - expect).norm() < 1e-12, "row {r}: {got} vs {expect}");
+    }
+    // The name and the stored joints must agree.
+    let bad = text.replace(
+        "\"model\": \"kinematic+joint_compliance@2,4\"",
+        "\"model\": \"kinematic+joint_compliance@2\"",
+    );
+    let e = CalibratedModel::from_json(&bad, "m.json")
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("m.json") && e.contains("joints"), "{e}");
+    // An older file, without the limit: the cause at every joint (the values no longer match the
+    // parameters, which the predictor refuses, but the settings load as all joints).
+    let full = ModelSpec::parse("joint_compliance").unwrap();
+    let cal_full = fit(&model, &data, &FitRequest::new(&full, &options)).unwrap();
+    let text_full = CalibratedModel::new(&robot, &cal_full).to_json();
+    assert!(
+        !text_full.contains("\"joints\""),
+        "no joints key without limits"
+    );
+    let old = CalibratedModel::from_json(&text_full, "old.json").unwrap();
+    assert!(old.model.joints.is_empty());
+    assert_eq!(
+        old.extensions
+            .as_ref()
+            .unwrap()
+            .settings
+            .params(&model)
+            .len(),
+        model.nq()
+    );
     let _ = std::fs::remove_dir_all(&dir);
 }
 

@@ -198,7 +198,8 @@ fn extended_jacobian_matches_central_differences() {
         )
         .unwrap();
         let mut settings =
-            ExtensionSettings::for_data(&model, &spec.causes, &t, &rows, "t").unwrap();
+            ExtensionSettings::for_data(&model, &spec.causes, &spec.joints, &t, &rows, "t")
+                .unwrap();
         settings.payload_com_m = [0.01, -0.02, 0.06];
         let n_ext = settings.params(&model).len();
         let at: Vec<f64> = settings

@@ -331,7 +331,8 @@ def _model_words() -> str:
     example = "+".join(["kinematic", *causes[:2]])
     return (
         f"``kinematic`` (default), a ``+``-joined extension such as ``{example}`` with any of the\n"
-        f"            causes {', '.join(f'``{c}``' for c in causes)}, a learned residual\n"
+        f"            causes {', '.join(f'``{c}``' for c in causes)} (each at only some of its\n"
+        f"            joints with ``@``, 1-based: ``{causes[0]}@2,4``), a learned residual\n"
         f"            ``learned:{'|'.join(_robocal.LEARNED_KINDS)}``, or ``auto`` (what diagnose chooses,\n"
         "            then the learned residual when it pays)."
     )

@@ -16,3 +16,5 @@ def test_calibrate_docstring_names_every_cause_and_learned_kind(cli) -> None:
     for word in [*_robocal.CAUSES, *_robocal.LEARNED_KINDS]:
         assert word in doc, word
         assert word in help_text, word
+    # A cause at only some of its joints (issue 25): the syntax is named in both.
+    assert "@2,4" in doc and "@2,4" in help_text

@@ -21,14 +21,16 @@ pub fn model_help() -> String {
     let causes = cause_words();
     format!(
         "Error model: `kinematic` (joint error twists, zero offsets, base and target), a `+`-joined \
-         extension such as `kinematic+{}` with any of the causes {}, a learned residual \
-         `learned:{}`, or `auto` (what diagnose chooses, then the learned residual when it pays)",
+         extension such as `kinematic+{}` with any of the causes {} (each at only some of its \
+         joints with `@`, 1-based: `{}@2,4`), a learned residual `learned:{}`, or `auto` (what \
+         diagnose chooses, then the learned residual when it pays)",
         causes.iter().take(2).copied().collect::<Vec<_>>().join("+"),
         causes
             .iter()
             .map(|c| format!("`{c}`"))
             .collect::<Vec<_>>()
             .join(", "),
+        causes.first().copied().unwrap_or("cause"),
         learned_words().join("|")
     )
 }
@@ -50,5 +52,6 @@ mod tests {
             help.contains("`auto`") && help.contains("`kinematic`"),
             "{help}"
         );
+        assert!(help.contains("@2,4"), "{help}");
     }
 }

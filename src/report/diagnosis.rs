@@ -151,8 +151,25 @@ pub fn document(d: &Diagnosis, data_name: &str, figures: &[(String, String)]) ->
         }
         doc.push(Block::Table(t));
     }
+    if !d.joint_selection.is_empty() {
+        doc.push(Block::Heading(2, "Joints dropped from a cause".into()));
+        doc.push(Block::List(
+            d.joint_selection
+                .iter()
+                .map(|s| {
+                    vec![
+                        Span::Strong(s.cause.to_string()),
+                        Span::Text(format!(": {}.", s.evidence)),
+                    ]
+                })
+                .collect(),
+        ));
+    }
     if !d.unexplained.rejected.is_empty() {
-        doc.push(Block::Heading(2, "Rejected for impossible physics".into()));
+        doc.push(Block::Heading(
+            2,
+            "Rejected for impossible or implausible physics".into(),
+        ));
         doc.push(Block::List(
             d.unexplained
                 .rejected
@@ -209,7 +226,7 @@ pub fn document(d: &Diagnosis, data_name: &str, figures: &[(String, String)]) ->
             "training z",
             "passes",
             "explained as well by",
-            "impossible physics",
+            "impossible or implausible physics",
         ])
         .left(1)
         .left(7)
@@ -217,7 +234,17 @@ pub fn document(d: &Diagnosis, data_name: &str, figures: &[(String, String)]) ->
         for tr in &d.trials {
             t.row(vec![
                 tr.round.to_string(),
-                tr.cause.to_string(),
+                match &tr.fitted_joints {
+                    Some(js) => format!(
+                        "{}@{}",
+                        tr.cause,
+                        js.iter()
+                            .map(|j| j.to_string())
+                            .collect::<Vec<_>>()
+                            .join(",")
+                    ),
+                    None => tr.cause.to_string(),
+                },
                 um(tr.test_rms_m),
                 format!("{:.1} %", 100.0 * tr.gain),
                 format!("{:.1}", tr.test_z),

@@ -292,8 +292,15 @@ pub fn fit(model: &Model, data: &Dataset<'_>, request: &FitRequest<'_>) -> Resul
         };
         kinematic_fit(model, data, &stage)?
     } else {
-        let mut settings =
-            ExtensionSettings::for_data(model, &spec.causes, data.table, &data.rows, &data.name)?;
+        spec.check_joints(model.nq())?;
+        let mut settings = ExtensionSettings::for_data(
+            model,
+            &spec.causes,
+            &spec.joints,
+            data.table,
+            &data.rows,
+            &data.name,
+        )?;
         if let Some(com) = warm.and_then(|f| f.payload_com_m) {
             settings.payload_com_m = com;
         }

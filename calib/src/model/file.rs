@@ -345,6 +345,24 @@ impl CalibratedModel {
                     .join(", ")
             )));
         }
+        let stored_joints = m
+            .extensions
+            .as_ref()
+            .map(|e| e.settings.joints.clone())
+            .unwrap_or_default();
+        if spec.joints != stored_joints {
+            let stored = ModelSpec {
+                causes: spec.causes.clone(),
+                joints: stored_joints,
+                learned: spec.learned,
+            };
+            return Err(bad(format!(
+                "key 'model' is '{}' but key 'extensions.settings.joints' makes it '{}'",
+                m.model, stored
+            )));
+        }
+        spec.check_joints(p.joint_error_twists.len())
+            .map_err(|e| bad(format!("key 'model': {e}")))?;
         if spec.learned.is_some() != m.learned.is_some() {
             return Err(bad(format!(
                 "key 'model' is '{}' but key 'learned' is {}",

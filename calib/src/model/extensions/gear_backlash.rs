@@ -5,6 +5,15 @@
 //! or, without `dir` columns, the sign of the holding torque `τᵢ` (gravity pulls the link against its
 //! holding torque, onto the loaded flank). A joint always approached from the same side cannot be told
 //! from a zero offset; the solver reports that and leaves `hᵢ` at zero.
+//!
+//! # Plausibility bounds
+//! `0 ≤ hᵢ ≤` [`MAX_HALF_RAD`] (2 mrad, 0.11°; prismatic joints [`MAX_HALF_M`], 0.5 mm). A negative
+//! lost motion is impossible (the link would lead its motor). Precision reducers are specified at
+//! about 1 arc-min (0.29 mrad) of lost motion (harmonic drives below that, cycloidal RV reducers
+//! 0.5–1 arc-min, precision planetary gears 1–3 arc-min); a half lost motion of 2 mrad is a full
+//! 14 arc-min, several times a worn spur gear's. A larger fitted value stands in for another error
+//! that flips with the load or the approach direction. Ball screws and racks of linear axes have a few
+//! to some tens of µm.
 
 use super::settings::missing_column;
 use super::{BacklashSign, Cause, CauseModel, ExtensionParam, ExtensionSettings, PlotAxis};
@@ -16,6 +25,12 @@ use sim::measurement_table::MeasurementTable;
 
 /// Expected half lost motion (rad): harmonic drives have about 1 arc-min (2.9e-4 rad) of lost motion.
 pub const SCALE_RAD: f64 = 1e-4;
+
+/// Largest plausible half lost motion of a rotational joint (rad): 2 mrad, 0.11° (module docs).
+pub const MAX_HALF_RAD: f64 = 2e-3;
+
+/// Largest plausible half lost motion of a prismatic joint (m): 0.5 mm.
+pub const MAX_HALF_M: f64 = 5e-4;
 
 /// Gear backlash: one half-lost-motion per joint, regressor `−sᵢ`.
 pub struct GearBacklash;
@@ -76,8 +91,21 @@ impl CauseModel for GearBacklash {
         format!("the approach direction of {joints}")
     }
 
-    fn impossible(&self, value: f64) -> Option<&'static str> {
-        (value < 0.0).then_some("negative lost motion: a link ahead of its motor")
+    fn implausible(&self, param: &ExtensionParam, value: f64) -> Option<String> {
+        let (max, words) = if param.unit == Unit::Metre {
+            (MAX_HALF_M, "0.5 mm")
+        } else {
+            (MAX_HALF_RAD, "2 mrad (0.11°)")
+        };
+        if value < 0.0 {
+            Some("negative lost motion: a link ahead of its motor".into())
+        } else if value > max {
+            Some(format!(
+                "a half lost motion above {words}: no precision gear has that much"
+            ))
+        } else {
+            None
+        }
     }
 
     fn signature(&self) -> &'static str {

@@ -7,6 +7,14 @@
 //! below 0.1 µrad for the iiwa 7's 1e-4 rad/(N m) and 50 N m.
 //! A joint whose torque does not change over the data (joint 1 of an upright arm) cannot be identified;
 //! the solver says so and leaves its compliance at zero.
+//!
+//! # Plausibility bounds
+//! `0 ≤ cᵢ ≤` [`MAX_RAD_PER_NM`] (1e-2 rad/(N m), a stiffness of at least 100 N m/rad; prismatic
+//! joints [`MAX_M_PER_N`], 1e-4 m/N). A negative compliance is impossible: no spring turns a joint
+//! along its load. Harmonic-drive joints of lightweight arms are 5e3–2e4 N m/rad, industrial arms
+//! stiffer still, and the series-elastic springs of compliant humanoid joints a few hundred N m/rad;
+//! below 100 N m/rad a 50 N m holding torque would sag the joint by half a radian, which no
+//! position-controlled arm does. A fitted compliance beyond the bound stands in for another error.
 
 use super::per_joint_params;
 use super::{Cause, CauseModel, ExtensionParam, ExtensionSettings, PlotAxis, RowInputs, Term};
@@ -16,6 +24,13 @@ use sim::measurement_table::MeasurementTable;
 
 /// Expected compliance (rad/(N m)): harmonic-drive joints of lightweight arms are 5e3–2e4 N m/rad.
 pub const SCALE_RAD_PER_NM: f64 = 1e-4;
+
+/// Largest plausible compliance of a rotational joint (rad/(N m)): stiffness 100 N m/rad (module
+/// docs).
+pub const MAX_RAD_PER_NM: f64 = 1e-2;
+
+/// Largest plausible compliance of a prismatic joint (m/N): stiffness 1e4 N/m, 1 mm under 10 N.
+pub const MAX_M_PER_N: f64 = 1e-4;
 
 /// Joint compliance: one compliance per joint, regressor `−τᵢ`.
 pub struct JointCompliance;
@@ -87,8 +102,24 @@ impl CauseModel for JointCompliance {
         }
     }
 
-    fn impossible(&self, value: f64) -> Option<&'static str> {
-        (value < 0.0).then_some("negative compliance: no spring turns a joint along its load")
+    fn implausible(&self, param: &ExtensionParam, value: f64) -> Option<String> {
+        let (max, words) = if param.unit == Unit::MetrePerNewton {
+            (MAX_M_PER_N, "1e-4 m/N (stiffness below 1e4 N/m)")
+        } else {
+            (
+                MAX_RAD_PER_NM,
+                "1e-2 rad/(N m) (stiffness below 100 N m/rad)",
+            )
+        };
+        if value < 0.0 {
+            Some("negative compliance: no spring turns a joint along its load".into())
+        } else if value > max {
+            Some(format!(
+                "a compliance above {words}: no position-controlled joint is that soft"
+            ))
+        } else {
+            None
+        }
     }
 
     fn signature(&self) -> &'static str {

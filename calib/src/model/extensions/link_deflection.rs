@@ -45,6 +45,13 @@
 //! mass by `φ` (about 10⁻⁴ rad) and so changes the moments by that fraction, a second-order effect
 //! (10⁻⁸ rad) left out. A joint whose bending moment does not vary over the data (the last joint
 //! without payload) cannot be identified; the solver says so and leaves its compliances at zero.
+//!
+//! # Plausibility bounds
+//! `0 ≤ c ≤` [`MAX_RAD_PER_NM`] (1e-3 rad/(N m), a bending stiffness of at least 1e3 N m/rad). A
+//! negative compliance is impossible: no link bends against its load. Cross-roller output bearings of
+//! harmonic drives have moment stiffnesses of 1e4–1e6 N m/rad (Harmonic Drive CSF/CSG catalogue) and
+//! aluminium link tubes more; bending a hundred times softer than the softest of them (and softer than
+//! most joints about their own axes) is no link's: it stands in for another error.
 
 use super::axis_name;
 use super::{Cause, CauseModel, ExtensionParam, ExtensionSettings, PlotAxis, RowInputs, Term};
@@ -57,6 +64,9 @@ use sim::statics::Payload;
 /// Expected bending compliance (rad/(N m)): a bearing and link of a lightweight arm are stiffer than
 /// its joint (1e-4), about 1e-6 to 1e-5.
 pub const SCALE_RAD_PER_NM: f64 = 3e-6;
+
+/// Largest plausible bending compliance (rad/(N m)): stiffness 1e3 N m/rad (module docs).
+pub const MAX_RAD_PER_NM: f64 = 1e-3;
 
 /// Link deflection: two bending compliances per joint whose axis lies along a coordinate axis of its
 /// frame.
@@ -197,8 +207,18 @@ impl CauseModel for LinkDeflection {
         }
     }
 
-    fn impossible(&self, value: f64) -> Option<&'static str> {
-        (value < 0.0).then_some("negative bending compliance: no link bends against its load")
+    fn implausible(&self, _param: &ExtensionParam, value: f64) -> Option<String> {
+        if value < 0.0 {
+            Some("negative bending compliance: no link bends against its load".into())
+        } else if value > MAX_RAD_PER_NM {
+            Some(
+                "a bending compliance above 1e-3 rad/(N m) (stiffness below 1e3 N m/rad): softer \
+                 than a link and its bearing can be"
+                    .into(),
+            )
+        } else {
+            None
+        }
     }
 
     fn signature(&self) -> &'static str {

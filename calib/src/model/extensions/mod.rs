@@ -143,11 +143,15 @@ pub trait CauseModel: Sync {
     /// The x axis of a diagnose plot of a parameter acting through `term`.
     fn plot_axis(&self, term: Term) -> PlotAxis;
 
-    /// Why an identified value `value` (parameter unit) of a parameter of this cause is physically
-    /// impossible, if it is (a negative compliance: no spring pushes that way; a negative lost
-    /// motion), in a few words; diagnose does not adopt a cause whose named parameters are impossible
-    /// and reports it as evidence of another error. Default: every value is possible.
-    fn impossible(&self, _value: f64) -> Option<&'static str> {
+    /// Why an identified value `value` (in `param`'s unit) of `param`, one of this cause's
+    /// parameters, is physically impossible or implausible, if it is, in a few words that name the
+    /// bound: impossible (a negative compliance: no spring turns a joint along its load; a negative
+    /// lost motion) or beyond what the physical cause can be (a half lost motion above 2 mrad, which
+    /// no precision gear has). Each cause documents its bounds, with their sources, in its file; the
+    /// table is in docs/diagnose.md. Diagnose drops a joint whose named parameter is implausible from
+    /// the cause, and does not adopt a cause left with none: it reports it as evidence of another
+    /// error. Default: every value is plausible.
+    fn implausible(&self, _param: &ExtensionParam, _value: f64) -> Option<String> {
         None
     }
 
@@ -360,5 +364,62 @@ pub fn joint_words(joints: &[usize]) -> String {
             s[..s.len() - 1].join(", "),
             s[s.len() - 1]
         ),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Every parameter of every cause on the iiwa 7 (with temperatures, every joint turning): its
+    /// expected magnitude is plausible, ten thousand times it is not (with a reason), and a negative
+    /// value of a compliance or a lost motion is impossible.
+    #[test]
+    fn expected_magnitudes_are_plausible_and_far_beyond_them_is_not() {
+        let model = sim::robots::load_builtin("iiwa7").unwrap();
+        let settings = ExtensionSettings {
+            causes: Cause::ALL.to_vec(),
+            gravity_base: sim::statics::DEFAULT_GRAVITY,
+            payload_com_m: [0.0; 3],
+            backlash_sign: BacklashSign::Direction,
+            thermal: Some(ThermalInput::Temperature { t_ref_c: 20.0 }),
+            transmission_joints: (0..model.nq()).collect(),
+            joints: Default::default(),
+        };
+        let params = settings.params(&model);
+        for c in Cause::ALL {
+            assert!(params.iter().any(|p| p.cause == *c), "{c} has parameters");
+        }
+        for p in &params {
+            let m = p.cause.model();
+            assert_eq!(m.implausible(p, p.scale), None, "{}", p.name());
+            let why = m.implausible(p, 1e4 * p.scale);
+            assert!(why.is_some_and(|w| !w.is_empty()), "{}", p.name());
+            if matches!(
+                p.cause,
+                Cause::JointCompliance | Cause::GearBacklash | Cause::LinkDeflection
+            ) {
+                assert!(m.implausible(p, -p.scale).is_some(), "{}", p.name());
+            }
+        }
+    }
+
+    /// The bound of the issue: a half lost motion of 5 mrad is no precision gear's, 1 mrad is.
+    #[test]
+    fn a_backlash_of_five_milliradians_is_implausible() {
+        let model = sim::robots::load_builtin("iiwa7").unwrap();
+        let p = &per_joint_params(
+            &model,
+            Cause::GearBacklash,
+            "half lost motion",
+            Unit::Radian,
+            Unit::Metre,
+            1e-4,
+        )[1];
+        let backlash = Cause::GearBacklash.model();
+        let why = backlash.implausible(p, 5e-3).unwrap();
+        assert!(why.contains("2 mrad"), "{why}");
+        assert_eq!(backlash.implausible(p, 1e-3), None);
+        assert!(backlash.implausible(p, -1e-4).is_some());
     }
 }

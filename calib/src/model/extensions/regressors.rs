@@ -152,7 +152,9 @@ pub struct RowContext<'a> {
 pub struct RowRegressors<'m> {
     model: &'m Model,
     settings: &'m ExtensionSettings,
-    widths: Vec<(Cause, usize)>,
+    parts: Vec<CauseColumns>,
+    /// A cause's regressors (or values) at all its joints, for a cause limited to some of them.
+    full: Vec<f64>,
     needs_tau: bool,
     needs_moment: bool,
     moves_links: bool,
@@ -175,11 +177,22 @@ impl<'m> RowRegressors<'m> {
         let n = params.len();
         let needs_moment = settings.needs_gravity_moment();
         let needs_tau = settings.needs_gravity_torque() || needs_moment;
-        let widths: Vec<(Cause, usize)> = settings
+        let parts: Vec<CauseColumns> = settings
             .causes
             .iter()
-            .map(|c| (*c, params.iter().filter(|p| p.cause == *c).count()))
+            .map(|&cause| {
+                let all = cause.model().params(model, settings);
+                let keep: Vec<usize> = (0..all.len())
+                    .filter(|&k| settings.acts_at(cause, all[k].term))
+                    .collect();
+                CauseColumns {
+                    cause,
+                    full: all.len(),
+                    keep: (keep.len() < all.len()).then_some(keep),
+                }
+            })
             .collect();
+        let widest = parts.iter().map(|p| p.full).max().unwrap_or(0);
         // Only joint-angle terms move the links the torques are evaluated at.
         let moves_links = params
             .iter()
@@ -188,7 +201,8 @@ impl<'m> RowRegressors<'m> {
         RowRegressors {
             model,
             settings,
-            widths,
+            parts,
+            full: vec![0.0; widest],
             needs_tau,
             needs_moment,
             moves_links,
@@ -267,9 +281,19 @@ impl<'m> RowRegressors<'m> {
                 t_s: context.t_s,
             };
             let mut col = 0;
-            for &(c, width) in &self.widths {
-                c.model()
-                    .regressors(self.settings, &inputs, &mut self.one.coef[col..col + width]);
+            for part in &self.parts {
+                let width = part.width();
+                let out = &mut self.one.coef[col..col + width];
+                match &part.keep {
+                    None => part.cause.model().regressors(self.settings, &inputs, out),
+                    Some(keep) => {
+                        let full = &mut self.full[..part.full];
+                        part.cause.model().regressors(self.settings, &inputs, full);
+                        for (o, &k) in out.iter_mut().zip(keep) {
+                            *o = full[k];
+                        }
+                    }
+                }
                 col += width;
             }
             if it + 1 < iterations {
@@ -318,12 +342,26 @@ impl<'m> RowRegressors<'m> {
             t_s: context.t_s,
         };
         let mut col = 0;
-        for &(c, width) in &self.widths {
-            c.model().angle_jacobian(
+        for part in &self.parts {
+            let width = part.width();
+            let x = &x[col..col + width];
+            // A cause limited to some joints sees zeros at the others (their parameters are absent).
+            let x = match &part.keep {
+                None => x,
+                Some(keep) => {
+                    let full = &mut self.full[..part.full];
+                    full.fill(0.0);
+                    for (&v, &k) in x.iter().zip(keep) {
+                        full[k] = v;
+                    }
+                    &self.full[..part.full]
+                }
+            };
+            part.cause.model().angle_jacobian(
                 self.settings,
                 &inputs,
                 torque_jac,
-                &x[col..col + width],
+                x,
                 d_dq,
                 d_dtheta,
             );
@@ -362,6 +400,22 @@ impl<'m> RowRegressors<'m> {
     /// The gravity moments of the last evaluation (N m, joint frames; zeros when no cause reads them).
     pub fn moments(&self) -> &[Vector3<f64>] {
         &self.moment
+    }
+}
+
+/// Where one cause's regressors go in a row: all its [`super::CauseModel::params`] (`full` of them),
+/// or, for a cause limited to some joints, those at positions `keep` of them.
+#[derive(Clone, Debug)]
+struct CauseColumns {
+    cause: Cause,
+    full: usize,
+    keep: Option<Vec<usize>>,
+}
+
+impl CauseColumns {
+    /// The columns this cause has in the model.
+    fn width(&self) -> usize {
+        self.keep.as_ref().map_or(self.full, Vec::len)
     }
 }
 

@@ -6,6 +6,7 @@ use crate::error::{CalibError, Result};
 use serde::{Deserialize, Serialize};
 use sim::Model;
 use sim::measurement_table::MeasurementTable;
+use std::collections::BTreeMap;
 
 /// Which sign the gear backlash regressor uses.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -56,10 +57,16 @@ pub struct ExtensionSettings {
     /// revolution in the training data ([`super::transmission_error::MIN_SPAN_RAD`]).
     #[serde(default)]
     pub transmission_joints: Vec<usize>,
+    /// The 0-based joints of each cause limited to some of its joints (`--model cause@2,4`); a cause
+    /// absent from the map acts at all its joints (the default: model files written before the
+    /// limits existed load unchanged). Parameters of the other joints are absent, not zero.
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub joints: BTreeMap<Cause, Vec<usize>>,
 }
 
 impl ExtensionSettings {
-    /// Settings for `causes` on training rows `rows` of `table`: each cause configures its part
+    /// Settings for `causes` (each at the 0-based `joints` given for it, else at all its joints) on
+    /// training rows `rows` of `table`: each cause configures its part
     /// ([`super::CauseModel::configure`]).
     ///
     /// Errors: compliance (or any cause that needs gravity torques) on a robot without inertials, or
@@ -67,6 +74,7 @@ impl ExtensionSettings {
     pub fn for_data(
         model: &Model,
         causes: &[Cause],
+        joints: &BTreeMap<Cause, Vec<usize>>,
         table: &MeasurementTable,
         rows: &[usize],
         source: &str,
@@ -74,6 +82,11 @@ impl ExtensionSettings {
         let mut causes = causes.to_vec();
         causes.sort();
         causes.dedup();
+        let joints = joints
+            .iter()
+            .filter(|(c, _)| causes.contains(c))
+            .map(|(c, j)| (*c, j.clone()))
+            .collect();
         let mut settings = ExtensionSettings {
             causes,
             gravity_base: sim::statics::DEFAULT_GRAVITY,
@@ -85,6 +98,7 @@ impl ExtensionSettings {
             },
             thermal: None,
             transmission_joints: Vec::new(),
+            joints,
         };
         let mut refused = None;
         for c in settings.causes.clone() {
@@ -137,12 +151,28 @@ impl ExtensionSettings {
         Ok(())
     }
 
-    /// The parameters of every cause, in order.
+    /// The parameters of every cause, in order: each cause's [`super::CauseModel::params`] at the
+    /// joints it acts at ([`ExtensionSettings::acts_at`]).
     pub fn params(&self, model: &Model) -> Vec<super::ExtensionParam> {
         self.causes
             .iter()
-            .flat_map(|c| c.model().params(model, self))
+            .flat_map(|c| {
+                c.model()
+                    .params(model, self)
+                    .into_iter()
+                    .filter(|p| self.acts_at(*c, p.term))
+            })
             .collect()
+    }
+
+    /// Whether a parameter of `cause` entering through `term` is in the model: always for a term not
+    /// tied to a joint (the arm's growth), else when the cause is not limited to some joints or its
+    /// joints include the term's.
+    pub fn acts_at(&self, cause: Cause, term: super::Term) -> bool {
+        match (self.joints.get(&cause), term.joint()) {
+            (Some(joints), Some(j)) => joints.contains(&j),
+            _ => true,
+        }
     }
 
     /// The settings to try besides these ([`super::CauseModel::alternatives`]), for the rows `rows` of

@@ -11,6 +11,17 @@
 //! Without a `temp` column, `ΔT` is replaced by the first-order warm-up `w(t) = 1 − exp(−t/τ)` (minus its
 //! training mean) from the `t` column, and the parameters are per unit of warm-up (rad, 1); the time
 //! constant τ (s) is found by the calibration's search over candidates ([`WARM_UP_TAUS_S`]).
+//!
+//! # Plausibility bounds
+//! - Link growth: `−5e-6 ≤ α ≤ 5e-5` 1/K ([`MIN_GROWTH_PER_K`], [`MAX_GROWTH_PER_K`]). Structural
+//!   steel expands by about 1.2e-5/K and aluminium alloys by 2.3e-5/K; carbon-fibre tubes by −1e-6 to
+//!   +3e-6/K. The bounds give the metals a factor of two and the composites a factor of five; a
+//!   growth beyond them is no arm's (it stands in for a drift of the tracker or another error).
+//! - Joint-zero drift: `|βᵢ| ≤ 1e-3` rad/K ([`MAX_ZERO_DRIFT_PER_K`]; m/K for a prismatic joint):
+//!   0.06°/K, 0.6° over a 10 K warm-up, a hundred times the drift of an encoder on a growing
+//!   housing.
+//! - Without temperatures the parameters are per unit of warm-up: the bounds are those per kelvin
+//!   times a warm-up of at most [`MAX_WARM_UP_RISE_K`] (40 K).
 
 use super::settings::missing_column;
 use super::{Cause, CauseModel, ExtensionParam, ExtensionSettings, PlotAxis, RowInputs, Term};
@@ -24,6 +35,15 @@ use sim::measurement_table::MeasurementTable;
 pub const BETA_SCALE_RAD_PER_K: f64 = 1e-5;
 /// Expected linear expansion (1/K): aluminium is 23e-6.
 pub const ALPHA_SCALE_PER_K: f64 = 2e-5;
+/// Smallest plausible link growth (1/K): five times the contraction of carbon-fibre tubes.
+pub const MIN_GROWTH_PER_K: f64 = -5e-6;
+/// Largest plausible link growth (1/K): twice aluminium's 2.3e-5.
+pub const MAX_GROWTH_PER_K: f64 = 5e-5;
+/// Largest plausible joint-zero drift (rad/K; m/K for a prismatic joint).
+pub const MAX_ZERO_DRIFT_PER_K: f64 = 1e-3;
+/// Largest warm-up temperature rise (K) assumed when the bounds are per unit of warm-up.
+pub const MAX_WARM_UP_RISE_K: f64 = 40.0;
+
 /// Warm-up time constants tried without a temperature column (s): 5 min to 4 h.
 pub const WARM_UP_TAUS_S: [f64; 10] = [
     300.0, 450.0, 600.0, 900.0, 1200.0, 1800.0, 2700.0, 3600.0, 7200.0, 14400.0,
@@ -189,6 +209,35 @@ impl CauseModel for ThermalDrift {
 
     fn evidence_subject(&self, _joints: &str) -> String {
         "the temperature change".to_string()
+    }
+
+    fn implausible(&self, param: &ExtensionParam, value: f64) -> Option<String> {
+        let per_kelvin = matches!(
+            param.unit,
+            Unit::PerKelvin | Unit::RadianPerKelvin | Unit::MetrePerKelvin
+        );
+        let (scale, per) = if per_kelvin {
+            (1.0, "/K")
+        } else {
+            (MAX_WARM_UP_RISE_K, " per unit of warm-up")
+        };
+        match param.term {
+            Term::Growth => {
+                let (lo, hi) = (MIN_GROWTH_PER_K * scale, MAX_GROWTH_PER_K * scale);
+                (value < lo || value > hi).then(|| {
+                    format!(
+                        "a link growth outside {lo:.0e} to {hi:.0e}{per}: no arm's links expand \
+                         like that (steel 1.2e-5/K, aluminium 2.3e-5/K)"
+                    )
+                })
+            }
+            _ => {
+                let max = MAX_ZERO_DRIFT_PER_K * scale;
+                (value.abs() > max).then(|| {
+                    format!("a joint-zero drift beyond {max:.0e}{per}: no encoder drifts that far")
+                })
+            }
+        }
     }
 
     fn signature(&self) -> &'static str {

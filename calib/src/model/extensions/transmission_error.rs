@@ -20,8 +20,12 @@
 //! joint that depends on its own angle alone*, smooth at the scale of a third of a turn: gear and
 //! encoder eccentricity, a harmonic drive's two-per-revolution error, a wrong gear ratio. Below half
 //! a turn even the third harmonic is 80 % a cubic and the amplitudes lose their meaning, so such a
-//! joint gets none. An amplitude beyond [`MAX_AMPLITUDE_RAD`] is no gear's ([`CauseModel::impossible`]):
-//! it is what harmonics fitted to something else over part of a turn look like.
+//! joint gets none.
+//!
+//! # Plausibility bounds
+//! `|aᵢₖ|, |bᵢₖ| ≤` [`MAX_AMPLITUDE_RAD`] (5 mrad, either sign: a harmonic has no preferred phase). An
+//! amplitude beyond that is no gear's ([`CauseModel::implausible`]): it is what harmonics fitted to
+//! something else over part of a turn look like.
 
 use super::{Cause, CauseModel, ExtensionParam, ExtensionSettings, PlotAxis, RowInputs, Term};
 use crate::units::Unit;
@@ -125,15 +129,18 @@ impl CauseModel for TransmissionError {
                 .join(", ");
             format!("{word} {list}")
         };
+        // Only the joints the model names (`transmission_error@…` limits them).
+        let named =
+            |j: usize| settings.acts_at(Cause::TransmissionError, Term::JointAngle { joint: j });
         let left_out: Vec<usize> = (0..model.nq())
-            .filter(|&j| model.joints()[j].kind.is_rotational())
+            .filter(|&j| model.joints()[j].kind.is_rotational() && named(j))
             .filter(|j| !settings.transmission_joints.contains(j))
             .collect();
         let part_turn: Vec<usize> = settings
             .transmission_joints
             .iter()
             .copied()
-            .filter(|&j| span_rad(table, rows, j) < 2.0 * std::f64::consts::PI)
+            .filter(|&j| named(j) && span_rad(table, rows, j) < 2.0 * std::f64::consts::PI)
             .collect();
         let mut notes = Vec::new();
         if !left_out.is_empty() {
@@ -213,9 +220,9 @@ impl CauseModel for TransmissionError {
         }
     }
 
-    fn impossible(&self, value: f64) -> Option<&'static str> {
+    fn implausible(&self, _param: &ExtensionParam, value: f64) -> Option<String> {
         (value.abs() > MAX_AMPLITUDE_RAD)
-            .then_some("a harmonic amplitude beyond 5 mrad: no gear errs by that much")
+            .then(|| "a harmonic amplitude beyond 5 mrad: no gear errs by that much".into())
     }
 
     fn evidence_subject(&self, joints: &str) -> String {
@@ -297,9 +304,15 @@ mod tests {
                 .unwrap();
         }
         let rows: Vec<usize> = (0..n).collect();
-        let settings =
-            ExtensionSettings::for_data(&model, &[Cause::TransmissionError], &table, &rows, "test")
-                .unwrap();
+        let settings = ExtensionSettings::for_data(
+            &model,
+            &[Cause::TransmissionError],
+            &std::collections::BTreeMap::new(),
+            &table,
+            &rows,
+            "test",
+        )
+        .unwrap();
         assert_eq!(settings.transmission_joints, vec![0, 1]);
         let notes = TransmissionError.notes(&settings, &model, &table, &rows);
         assert_eq!(notes.len(), 2, "{notes:?}");
@@ -314,6 +327,29 @@ mod tests {
             notes[1].contains("the angles of joint 2 (200.0°) span less than a full revolution"),
             "{}",
             notes[1]
+        );
+        // Limited to joints 1 and 3 (`transmission_error@1,3`): joint 3 is too short, joint 1 a full
+        // turn; the joints left out by the user are not reported.
+        let limited = ExtensionSettings::for_data(
+            &model,
+            &[Cause::TransmissionError],
+            &[(Cause::TransmissionError, vec![0, 2])]
+                .into_iter()
+                .collect(),
+            &table,
+            &rows,
+            "test",
+        )
+        .unwrap();
+        let notes = TransmissionError.notes(&limited, &model, &table, &rows);
+        assert_eq!(
+            notes,
+            vec![
+                "transmission_error: no harmonics at joint 3 (90.0°) (their angles span less than \
+                 half a revolution, 180°, in the training data, where an error periodic in the angle \
+                 is not told from a smooth one)"
+                    .to_string()
+            ]
         );
     }
 }

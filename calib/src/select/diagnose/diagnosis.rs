@@ -55,6 +55,10 @@ pub struct Finding {
     pub train_z: f64,
     /// The cause's identified parameters.
     pub parameters: Vec<FoundParameter>,
+    /// 1-based joints the cause is fitted at in the adopted model when diagnose limited it to some of
+    /// its joints ([`JointSelection`]; the model name reads `cause@2,4`); absent when it acts at all.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub fitted_joints: Option<Vec<usize>>,
     /// The nearest rival when it was adopted: the other candidate cause, or the probe for structure no
     /// cause explains, that gained most on the held-out poses in that round.
     #[serde(default)]
@@ -72,8 +76,9 @@ pub struct Rival {
     pub why_not: String,
 }
 
-/// A cause that would have gained on the held-out poses but whose identified physics is impossible:
-/// not adopted, and reported as evidence of an error no known cause explains.
+/// A cause that would have gained on the held-out poses but whose identified physics is impossible or
+/// implausible (outside the cause's plausibility bounds) at every joint it names: not adopted, and
+/// reported as evidence of an error no known cause explains.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Rejected {
     /// The cause.
@@ -88,6 +93,27 @@ pub struct Rejected {
     pub test_z: f64,
     /// The impossible parameters (value at least [`DiagnoseOptions::joint_z`] standard deviations on the
     /// impossible side).
+    pub parameters: Vec<FoundParameter>,
+    /// One sentence for people.
+    pub evidence: String,
+}
+
+/// Joints diagnose dropped from a cause: a parameter the final joint fit named at some joints was
+/// impossible or implausible, so the cause was refitted at its other named joints (`cause@kept`)
+/// instead of being rejected as a whole.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct JointSelection {
+    /// The cause.
+    pub cause: Cause,
+    /// 1-based joints it was refitted at.
+    pub kept: Vec<usize>,
+    /// 1-based joints dropped: the implausible ones and those whose parameters were insignificant.
+    pub dropped: Vec<usize>,
+    /// 1-based joints dropped for an impossible or implausible parameter.
+    pub implausible: Vec<usize>,
+    /// What was implausible (of the first such parameter).
+    pub reason: String,
+    /// The implausible parameters, as fitted before the drop.
     pub parameters: Vec<FoundParameter>,
     /// One sentence for people.
     pub evidence: String,
@@ -111,6 +137,9 @@ pub struct Trial {
     pub round: usize,
     /// The cause.
     pub cause: Cause,
+    /// 1-based joints it was tried at when limited to some ([`JointSelection`]); absent when at all.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub fitted_joints: Option<Vec<usize>>,
     /// Test RMS with it (m).
     pub test_rms_m: f64,
     /// Paired test `z`.
@@ -124,8 +153,9 @@ pub struct Trial {
     /// The unexplained-structure probe that predicts the test poses at least as well, if any: then the
     /// residual is not this cause's, whatever its significance.
     pub beaten_by: Option<String>,
-    /// Why its identified physics is impossible, if it is (a negative stiffness or lost motion): then
-    /// it is not adopted whatever its significance.
+    /// Why its identified physics is impossible or implausible, if it is (a negative stiffness or
+    /// lost motion, a half lost motion above 2 mrad): then it is not adopted as it is, whatever its
+    /// significance (in the final joint fit, the joints concerned are dropped from the cause).
     #[serde(default)]
     pub impossible: Option<String>,
     /// True when no parameter of it is determined on its own and differs from zero by
@@ -175,6 +205,10 @@ pub struct Diagnosis {
     /// counted: empty when all were clean.
     #[serde(default)]
     pub health: Health,
+    /// Joints dropped from a cause for an impossible or implausible parameter, in the order dropped
+    /// (each time the cause was refitted at the joints kept).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub joint_selection: Vec<JointSelection>,
     /// Candidate causes this robot and table cannot feed (never tried), with the reason: a robot
     /// without inertials cannot be checked for joint compliance, a table without `temp` or `t` for
     /// thermal drift.

@@ -91,8 +91,9 @@ pub(super) fn cause_parameters(
         .collect()
 }
 
-/// The parameters of `cause` in `cal` whose value is physically impossible by more than `joint_z`
-/// standard deviations (and determined on their own), with the reason of the first.
+/// The named parameters of `cause` in `cal` (determined on their own and beyond `joint_z` standard
+/// deviations from zero) whose value is physically impossible or implausible
+/// ([`crate::model::extensions::CauseModel::implausible`]), with the reason of the first.
 pub(super) fn impossible_parameters(
     cal: &Calibration,
     cause: Cause,
@@ -100,20 +101,18 @@ pub(super) fn impossible_parameters(
 ) -> Option<(String, Vec<FoundParameter>)> {
     let model = cause.model();
     let mut reason = None;
+    let own = cal.layout.extensions.iter().filter(|p| p.cause == cause);
     let bad: Vec<FoundParameter> = cause_parameters(cal, cause)
         .into_iter()
-        .filter(|(p, _, alone)| {
-            *alone
-                && p.sigma > 0.0
-                && (p.value / p.sigma).abs() > joint_z
-                && model.impossible(p.value).is_some()
-        })
-        .map(|(p, _, _)| {
-            reason.get_or_insert(model.impossible(p.value).unwrap_or_default());
-            p
+        .zip(own)
+        .filter(|((p, _, alone), _)| *alone && p.sigma > 0.0 && (p.value / p.sigma).abs() > joint_z)
+        .filter_map(|((p, _, _), param)| {
+            let why = model.implausible(param, p.value)?;
+            reason.get_or_insert(why);
+            Some(p)
         })
         .collect();
-    reason.map(|r| (r.to_string(), bad))
+    reason.map(|r| (r, bad))
 }
 
 /// 1-based joints of the parameters `params`, ascending, each once.

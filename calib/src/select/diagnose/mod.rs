@@ -17,6 +17,11 @@
 //!    remaining causes until none is significant.
 //! 4. The joints of a finding are those whose parameter of that cause is determined on its own and
 //!    differs from zero by more than [`DiagnoseOptions::joint_z`] standard deviations.
+//!    A parameter named there must also lie within its cause's plausibility bounds
+//!    ([`crate::model::extensions::CauseModel::implausible`]): a cause with an implausible named
+//!    parameter at some joints is refitted without them and without its insignificant joints
+//!    (`cause@kept`, `selection::narrowed`) and the selection runs again; a cause left with nothing
+//!    plausible is rejected (reported as evidence of another error).
 //! 5. Every adopted cause must also transfer to **unseen regions** of the configuration space
 //!    ([`transfer`]): the final model fitted without each region in turn must predict it better
 //!    than the same model without the cause. One that does not is rejected, and the selection runs
@@ -43,7 +48,9 @@ mod transfer;
 pub mod unexplained;
 
 use confirm::*;
-pub use diagnosis::{Diagnosis, Finding, FoundParameter, NotTried, Rejected, Rival, Step, Trial};
+pub use diagnosis::{
+    Diagnosis, Finding, FoundParameter, JointSelection, NotTried, Rejected, Rival, Step, Trial,
+};
 use evaluate::*;
 use evidence::*;
 pub use evidence::{MAX_NULL_SHARE, TIE_Z};
@@ -123,6 +130,10 @@ pub fn diagnose_with_progress(
     // parameters are impossible there (or that names nothing) is rejected, and the selection runs
     // again without it (it may have stood in for another cause), until every adopted cause holds.
     let mut rejected: Vec<Rejected> = Vec::new();
+    // Joint selection within a cause: a cause whose final fit names an implausible parameter at some
+    // joints is limited to its other named joints ([`narrowed`]) and the selection runs again.
+    let mut limits: BTreeMap<Cause, Vec<usize>> = BTreeMap::new();
+    let mut joint_selection: Vec<JointSelection> = Vec::new();
     let mut round = 0;
     let mut fits = std::collections::BTreeMap::new();
     let mut rival_probes = std::collections::BTreeMap::new();
@@ -160,6 +171,7 @@ pub fn diagnose_with_progress(
                     screen,
                     kinematic.clone(),
                     &candidates,
+                    &limits,
                     options,
                     &mut Bookkeeping {
                         round: &mut round,
@@ -185,7 +197,13 @@ pub fn diagnose_with_progress(
                         None => return Ok(sel),
                         Some(r) => rejected.push(r),
                     },
-                    Some(r) => rejected.push(r),
+                    Some(r) => match narrowed(&sel, &r, options) {
+                        Some(js) => {
+                            limits.insert(js.cause, js.kept.iter().map(|j| j - 1).collect());
+                            joint_selection.push(js);
+                        }
+                        None => rejected.push(r),
+                    },
                 }
             }
         })();
@@ -255,6 +273,10 @@ pub fn diagnose_with_progress(
             .map(|(p, _, _)| p.clone())
             .collect();
         f.joints = joints_of(&named);
+        f.fitted_joints = current
+            .spec
+            .joints_of(cause)
+            .map(|js| js.iter().map(|j| j + 1).collect());
         let growth = params
             .iter()
             .any(|(p, term, alone)| *term == Term::Growth && *alone && z_of(p) > options.joint_z);
@@ -285,8 +307,7 @@ pub fn diagnose_with_progress(
             findings.retain(|f| f.cause != comp);
         } else if joints_of_cause(cause) == Some(true) {
             // Named without a joint only when the final model without it is worse on both tests.
-            let mut reduced = current.spec.clone();
-            reduced.causes.retain(|c| *c != cause);
+            let reduced = current.spec.without(cause);
             progress(&reduced.name());
             let without = match (fits.get(&reduced.name()), &sub) {
                 (Some(Some(c)), None) => c.clone(),
@@ -339,8 +360,15 @@ pub fn diagnose_with_progress(
     };
     crate::cancel::checkpoint()?;
     progress("unexplained structure");
-    let unexplained =
-        unexplained::analyse(model, &split, &current, noise_floor_m, options, rejected)?;
+    let unexplained = unexplained::analyse(
+        model,
+        &split,
+        &current,
+        noise_floor_m,
+        options,
+        rejected,
+        &joint_selection,
+    )?;
     plots.test_errors_final_m = current.test_err.iter().map(|e| e.norm()).collect();
     if let Some(j) = unexplained.correlates_with.as_ref().and_then(|p| p.joint) {
         plots.unexplained = Some(report::RegressorPlot {
@@ -381,6 +409,7 @@ pub fn diagnose_with_progress(
         unexplained,
         model: current.spec.clone(),
         trials,
+        joint_selection,
         not_tried,
         campaigns: campaigns::report(&split, &current, options.alpha),
         screening: sub.as_ref().map(screening::record),

@@ -40,7 +40,8 @@ pub(super) struct Bookkeeping<'b> {
     pub(super) rivals: &'b mut std::collections::BTreeMap<String, Vec<unexplained::Probe>>,
 }
 
-/// Forward selection from `start` over `candidates`: each round extends the current model by every
+/// Forward selection from `start` over `candidates` (each at the 0-based joints `limits` gives for
+/// it, else at all its joints; [`narrowed`]): each round extends the current model by every
 /// remaining candidate, judges each ([`Trial`]) and adopts the significant one with the largest
 /// held-out `z`, until none is significant. Impossible physics does not stop a candidate here: fitted
 /// alone, a cause often stands in for another one with a wrong sign somewhere, which the joint fit
@@ -50,6 +51,7 @@ pub(super) fn select(
     split: &Split<'_>,
     start: Evaluated,
     candidates: &[Cause],
+    limits: &BTreeMap<Cause, Vec<usize>>,
     options: &DiagnoseOptions,
     book: &mut Bookkeeping<'_>,
 ) -> Result<Selection> {
@@ -82,9 +84,10 @@ pub(super) fn select(
         let specs: Vec<(Cause, ModelSpec)> = remaining
             .iter()
             .map(|&cause| {
-                let mut spec = current.spec.with(cause);
+                let limit = |c: Cause| limits.get(&c).map(Vec::as_slice);
+                let mut spec = current.spec.with_joints(cause, limit(cause));
                 if let Some(c) = companion(cause).filter(|c| candidates.contains(c)) {
-                    spec = spec.with(c);
+                    spec = spec.with_joints(c, limit(c));
                 }
                 (cause, spec)
             })
@@ -107,6 +110,9 @@ pub(super) fn select(
             book.trials.push(Trial {
                 round,
                 cause,
+                fitted_joints: spec
+                    .joints_of(cause)
+                    .map(|js| js.iter().map(|j| j + 1).collect()),
                 test_rms_m: cand.step.test_rms_m,
                 test_z: tz,
                 train_z: trz,
@@ -159,6 +165,7 @@ pub(super) fn select(
             test_z: tz,
             train_z: trz,
             parameters: Vec::new(),
+            fitted_joints: None,
             rival,
         };
         let added: Vec<Cause> = next
@@ -291,5 +298,84 @@ pub(super) fn invalid_finding(sel: &Selection, options: &DiagnoseOptions) -> Opt
             test_z: f.test_z,
             parameters: params,
         })
+    })
+}
+
+/// Joint selection within a cause: when the final joint fit of `sel` names an implausible parameter
+/// of the cause of `rejection` at some joints ([`invalid_finding`]), the cause limited to its other
+/// joints that the fit names (determined on their own, beyond [`DiagnoseOptions::joint_z`] standard
+/// deviations, and plausible): the joints dropped are the implausible and the insignificant ones, in
+/// one step. `None` when nothing is left to keep, when an implausible parameter is not tied to a joint
+/// (the arm's growth), or when the cause already acts at no more than those joints: then the whole
+/// cause is rejected. Only a cause that would otherwise be rejected is refitted, so the selection
+/// costs nothing more when every adopted cause is plausible.
+pub(super) fn narrowed(
+    sel: &Selection,
+    rejection: &Rejected,
+    options: &DiagnoseOptions,
+) -> Option<JointSelection> {
+    let cause = rejection.cause;
+    let spec = &sel.current.spec;
+    if rejection
+        .parameters
+        .iter()
+        .any(|p| p.term.and_then(Term::joint).is_none())
+    {
+        return None;
+    }
+    let bad: Vec<usize> = joints_of(&rejection.parameters);
+    let params = cause_parameters(&sel.current.cal, cause);
+    let named: Vec<FoundParameter> = params
+        .iter()
+        .filter(|(p, _, alone)| {
+            *alone && p.sigma > 0.0 && (p.value / p.sigma).abs() > options.joint_z
+        })
+        .map(|(p, _, _)| p.clone())
+        .collect();
+    let kept: Vec<usize> = joints_of(&named)
+        .into_iter()
+        .filter(|j| !bad.contains(j))
+        .collect();
+    let before: Vec<usize> =
+        joints_of(&params.iter().map(|(p, _, _)| p.clone()).collect::<Vec<_>>());
+    if kept.is_empty() || kept.len() >= before.len() {
+        return None;
+    }
+    let dropped: Vec<usize> = before
+        .iter()
+        .copied()
+        .filter(|j| !kept.contains(j))
+        .collect();
+    let insignificant: Vec<usize> = dropped
+        .iter()
+        .copied()
+        .filter(|j| !bad.contains(j))
+        .collect();
+    let now = spec.with_joints(cause, Some(&kept.iter().map(|j| j - 1).collect::<Vec<_>>()));
+    let evidence = format!(
+        "{cause} fitted at {} needs {} at {} ({}): {} dropped{}, and {cause} refitted at {} \
+         ({} instead of {})",
+        joint_words(&before),
+        rejection.reason,
+        joint_words(&bad),
+        parameter_values(cause, &rejection.parameters),
+        joint_words(&bad),
+        if insignificant.is_empty() {
+            String::new()
+        } else {
+            format!(" with the insignificant {}", joint_words(&insignificant))
+        },
+        joint_words(&kept),
+        now.name(),
+        spec.name()
+    );
+    Some(JointSelection {
+        cause,
+        kept,
+        dropped,
+        implausible: bad,
+        reason: rejection.reason.clone(),
+        parameters: rejection.parameters.clone(),
+        evidence,
     })
 }

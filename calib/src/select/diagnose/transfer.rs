@@ -127,10 +127,11 @@ pub(super) fn not_transferring(
     };
     let is_companion = |cause: Cause| sel.companions.iter().any(|(_, comp)| *comp == cause);
     let reduced = |cause: Cause| {
-        let mut r = sel.current.spec.clone();
-        let comp = companion_of(cause);
-        r.causes.retain(|c| *c != cause && Some(*c) != comp);
-        r
+        let r = sel.current.spec.without(cause);
+        match companion_of(cause) {
+            Some(comp) => r.without(comp),
+            None => r,
+        }
     };
     let tested: Vec<&Finding> = sel
         .findings

@@ -406,7 +406,8 @@ pub(crate) fn probe_z_crit(alpha: f64, probes: usize) -> f64 {
 }
 
 /// Examines the residual of `current` (the final physical model); `rejected` are the causes not
-/// adopted for impossible physics.
+/// adopted for impossible or implausible physics, `dropped` the joints dropped from a cause for the
+/// same reason (both evidence of an error no known cause explains).
 pub(crate) fn analyse(
     model: &Model,
     split: &Split<'_>,
@@ -414,6 +415,7 @@ pub(crate) fn analyse(
     noise_floor_m: f64,
     options: &DiagnoseOptions,
     rejected: Vec<super::Rejected>,
+    dropped: &[super::JointSelection],
 ) -> Result<Unexplained> {
     let before = rms(&current.test_err);
     let probes = probes(model, split, current, &options.learned_kinds, options.seed);
@@ -429,7 +431,10 @@ pub(crate) fn analyse(
     );
     let learned = best_of(&mut probes.iter().filter(|p| p.kind == ProbeKind::Learned));
     let learned_significant = learned.as_ref().filter(significant).cloned();
-    let present = angle.is_some() || learned_significant.is_some() || !rejected.is_empty();
+    let present = angle.is_some()
+        || learned_significant.is_some()
+        || !rejected.is_empty()
+        || !dropped.is_empty();
     let ratio = before / noise_floor_m;
     let mut note = if angle.is_some() || learned_significant.is_some() {
         let mut s = format!(
@@ -473,6 +478,13 @@ pub(crate) fn analyse(
              poses confirm (noise floor underestimated, or an effect beyond the probes)"
         )
     };
+    for d in dropped {
+        note.push_str(&format!(
+            "; {}: the error it stood in for at {} is no known cause's",
+            d.evidence,
+            crate::model::extensions::joint_words(&d.implausible)
+        ));
+    }
     for r in &rejected {
         note.push_str(&format!("; {}", r.evidence));
     }
