@@ -30,7 +30,7 @@
 
 #[allow(unused_imports)]
 use super::*;
-use crate::lm::{LeastSquaresProblem, Subspace};
+use crate::lm::Subspace;
 
 /// The leave-one-region-out RMS (m) of the physical model of `all` (`request`'s model fitted on every
 /// row of `data`) over `k` regions drawn with `seed` ([`region_of_rows`]), each region predicted
@@ -84,12 +84,6 @@ pub fn region_rms_gauss_newton(
     let parts = problem.group_parts(scales.as_slice(), &group, k);
     crate::cancel::checkpoint()?;
     let dim = obs.dim();
-    let full = |params: &KinematicParams, step: &[f64]| {
-        let mut moved = KinematicProblem::new(model, &obs, params.clone(), (0..p).collect());
-        moved.set_params(step);
-        moved.accept();
-        moved.into_params()
-    };
     // The step and its length in standard deviations of the fit (noise model units).
     let solve = |gradient: &[f64], factors: &[DMatrix<f64>], m: usize| {
         let sub = Subspace::from_factor(
@@ -134,7 +128,7 @@ pub fn region_rms_gauss_newton(
                         if converged {
                             break;
                         }
-                        params = full(&params, &step);
+                        params.retract(&layout, &step);
                         let mut at =
                             KinematicProblem::new(model, &obs, params.clone(), (0..p).collect());
                         let part = at
@@ -147,7 +141,7 @@ pub fn region_rms_gauss_newton(
                     if !converged {
                         return Ok(None);
                     }
-                    params = full(&params, &step);
+                    params.retract(&layout, &step);
                     let mut cal = all.clone();
                     cal.params = params;
                     cal.physical = None;
