@@ -73,9 +73,8 @@ impl CalibratedModel {
         }
         let stride = rows.len().div_ceil(SIGMA_SAMPLE_ROWS);
         let sample: Vec<usize> = rows.iter().step_by(stride).copied().collect();
-        let mut predictor = crate::model::predict::Predictor::from_file(self)?;
-        let predictions = predictor.predict_table(&table.select_rows(&sample), name)?;
-        let Some(mut sigma) = predictions.sigma_m else {
+        let predictor = crate::model::predict::Predictor::from_file(self)?;
+        let Some(mut sigma) = predictor.sigma_table(&table.select_rows(&sample), name)? else {
             return Ok(());
         };
         sigma.retain(|s| s.is_finite());

@@ -666,19 +666,7 @@ impl Predictor {
 
     /// Predictions for every row of `table` (its x, y, z are ignored); `file` names it in errors.
     pub fn predict_table(&mut self, table: &MeasurementTable, file: &str) -> Result<Predictions> {
-        if table.n_joints != self.model.nq() {
-            return Err(CalibError::BadValue {
-                context: file.to_string(),
-                field: "q1..qN".into(),
-                value: format!("{} joint columns", table.n_joints),
-                problem: format!(
-                    "the model's robot '{}' has {} joints",
-                    self.model.name(),
-                    self.model.nq()
-                ),
-            });
-        }
-        let campaign = self.campaigns_of(table, file)?;
+        let (campaign, regs) = self.inputs(table, file)?;
         let orientation = self.params.r_flange_target.is_some();
         let mut out = Predictions {
             pose: table.pose.clone(),
@@ -686,14 +674,6 @@ impl Predictor {
             orientation: orientation.then(|| Vec::with_capacity(table.len())),
             sigma_m: None,
             outside_support: Vec::new(),
-        };
-        let rows: Vec<usize> = (0..table.len()).collect();
-        let regs = match &self.extensions {
-            Some(s) => {
-                s.check_table(table, file)?;
-                Regressors::build(&self.model, s, table, &rows, file, &self.params.extension)?
-            }
-            None => Regressors::none(),
         };
         let mut position = vec![Vector3::zeros(); table.len()];
         let mut rotation = orientation.then(|| vec![Matrix3::identity(); table.len()]);
@@ -730,6 +710,44 @@ impl Predictor {
             })
             .collect();
         Ok(out)
+    }
+
+    /// What every row of `table` needs besides its joint values: its campaign's index and the
+    /// regressors of the model's extensions. Errors for a table of another robot or without the
+    /// columns the extensions read; `file` names it.
+    fn inputs(&self, table: &MeasurementTable, file: &str) -> Result<(Vec<usize>, Regressors)> {
+        if table.n_joints != self.model.nq() {
+            return Err(CalibError::BadValue {
+                context: file.to_string(),
+                field: "q1..qN".into(),
+                value: format!("{} joint columns", table.n_joints),
+                problem: format!(
+                    "the model's robot '{}' has {} joints",
+                    self.model.name(),
+                    self.model.nq()
+                ),
+            });
+        }
+        let campaign = self.campaigns_of(table, file)?;
+        let rows: Vec<usize> = (0..table.len()).collect();
+        let regs = match &self.extensions {
+            Some(s) => {
+                s.check_table(table, file)?;
+                Regressors::build(&self.model, s, table, &rows, file, &self.params.extension)?
+            }
+            None => Regressors::none(),
+        };
+        Ok((campaign, regs))
+    }
+
+    /// Every row's predicted standard deviation `sigma_m` (m) alone, as [`Predictor::predict_table`]
+    /// gives it, without the positions; `None` when the predictor has no uncertainty.
+    pub fn sigma_table(&self, table: &MeasurementTable, file: &str) -> Result<Option<Vec<f64>>> {
+        if self.uncertainty.is_none() {
+            return Ok(None);
+        }
+        let (campaign, regs) = self.inputs(table, file)?;
+        Ok(self.sigmas(table, &regs, &campaign))
     }
 
     /// Every row's predicted standard deviation (m), when the predictor has an uncertainty. The
