@@ -97,15 +97,12 @@ impl CauseModel for GearBacklash {
         } else {
             (MAX_HALF_RAD, "2 mrad (0.11°)")
         };
-        if value < 0.0 {
-            Some("negative lost motion: a link ahead of its motor".into())
-        } else if value > max {
-            Some(format!(
-                "a half lost motion above {words}: no precision gear has that much"
-            ))
-        } else {
-            None
-        }
+        super::outside_zero_to(
+            value,
+            max,
+            "negative lost motion: a link ahead of its motor",
+            || format!("a half lost motion above {words}: no precision gear has that much"),
+        )
     }
 
     fn signature(&self) -> &'static str {

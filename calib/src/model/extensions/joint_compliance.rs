@@ -111,15 +111,12 @@ impl CauseModel for JointCompliance {
                 "1e-2 rad/(N m) (stiffness below 100 N m/rad)",
             )
         };
-        if value < 0.0 {
-            Some("negative compliance: no spring turns a joint along its load".into())
-        } else if value > max {
-            Some(format!(
-                "a compliance above {words}: no position-controlled joint is that soft"
-            ))
-        } else {
-            None
-        }
+        super::outside_zero_to(
+            value,
+            max,
+            "negative compliance: no spring turns a joint along its load",
+            || format!("a compliance above {words}: no position-controlled joint is that soft"),
+        )
     }
 
     fn signature(&self) -> &'static str {

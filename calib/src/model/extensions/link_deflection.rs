@@ -208,17 +208,16 @@ impl CauseModel for LinkDeflection {
     }
 
     fn implausible(&self, _param: &ExtensionParam, value: f64) -> Option<String> {
-        if value < 0.0 {
-            Some("negative bending compliance: no link bends against its load".into())
-        } else if value > MAX_RAD_PER_NM {
-            Some(
+        super::outside_zero_to(
+            value,
+            MAX_RAD_PER_NM,
+            "negative bending compliance: no link bends against its load",
+            || {
                 "a bending compliance above 1e-3 rad/(N m) (stiffness below 1e3 N m/rad): softer \
                  than a link and its bearing can be"
-                    .into(),
-            )
-        } else {
-            None
-        }
+                    .into()
+            },
+        )
     }
 
     fn signature(&self) -> &'static str {

@@ -353,6 +353,23 @@ pub(crate) fn per_joint_params(
         .collect()
 }
 
+/// Why a value that physics keeps within `[0, max]` is implausible, for
+/// [`CauseModel::implausible`]: `negative` below zero, `above()` beyond `max`, `None` within.
+pub(crate) fn outside_zero_to(
+    value: f64,
+    max: f64,
+    negative: &str,
+    above: impl FnOnce() -> String,
+) -> Option<String> {
+    if value < 0.0 {
+        Some(negative.to_string())
+    } else if value > max {
+        Some(above())
+    } else {
+        None
+    }
+}
+
 /// The joints as words: `joint 2`, `joints 2 and 4`, `joints 1, 2 and 4` (1-based numbers given).
 pub fn joint_words(joints: &[usize]) -> String {
     let s: Vec<String> = joints.iter().map(|x| x.to_string()).collect();
