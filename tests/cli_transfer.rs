@@ -17,49 +17,16 @@
 //!   unlike them);
 //! - inside the support, the learned gain on the first campaign stays (held-out poses of it).
 
+use common::{repo, robocal_ok as robocal, seed};
 use nalgebra::{Matrix3, Vector3};
 use rand::{RngExt, SeedableRng};
 use sim::measurement_table as mt;
 use std::path::{Path, PathBuf};
 
-fn repo() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-}
+mod common;
 
 fn dir(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!(
-        "robocal_cli_transfer_{}_{name}",
-        std::process::id()
-    ));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
-}
-
-fn robocal(args: &[&str]) -> (String, String) {
-    let o = assert_cmd::Command::new(env!("CARGO_BIN_EXE_robocal"))
-        .args(args)
-        .output()
-        .expect("run robocal");
-    let (out, err) = (
-        String::from_utf8_lossy(&o.stdout).into_owned(),
-        String::from_utf8_lossy(&o.stderr).into_owned(),
-    );
-    assert_eq!(o.status.code(), Some(0), "{args:?}: {err}");
-    (out, err)
-}
-
-/// The run's seed: `ROBOCAL_TEST_SEED`, or drawn from the clock.
-fn seed() -> u64 {
-    std::env::var("ROBOCAL_TEST_SEED")
-        .ok()
-        .and_then(|s| s.parse().ok())
-        .unwrap_or_else(|| {
-            std::time::SystemTime::now()
-                .duration_since(std::time::UNIX_EPOCH)
-                .unwrap()
-                .as_nanos() as u64
-        })
+    common::scratch_dir("robocal_cli_transfer", name)
 }
 
 /// A grid of 6 × 6 × 6 target positions 8 cm apart near the flange orientation of a seed pose

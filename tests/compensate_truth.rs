@@ -19,9 +19,12 @@
 //! The generator's seed is drawn per run and printed (`ROBOCAL_COMPENSATE_SEED` sets it); it reaches
 //! only `robocal generate`, never the calibration or the compensation.
 
+use common::{repo, robocal_ok as robocal};
 use nalgebra::{Matrix3, Vector3};
 use sim::measurement_table::{self as mt, MeasurementTable};
 use std::path::{Path, PathBuf};
+
+mod common;
 
 /// The target: after compensation the mean AP on the truth is at most this many times the model's
 /// held-out mean prediction error (issue 26).
@@ -31,28 +34,8 @@ const TRAIN_POSES: usize = 200;
 /// Poses of the nominal program (never seen by the calibration).
 const PROGRAM_POSES: usize = 100;
 
-fn repo() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-}
-
 fn dir(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("robocal_comp_{}_{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
-}
-
-fn robocal(args: &[&str]) -> (String, String) {
-    let o = assert_cmd::Command::new(env!("CARGO_BIN_EXE_robocal"))
-        .args(args)
-        .output()
-        .expect("run robocal");
-    let (out, err) = (
-        String::from_utf8_lossy(&o.stdout).into_owned(),
-        String::from_utf8_lossy(&o.stderr).into_owned(),
-    );
-    assert_eq!(o.status.code(), Some(0), "{args:?}: {err}");
-    (out, err)
+    common::scratch_dir("robocal_comp", name)
 }
 
 fn seed() -> u64 {

@@ -24,20 +24,17 @@
 //! - **A backlash no gear has.** A half lost motion of 5 mrad (0.29°) at one joint is reported as
 //!   implausible (beyond 2 mrad) and not adopted.
 
+use common::seed;
 use rand::rngs::StdRng;
 use rand::{RngExt, SeedableRng};
 use serde_json::Value;
 use sim::measurement_table as mt;
 use std::path::{Path, PathBuf};
 
+mod common;
+
 fn dir(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!(
-        "robocal_diagnose_plausibility_{}_{name}",
-        std::process::id()
-    ));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
+    common::scratch_dir("robocal_diagnose_plausibility", name)
 }
 
 /// Removes a case's folder, unless `ROBOCAL_TEST_KEEP` is set (then it is kept to look at; a failed
@@ -50,26 +47,7 @@ fn cleanup(d: &Path) {
 
 /// Runs robocal with `args`; stdout, asserting exit 0.
 fn robocal(args: &[&str]) -> String {
-    let o = assert_cmd::Command::new(env!("CARGO_BIN_EXE_robocal"))
-        .args(args)
-        .output()
-        .expect("run robocal");
-    let err = String::from_utf8_lossy(&o.stderr).into_owned();
-    assert_eq!(o.status.code(), Some(0), "{args:?}: {err}");
-    String::from_utf8_lossy(&o.stdout).into_owned()
-}
-
-/// The run's seed: `ROBOCAL_TEST_SEED`, or drawn from the clock.
-fn seed() -> u64 {
-    std::env::var("ROBOCAL_TEST_SEED")
-        .ok()
-        .and_then(|s| s.parse().ok())
-        .unwrap_or_else(|| {
-            std::time::SystemTime::now()
-                .duration_since(std::time::UNIX_EPOCH)
-                .unwrap()
-                .as_nanos() as u64
-        })
+    common::robocal_ok(args).0
 }
 
 /// Generates the iiwa 7 campaign of the kinematic scenario (drawn geometric errors, 300 random poses)
