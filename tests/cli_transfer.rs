@@ -225,13 +225,21 @@ fn a_manifold_campaign_does_not_mislead_about_free_orientations() {
     let table_a = mt::read(&a).unwrap();
     let table_b = mt::read(&b).unwrap();
     let table_c = mt::read(&c).unwrap();
-    let (s, a_s, b_s) = (
-        d.to_str().unwrap(),
-        a.to_str().unwrap(),
-        b.to_str().unwrap(),
-    );
+    let (s, a_s) = (d.to_str().unwrap(), a.to_str().unwrap());
     let model = |name: &str| format!("{s}/{name}.json");
     let pred = |name: &str| PathBuf::from(format!("{s}/{name}.csv"));
+    // `predict` of the model file `name` on the table `data` into the output `out` (`pred(out)`).
+    let predict = |name: &str, data: &Path, out: &str| {
+        robocal(&[
+            "predict",
+            "--model",
+            &model(name),
+            "--data",
+            data.to_str().unwrap(),
+            "--out",
+            pred(out).to_str().unwrap(),
+        ]);
+    };
     // auto on the manifold, and the physical models a user could have chosen instead.
     let (auto_json, _) = robocal(&[
         "calibrate",
@@ -277,45 +285,13 @@ fn a_manifold_campaign_does_not_mislead_about_free_orientations() {
             "--out",
             &model(&name),
         ]);
-        robocal(&[
-            "predict",
-            "--model",
-            &model(&name),
-            "--data",
-            b_s,
-            "--out",
-            pred(&name).to_str().unwrap(),
-        ]);
+        predict(&name, &b, &name);
         let (e, _) = mean_error(&pred(&name), &table_b, None);
         eprintln!("cli_transfer: {m} on the free campaign: {:.1} µm", e * 1e6);
-        robocal(&[
-            "predict",
-            "--model",
-            &model(&name),
-            "--data",
-            c.to_str().unwrap(),
-            "--out",
-            pred(&format!("{name}_c")).to_str().unwrap(),
-        ]);
+        predict(&name, &c, &format!("{name}_c"));
     }
-    robocal(&[
-        "predict",
-        "--model",
-        &model("auto"),
-        "--data",
-        b_s,
-        "--out",
-        pred("auto_b").to_str().unwrap(),
-    ]);
-    robocal(&[
-        "predict",
-        "--model",
-        &model("auto"),
-        "--data",
-        a_s,
-        "--out",
-        pred("auto_a").to_str().unwrap(),
-    ]);
+    predict("auto", &b, "auto_b");
+    predict("auto", &a, "auto_a");
     let out_b = outside(&pred("auto_b"));
     let out_a = outside(&pred("auto_a"));
     let share = |v: &[bool]| v.iter().filter(|&&o| o).count() as f64 / v.len() as f64;
@@ -361,16 +337,7 @@ fn a_manifold_campaign_does_not_mislead_about_free_orientations() {
     }
     // Poses near the calibration's: predict keeps them inside the support, and there the error is
     // the promise.
-    let c_s = c.to_str().unwrap();
-    robocal(&[
-        "predict",
-        "--model",
-        &model("auto"),
-        "--data",
-        c_s,
-        "--out",
-        pred("auto_c").to_str().unwrap(),
-    ]);
+    predict("auto", &c, "auto_c");
     let out_c = outside(&pred("auto_c"));
     let inside_c: Vec<bool> = out_c.iter().map(|o| !o).collect();
     let (auto_c, n_c) = mean_error(&pred("auto_c"), &table_c, Some(&inside_c));
