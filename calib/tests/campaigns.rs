@@ -172,7 +172,7 @@ fn two_campaigns_share_the_robot_and_both_registrations_are_within_sigma() {
 fn register_recovers_a_moved_tracker_within_its_predicted_sigma() {
     let model = robots::load_builtin("ur5").unwrap();
     let mut g = StdRng::seed_from_u64(common::run_seed("register"));
-    let mut zs = Vec::new();
+    let (mut zs, mut factors) = (Vec::new(), Vec::new());
     for rep in 0..20 {
         let a = Truth::random(&model, false, &mut g);
         // The robot known exactly (noise-free calibration): the registration alone is uncertain.
@@ -207,14 +207,29 @@ fn register_recovers_a_moved_tracker_within_its_predicted_sigma() {
             b.t_tracker_base * a.t_tracker_base.inverse() * cal.params.t_tracker_base;
         let got = reg.params.t_tracker_base_of(1);
         let delta = log_pose(&(expected * got.inverse()));
-        let c = Matrix6::from_fn(|i, j| reg.report.covariance[i][j]);
+        // The reported covariance is scaled by σ̂² = χ²/dof, so `delta` whitened by it follows
+        // Student's t with 54 degrees of freedom (mean z² 54/52, tails that a normal check flags
+        // several times in 1000 runs). Whitened by the noise model's covariance (σ̂² divided out) it
+        // is standard normal; σ̂² itself is checked against its χ²(54)/54 distribution below.
+        let vf = reg.report.variance_factor;
+        let c = Matrix6::from_fn(|i, j| reg.report.covariance[i][j]) / vf;
         zs.extend(whiten(&delta, &c));
+        factors.push(vf);
         // Every robot parameter is kept.
         assert_eq!(reg.params.joint_error, cal.params.joint_error);
         assert_eq!(reg.params.zero_offset, cal.params.zero_offset);
         assert_eq!(reg.params.p_flange_target, cal.params.p_flange_target);
     }
     assert_standard_normal(&zs, "registered tracker pose");
+    // 20 poses × 3 coordinates − 6 registration parameters: σ̂² ~ χ²(54)/54, mean 1, variance 2/54.
+    let dof = 54.0;
+    let mean = factors.iter().sum::<f64>() / factors.len() as f64;
+    let se = (2.0 / dof / factors.len() as f64).sqrt();
+    eprintln!(
+        "variance factor: mean {mean:.3} over {} registrations (σ {se:.3})",
+        factors.len()
+    );
+    assert!((mean - 1.0).abs() < 4.0 * se, "variance factor mean {mean}");
 }
 
 /// Bit-for-bit equality of two parameter points.

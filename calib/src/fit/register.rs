@@ -85,6 +85,11 @@ pub struct RegistrationReport {
     pub sigma_rotation_rad: [f64; 3],
     /// The target fitted with `target` (flange frame, m).
     pub target_m: Option<[f64; 3]>,
+    /// The variance factor `σ̂²` (dimensionless) that scales `covariance`: χ²/dof of the
+    /// registration's weighted residuals, or 1 when no degrees of freedom are left. Under a correct
+    /// noise model it is χ²(dof)/dof distributed, so the standardised errors of a registration from
+    /// few poses follow Student's t, not the normal.
+    pub variance_factor: f64,
     /// Where the variance factor comes from.
     pub variance_factor_source: String,
     /// Solver outcome of the last round.
@@ -476,6 +481,7 @@ pub fn register(
         sigma_translation_m,
         sigma_rotation_rad,
         target_m: options.target.then(|| (*reg.p_flange_target_of(c)).into()),
+        variance_factor: vf,
         variance_factor_source: source.into(),
         solver: report,
         warnings,
