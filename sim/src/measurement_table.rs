@@ -55,11 +55,17 @@
 //! ```
 
 mod check;
+mod chunks;
 mod columns;
 mod csv;
 mod parquet;
 
-pub use check::{LIMIT_TOLERANCE, check_against_model, check_within_limits, reach_bound};
+pub use check::{
+    LIMIT_TOLERANCE, ModelCheck, check_against_model, check_within_limits, reach_bound,
+};
+pub use chunks::{
+    CSV_BLOCK_BYTES, Chunk, DEFAULT_CHUNK_ROWS, TableChunks, read_chunks, read_configuration_chunks,
+};
 pub use columns::{Column, ColumnValues, configurations_from_columns, from_columns};
 pub use csv::{read_csv_str, write_csv_string};
 pub use parquet::{PARQUET_MAX_ROW_GROUP_ROWS, ParquetTableWriter, write_parquet_bytes};

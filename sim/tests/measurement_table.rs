@@ -1414,3 +1414,141 @@ fn campaign_column_is_read_written_and_keys_the_poses() {
     assert_eq!(mt::read(&q).unwrap().campaign, Some(vec![1, 2]));
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// Every piece of `chunks` is the whole read's rows at its place, bit for bit, and the pieces cover
+/// the file in order.
+fn assert_chunks_are_the_table(chunks: mt::TableChunks, whole: &MeasurementTable, what: &str) {
+    let mut next = 0usize;
+    let mut pieces = 0usize;
+    for chunk in chunks {
+        let chunk = chunk.unwrap_or_else(|e| panic!("{what}: {e}"));
+        assert_eq!(chunk.first_row, next, "{what}: pieces in order");
+        assert!(!chunk.table.is_empty(), "{what}: empty piece");
+        let rows: Vec<usize> = (next..next + chunk.table.len()).collect();
+        assert_bit_equal(&chunk.table, &whole.select_rows(&rows), what);
+        next += chunk.table.len();
+        pieces += 1;
+    }
+    assert_eq!(next, whole.len(), "{what}: every row read");
+    assert!(pieces >= 1);
+}
+
+#[test]
+fn streamed_pieces_are_the_whole_table_in_both_formats() {
+    let dir = temp_dir("chunks");
+    let mut rng = StdRng::seed_from_u64(20261203);
+    for rep in 0..6 {
+        // Enough rows for several CSV pieces of the smallest block (4 KiB); pose ids renumbered so
+        // that the drawn tables' rows do not repeat one another's ids.
+        let first = random_table(&mut rng, None);
+        let mut table = MeasurementTable::new(first.n_joints, first.columns());
+        let mut part = first;
+        while table.len() < 400 {
+            for r in 0..part.len() {
+                let mut row = part.row(r);
+                row.pose = table.len() as i64;
+                table.push_row(&row).unwrap();
+            }
+            part = random_table(&mut rng, Some(table.columns()));
+            if part.n_joints != table.n_joints {
+                part = MeasurementTable::new(table.n_joints, table.columns());
+            }
+        }
+        let csv = dir.join(format!("t{rep}.csv"));
+        let parquet = dir.join(format!("t{rep}.parquet"));
+        mt::write(&csv, &table).unwrap();
+        mt::write(&parquet, &table).unwrap();
+        // Quoted cells (with a line end inside a quoted ignored column) in the CSV variant.
+        let text = std::fs::read_to_string(&csv).unwrap();
+        let mut lines = text.lines();
+        let mut quoted = format!("{},\"note\"\n", lines.next().unwrap());
+        for (k, l) in lines.enumerate() {
+            quoted += &format!("{l},\"row {k}\nsecond line, \"\"quoted\"\"\"\n");
+        }
+        let quoted_path = dir.join(format!("q{rep}.csv"));
+        std::fs::write(&quoted_path, quoted).unwrap();
+        for path in [&csv, &parquet, &quoted_path] {
+            let whole = mt::read(path).unwrap();
+            assert_bit_equal(&whole, &table, "whole read");
+            for rows in [1, 7, 64, 100_000] {
+                let what = format!("{} in pieces of {rows}", path.display());
+                assert_chunks_are_the_table(mt::read_chunks(path, rows).unwrap(), &table, &what);
+            }
+        }
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn streamed_errors_name_the_file_wide_row_and_line() {
+    let dir = temp_dir("chunk_errors");
+    // Row 250 of 300 (line 251 with the header; one blank line before the data: 252).
+    let text = csv_with(300, Some((250, "q2", "abc"))).replacen("\n", "\n\n", 1);
+    let path = dir.join("data.csv");
+    std::fs::write(&path, &text).unwrap();
+    let whole = mt::read(&path).unwrap_err().to_string();
+    for rows in [1, 16, 100_000] {
+        let e = mt::read_chunks(&path, rows)
+            .unwrap()
+            .find_map(Result::err)
+            .expect("an error")
+            .to_string();
+        assert_eq!(e, whole, "pieces of {rows}");
+        assert!(e.contains("row 250 (line 252), column q2"), "{e}");
+    }
+    // Found by the validation of a piece: a non-unit quaternion in row 290.
+    let n = 300;
+    let f64s = |f: &dyn Fn(usize) -> f64| -> arrow_array::ArrayRef {
+        std::sync::Arc::new(arrow_array::Float64Array::from_iter_values((0..n).map(f)))
+    };
+    let qw = |r: usize| if r == 289 { 2.0 } else { 1.0 };
+    let parquet = dir.join("data.parquet");
+    write_arrow(
+        &parquet,
+        vec![
+            (
+                "pose",
+                std::sync::Arc::new(arrow_array::Int64Array::from_iter_values(0..n as i64)),
+            ),
+            ("q1", f64s(&|_| 0.1)),
+            ("x", f64s(&|_| 1.0)),
+            ("y", f64s(&|_| 2.0)),
+            ("z", f64s(&|_| 3.0)),
+            ("qw", f64s(&qw)),
+            ("qx", f64s(&|_| 0.0)),
+            ("qy", f64s(&|_| 0.0)),
+            ("qz", f64s(&|_| 0.0)),
+        ],
+    );
+    let mut text = String::from("pose,q1,x,y,z,qw,qx,qy,qz\n");
+    for r in 0..n {
+        text += &format!("{r},0.1,1,2,3,{},0,0,0\n", qw(r));
+    }
+    let csv = dir.join("bad.csv");
+    std::fs::write(&csv, text).unwrap();
+    for path in [&parquet, &csv] {
+        let whole = mt::read(path).unwrap_err().to_string();
+        assert!(whole.contains("row 290"), "{whole}");
+        for rows in [1, 16, 100_000] {
+            let e = mt::read_chunks(path, rows)
+                .unwrap()
+                .find_map(Result::err)
+                .expect("an error")
+                .to_string();
+            assert_eq!(e, whole, "{} in pieces of {rows}", path.display());
+        }
+    }
+    // No data rows: one error, then the end.
+    let empty = dir.join("empty.csv");
+    std::fs::write(&empty, "pose,q1,x,y,z\n\n").unwrap();
+    let mut it = mt::read_chunks(&empty, 10).unwrap();
+    assert!(
+        it.next()
+            .unwrap()
+            .unwrap_err()
+            .to_string()
+            .contains("no data rows")
+    );
+    assert!(it.next().is_none());
+    std::fs::remove_dir_all(&dir).unwrap();
+}

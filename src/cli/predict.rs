@@ -3,12 +3,10 @@
 use super::paths::{Inputs, check_distinct};
 use super::shared::{CliError, CliResult, print_json};
 use calib::model::file::CalibratedModel;
-use calib::model::predict::{
-    Predictions, Predictor, SIGMA_BEYOND_CALIBRATION, SIGMA_MATTERS, SIGMA_OUTSIDE,
-};
+use calib::model::predict::{Predictor, SIGMA_BEYOND_CALIBRATION, SIGMA_MATTERS, SIGMA_OUTSIDE};
 use calib::model::uncertainty::Prior;
 use serde_json::json;
-use sim::measurement_table::{self, MeasurementTable};
+use sim::measurement_table::{self, DEFAULT_CHUNK_ROWS, MeasurementTable, ModelCheck};
 use std::path::{Path, PathBuf};
 
 /// Arguments of `robocal predict`.
@@ -36,19 +34,14 @@ pub struct Args {
     /// rotations, zero offsets), in radians, for `sigma_m`.
     #[arg(long, value_name = "RAD", default_value_t = 1e-3)]
     prior_angle: f64,
+    /// Rows read, predicted and written at a time: memory holds one piece of this many rows (and
+    /// its predictions), whatever the file's length. CSV is read in pieces of about 256 bytes a row of
+    /// text, at most 8 MiB.
+    #[arg(long, value_name = "N", default_value_t = DEFAULT_CHUNK_ROWS)]
+    chunk_rows: usize,
     /// Print one JSON summary on stdout instead of text on stderr.
     #[arg(long)]
     json: bool,
-}
-
-/// A table of joint values: the measurement contract, `x, y, z` optional (CSV or Parquet).
-fn read_configs(path: &Path, robot: &sim::Model) -> Result<MeasurementTable, CliError> {
-    // x, y, z are not needed (and ignored when present).
-    let table = measurement_table::read_configurations(path)?;
-    for w in check_configurations(&table, robot, &path.display().to_string())? {
-        eprintln!("warning: {w}");
-    }
-    Ok(table)
 }
 
 /// Checks a table of joint configurations against the model's robot (joint count, limits, units);
@@ -102,31 +95,43 @@ pub fn run(args: Args) -> CliResult {
     if prior != Prior::default() {
         predictor.set_prior(&file, &prior);
     }
-    let table = read_configs(&args.data, &predictor.model)?;
-    let preds = predictor.predict_table(&table, &args.data.display().to_string())?;
-    sim::io::write_atomic(&args.out, preds.to_csv().as_bytes())?;
+    let name = args.data.display().to_string();
+    if args.chunk_rows == 0 {
+        return Err(CliError::Input(
+            "--chunk-rows 0: a piece holds at least 1 row".into(),
+        ));
+    }
+    let summary = predict_streaming(&mut predictor, &args.data, &args.out, args.chunk_rows)?;
     if let Some(path) = &args.urdf_out {
-        super::urdf_out::write(path, &file, &table, &args.data.display().to_string())?;
+        super::urdf_out::write(path, &file, &summary.first_rows, &name)?;
     }
     if args.json {
         print_json(&json!({
             "model": args.model.display().to_string(),
             "robot": predictor.model.name(),
-            "rows": table.len(),
-            "orientation": preds.orientation.is_some(),
-            "sigma_m": preds.sigma_m.is_some(),
-            "outside_support": preds.n_outside_support(),
+            "rows": summary.rows,
+            "orientation": summary.orientation,
+            "sigma_m": summary.sigma_m,
+            "outside_support": summary.outside_support,
             "out": args.out.display().to_string(),
             "urdf_out": args.urdf_out.as_ref().map(|p| p.display().to_string()),
         }))
     } else {
         eprintln!(
             "predicted {} rows with the calibrated '{}' model; wrote {}",
-            table.len(),
+            summary.rows,
             predictor.model.name(),
             args.out.display()
         );
-        eprintln!("{}", support_line(&predictor, &preds));
+        eprintln!(
+            "{}",
+            support_line(
+                &predictor,
+                summary.rows,
+                summary.outside_support,
+                summary.sigma_m
+            )
+        );
         if let Some(p) = &args.urdf_out {
             eprintln!("wrote {}", p.display());
         }
@@ -134,15 +139,80 @@ pub fn run(args: Args) -> CliResult {
     }
 }
 
-/// One line on stderr: how many rows lie outside the model's support, and why that matters.
-pub fn support_line(predictor: &Predictor, preds: &Predictions) -> String {
-    let n = preds.outside_support.len();
-    let outside = preds.n_outside_support();
+/// What [`predict_streaming`] wrote.
+struct StreamSummary {
+    rows: usize,
+    outside_support: usize,
+    orientation: bool,
+    sigma_m: bool,
+    /// The first piece's rows (for `--urdf-out`, which compares at the first 200).
+    first_rows: MeasurementTable,
+}
+
+/// Predicts every row of the configurations file `data` into the CSV file `out`, piece by piece
+/// ([`measurement_table::read_configuration_chunks`], `chunk_rows` rows): memory holds one
+/// piece and its predictions, whatever the file's length. Each piece is checked against the robot
+/// ([`ModelCheck`]: errors name file-wide rows); the warnings go to stderr at the end. `out` is
+/// written atomically: an error leaves it as it was.
+fn predict_streaming(
+    predictor: &mut Predictor,
+    data: &Path,
+    out: &Path,
+    chunk_rows: usize,
+) -> Result<StreamSummary, CliError> {
+    use std::io::Write;
+    let name = data.display().to_string();
+    let chunks = measurement_table::read_configuration_chunks(data, chunk_rows)?;
+    let robot = predictor.model.clone();
+    if chunks.n_joints() != robot.nq() {
+        return Err(CliError::Input(format!(
+            "{name}: {} joint columns, but the model's robot '{}' has {} joints",
+            chunks.n_joints(),
+            robot.name(),
+            robot.nq()
+        )));
+    }
+    let mut check = ModelCheck::new(&robot, data);
+    let mut file = sim::io::AtomicFile::create(out)?;
+    let mut summary = StreamSummary {
+        rows: 0,
+        outside_support: 0,
+        orientation: false,
+        sigma_m: false,
+        first_rows: MeasurementTable::new(robot.nq(), Default::default()),
+    };
+    for chunk in chunks {
+        let chunk = chunk?;
+        check.add(&chunk.table, chunk.first_row)?;
+        let preds = predictor.predict_table(&chunk.table, &name)?;
+        if summary.rows == 0 {
+            file.write_all(preds.csv_header().as_bytes())
+                .map_err(|e| file.error(e))?;
+            summary.orientation = preds.orientation.is_some();
+            summary.sigma_m = preds.sigma_m.is_some();
+            summary.first_rows = chunk.table.clone();
+        }
+        file.write_all(preds.csv_rows().as_bytes())
+            .map_err(|e| file.error(e))?;
+        summary.rows += chunk.table.len();
+        summary.outside_support += preds.n_outside_support();
+    }
+    for w in check.warnings() {
+        eprintln!("warning: {w}");
+    }
+    file.commit()?;
+    Ok(summary)
+}
+
+/// One line on stderr: how many of `rows` predictions lie outside the model's support (`outside`),
+/// and why that matters (`sigma_m`: whether they had a predicted standard deviation).
+pub fn support_line(predictor: &Predictor, rows: usize, outside: usize, sigma_m: bool) -> String {
+    let n = rows;
     let mut why = Vec::new();
     if predictor.learned.as_ref().is_some_and(|l| l.is_active()) {
         why.push("beyond the configurations its learned correction was fitted on (the correction is faded out there)".to_string());
     }
-    if let Some(h) = predictor.held_out_rms_m.filter(|_| preds.sigma_m.is_some()) {
+    if let Some(h) = predictor.held_out_rms_m.filter(|_| sigma_m) {
         why.push(format!(
             "with sigma_m above {SIGMA_OUTSIDE} × its held-out RMS ({:.4} mm)",
             h * 1e3
@@ -150,7 +220,7 @@ pub fn support_line(predictor: &Predictor, preds: &Predictions) -> String {
     }
     if let (Some(c), Some(h)) = (
         predictor.calibration_sigma_m,
-        predictor.held_out_rms_m.filter(|_| preds.sigma_m.is_some()),
+        predictor.held_out_rms_m.filter(|_| sigma_m),
     ) {
         why.push(format!(
             "with sigma_m above both {SIGMA_BEYOND_CALIBRATION} × its 95th percentile on the calibration poses \

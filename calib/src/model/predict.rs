@@ -496,8 +496,16 @@ pub struct Predictions {
 }
 
 impl Predictions {
-    /// CSV text `pose,x,y,z[,qw,qx,qy,qz][,sigma_m],outside_support` (the flag as `0` or `1`).
+    /// CSV text `pose,x,y,z[,qw,qx,qy,qz][,sigma_m],outside_support` (the flag as `0` or `1`):
+    /// [`Predictions::csv_header`] then [`Predictions::csv_rows`].
     pub fn to_csv(&self) -> String {
+        let mut s = self.csv_header();
+        s.push_str(&self.csv_rows());
+        s
+    }
+
+    /// The CSV header line of [`Predictions::to_csv`], with its line end.
+    pub fn csv_header(&self) -> String {
         let mut header: Vec<String> = ["pose", "x", "y", "z"].map(String::from).to_vec();
         if self.orientation.is_some() {
             header.extend(["qw", "qx", "qy", "qz"].map(String::from));
@@ -508,6 +516,13 @@ impl Predictions {
         header.push("outside_support".into());
         let mut s = header.join(",");
         s.push('\n');
+        s
+    }
+
+    /// The CSV data lines of [`Predictions::to_csv`] (no header): predictions made piece by piece
+    /// append to one file.
+    pub fn csv_rows(&self) -> String {
+        let mut s = String::with_capacity(self.pose.len() * 96);
         for r in 0..self.pose.len() {
             s.push_str(&self.pose[r].to_string());
             let mut push = |v: f64| {

@@ -105,44 +105,60 @@ pub fn check_against_model(
     model: &Model,
     file: &Path,
 ) -> Result<Vec<String>> {
-    let name = file.display().to_string();
-    table.validate_named(&name)?;
-    let nq = model.nq();
-    if table.n_joints != nq {
-        let joints: Vec<&str> = model.joints().iter().map(|j| j.name.as_str()).collect();
-        return Err(table_err(
-            &name,
-            None,
-            None,
-            format!(
-                "the file has {} joint columns (q1..q{}), but robot '{}' has {nq} joints ({})",
-                table.n_joints,
-                table.n_joints,
-                model.name(),
-                joints.join(", ")
-            ),
-        ));
-    }
-    let mut warnings = Vec::new();
-    let n = table.len();
-    let column = |j: usize| (0..n).map(move |r| table.q[r * nq + j]);
+    let mut check = ModelCheck::new(model, file);
+    check.add(table, 0)?;
+    Ok(check.warnings())
+}
 
-    // Units of joint columns.
-    let mut hints: Vec<Option<String>> = vec![None; nq];
-    for (j, joint) in model.joints().iter().enumerate() {
-        let max_abs = column(j).fold(0.0f64, |m, v| m.max(v.abs()));
-        let fits = |scale: f64| {
-            joint.limits.is_some_and(|l| {
-                column(j).all(|v| {
-                    let s = v * scale;
-                    s >= l.lower - LIMIT_TOLERANCE && s <= l.upper + LIMIT_TOLERANCE
-                })
-            })
-        };
-        let hint = match joint.kind {
+/// [`check_against_model`] over a file read in pieces ([`super::read_chunks`]): [`ModelCheck::add`]
+/// each piece with its first file row, then [`ModelCheck::warnings`]. Errors and warnings name
+/// file-wide rows; counts and worst values run over every piece. The unit heuristics that need
+/// medians (positions and `sigma` in millimetres) judge the first piece, and a column's degree or
+/// millimetre hint is judged on the rows read so far. Given the whole table as one piece, it is
+/// [`check_against_model`].
+pub struct ModelCheck<'a> {
+    model: &'a Model,
+    name: String,
+    pieces: usize,
+    /// Per joint: largest |q| so far, and whether every value so far fits the limits as degrees
+    /// (rotational) or millimetres (prismatic).
+    max_abs: Vec<f64>,
+    fits_scaled: Vec<bool>,
+    /// Per joint: (count outside the limits within the tolerance, worst excess, its 1-based row).
+    outside: Vec<(usize, f64, usize)>,
+    /// Rows whose quaternion norm is off 1 by more than [`QUATERNION_NORM_WARNING`]: count, worst, row.
+    quaternion: (usize, f64, usize),
+    /// Temperatures seen: lowest, highest.
+    temp: Option<(f64, f64)>,
+    /// Warnings judged on the first piece (positions and `sigma` in millimetres).
+    first_piece: Vec<String>,
+}
+
+impl<'a> ModelCheck<'a> {
+    /// A check of the file `file` against `model`, before any piece.
+    pub fn new(model: &'a Model, file: &Path) -> Self {
+        let nq = model.nq();
+        ModelCheck {
+            model,
+            name: file.display().to_string(),
+            pieces: 0,
+            max_abs: vec![0.0; nq],
+            fits_scaled: vec![true; nq],
+            outside: vec![(0, 0.0, 0); nq],
+            quaternion: (0, 0.0, 0),
+            temp: None,
+            first_piece: Vec::new(),
+        }
+    }
+
+    /// The degree (millimetre) hint of joint `j`'s column, from the rows so far.
+    fn hint(&self, j: usize) -> Option<String> {
+        let joint = &self.model.joints()[j];
+        let (max_abs, fits) = (self.max_abs[j], self.fits_scaled[j]);
+        match joint.kind {
             JointKind::Revolute | JointKind::Continuous => {
                 let deg = if joint.limits.is_some() {
-                    max_abs > 2.0 * PI + LIMIT_TOLERANCE && fits(PI / 180.0)
+                    max_abs > 2.0 * PI + LIMIT_TOLERANCE && fits
                 } else {
                     max_abs > 4.0 * PI
                 };
@@ -152,7 +168,7 @@ pub fn check_against_model(
             }
             JointKind::Prismatic => {
                 let mm = if let Some(l) = joint.limits {
-                    max_abs > l.lower.abs().max(l.upper.abs()) + LIMIT_TOLERANCE && fits(1e-3)
+                    max_abs > l.lower.abs().max(l.upper.abs()) + LIMIT_TOLERANCE && fits
                 } else {
                     max_abs > 10.0
                 };
@@ -160,113 +176,203 @@ pub fn check_against_model(
                     format!("values up to {max_abs} look like millimetres, but metres are expected")
                 })
             }
-        };
-        hints[j] = hint;
-    }
-
-    // URDF limits.
-    let mut outside: Vec<(usize, f64, usize)> = vec![(0, 0.0, 0); nq]; // (count, worst excess, worst row)
-    for r in 0..n {
-        for (j, joint) in model.joints().iter().enumerate() {
-            let Some(l) = joint.limits else { continue };
-            let v = table.q[r * nq + j];
-            let excess = (l.lower - v).max(v - l.upper);
-            if excess <= 0.0 {
-                continue;
-            }
-            let unit = joint.kind.unit();
-            if excess > LIMIT_TOLERANCE {
-                let hint = hints[j]
-                    .as_ref()
-                    .map(|h| format!(" (the column's {h})"))
-                    .unwrap_or_default();
-                return Err(table_err(
-                    &name,
-                    Some(r + 1),
-                    Some(&format!("q{}", j + 1)),
-                    format!(
-                        "{v:?} {unit} is outside the limits [{}, {}] {unit} of joint '{}' by {excess:.4} {unit}, \
-                         more than the {LIMIT_TOLERANCE} {unit} tolerance{hint}",
-                        l.lower, l.upper, joint.name
-                    ),
-                ));
-            }
-            let o = &mut outside[j];
-            o.0 += 1;
-            if excess > o.1 {
-                o.1 = excess;
-                o.2 = r + 1;
-            }
         }
     }
-    for (j, &(count, worst, row)) in outside.iter().enumerate() {
-        if count > 0 {
-            let joint = &model.joints()[j];
-            let l = joint.limits.expect("only joints with limits count");
-            let unit = joint.kind.unit();
-            warnings.push(format!(
-                "{name}: column q{}: {count} row(s) outside the limits [{}, {}] {unit} of joint '{}' by up \
-                 to {worst:.4} {unit} (row {row}), within the {LIMIT_TOLERANCE} {unit} tolerance",
-                j + 1,
-                l.lower,
-                l.upper,
-                joint.name
+
+    /// Checks the rows of `table`, the file's rows from `first_row` (0-based) on: the first error
+    /// (naming the file-wide row), or `Ok` with its warnings kept for [`ModelCheck::warnings`].
+    pub fn add(&mut self, table: &MeasurementTable, first_row: usize) -> Result<()> {
+        let name = self.name.clone();
+        table.validate_named(&name).map_err(|e| match e {
+            crate::error::SimError::Table {
+                file,
+                row: Some(r),
+                line,
+                column,
+                message,
+            } => crate::error::SimError::Table {
+                file,
+                row: Some(first_row + r),
+                line,
+                column,
+                message,
+            },
+            e => e,
+        })?;
+        let model = self.model;
+        let nq = model.nq();
+        if table.n_joints != nq {
+            let joints: Vec<&str> = model.joints().iter().map(|j| j.name.as_str()).collect();
+            return Err(table_err(
+                &name,
+                None,
+                None,
+                format!(
+                    "the file has {} joint columns (q1..q{}), but robot '{}' has {nq} joints ({})",
+                    table.n_joints,
+                    table.n_joints,
+                    model.name(),
+                    joints.join(", ")
+                ),
             ));
         }
-    }
-    for (j, h) in hints.iter().enumerate() {
-        if let Some(h) = h {
-            warnings.push(format!("{name}: column q{}: {h}", j + 1));
+        let n = table.len();
+        let column = |j: usize| (0..n).map(move |r| table.q[r * nq + j]);
+
+        // Units of joint columns.
+        for (j, joint) in model.joints().iter().enumerate() {
+            self.max_abs[j] = column(j).fold(self.max_abs[j], |m, v| m.max(v.abs()));
+            let scale = match joint.kind {
+                JointKind::Revolute | JointKind::Continuous => PI / 180.0,
+                JointKind::Prismatic => 1e-3,
+            };
+            self.fits_scaled[j] = self.fits_scaled[j]
+                && joint.limits.is_some_and(|l| {
+                    column(j).all(|v| {
+                        let s = v * scale;
+                        s >= l.lower - LIMIT_TOLERANCE && s <= l.upper + LIMIT_TOLERANCE
+                    })
+                });
         }
-    }
 
-    // Positions in millimetres?
-    let centre: Vec<f64> = (0..3)
-        .map(|k| median(table.position.iter().map(|p| p[k]).collect()))
-        .collect();
-    let spread = median(
-        table
-            .position
-            .iter()
-            .map(|p| {
-                ((p[0] - centre[0]).powi(2)
-                    + (p[1] - centre[1]).powi(2)
-                    + (p[2] - centre[2]).powi(2))
-                .sqrt()
-            })
-            .collect(),
-    );
-    let distance = median(
-        table
-            .position
-            .iter()
-            .map(|p| (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt())
-            .collect(),
-    );
-    let reach = reach_bound(model);
-    if spread > MM_SPREAD_FACTOR * (reach + TOOL_ALLOWANCE) || distance > MM_DISTANCE {
-        warnings.push(format!(
-            "{name}: columns x, y, z: the points lie a median {spread:.4} from their median point and \
-             {distance:.4} from the tracker origin, but robot '{}' reaches about {reach:.3} m: the \
-             positions look like millimetres, but metres are expected",
-            model.name()
-        ));
-    }
-
-    // Quaternion norms.
-    if let Some(o) = &table.orientation {
-        let mut count = 0;
-        let (mut worst, mut worst_row) = (0.0f64, 0);
-        for (r, q) in o.iter().enumerate() {
-            let dev = (q.iter().map(|v| v * v).sum::<f64>().sqrt() - 1.0).abs();
-            if dev > QUATERNION_NORM_WARNING {
-                count += 1;
-                if dev > worst {
-                    worst = dev;
-                    worst_row = r + 1;
+        // URDF limits.
+        for r in 0..n {
+            for (j, joint) in model.joints().iter().enumerate() {
+                let Some(l) = joint.limits else { continue };
+                let v = table.q[r * nq + j];
+                let excess = (l.lower - v).max(v - l.upper);
+                if excess <= 0.0 {
+                    continue;
+                }
+                let unit = joint.kind.unit();
+                if excess > LIMIT_TOLERANCE {
+                    let hint = self
+                        .hint(j)
+                        .map(|h| format!(" (the column's {h})"))
+                        .unwrap_or_default();
+                    return Err(table_err(
+                        &name,
+                        Some(first_row + r + 1),
+                        Some(&format!("q{}", j + 1)),
+                        format!(
+                            "{v:?} {unit} is outside the limits [{}, {}] {unit} of joint '{}' by {excess:.4} {unit}, \
+                             more than the {LIMIT_TOLERANCE} {unit} tolerance{hint}",
+                            l.lower, l.upper, joint.name
+                        ),
+                    ));
+                }
+                let o = &mut self.outside[j];
+                o.0 += 1;
+                if excess > o.1 {
+                    o.1 = excess;
+                    o.2 = first_row + r + 1;
                 }
             }
         }
+
+        if self.pieces == 0 {
+            self.first_piece = self.median_warnings(table);
+        }
+        self.pieces += 1;
+
+        // Quaternion norms.
+        if let Some(o) = &table.orientation {
+            for (r, q) in o.iter().enumerate() {
+                let dev = (q.iter().map(|v| v * v).sum::<f64>().sqrt() - 1.0).abs();
+                if dev > QUATERNION_NORM_WARNING {
+                    self.quaternion.0 += 1;
+                    if dev > self.quaternion.1 {
+                        self.quaternion.1 = dev;
+                        self.quaternion.2 = first_row + r + 1;
+                    }
+                }
+            }
+        }
+        if let Some(t) = &table.temp {
+            let lo = t.iter().copied().fold(f64::INFINITY, f64::min);
+            let hi = t.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+            self.temp = Some(self.temp.map_or((lo, hi), |(a, b)| (a.min(lo), b.max(hi))));
+        }
+        Ok(())
+    }
+
+    /// Positions and `sigma` in millimetres, judged on the medians of `table`.
+    fn median_warnings(&self, table: &MeasurementTable) -> Vec<String> {
+        let name = &self.name;
+        let mut warnings = Vec::new();
+        let centre: Vec<f64> = (0..3)
+            .map(|k| median(table.position.iter().map(|p| p[k]).collect()))
+            .collect();
+        let spread = median(
+            table
+                .position
+                .iter()
+                .map(|p| {
+                    ((p[0] - centre[0]).powi(2)
+                        + (p[1] - centre[1]).powi(2)
+                        + (p[2] - centre[2]).powi(2))
+                    .sqrt()
+                })
+                .collect(),
+        );
+        let distance = median(
+            table
+                .position
+                .iter()
+                .map(|p| (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt())
+                .collect(),
+        );
+        let reach = reach_bound(self.model);
+        if spread > MM_SPREAD_FACTOR * (reach + TOOL_ALLOWANCE) || distance > MM_DISTANCE {
+            warnings.push(format!(
+                "{name}: columns x, y, z: the points lie a median {spread:.4} from their median point and \
+                 {distance:.4} from the tracker origin, but robot '{}' reaches about {reach:.3} m: the \
+                 positions look like millimetres, but metres are expected",
+                self.model.name()
+            ));
+        }
+        if let Some(s) = &table.sigma {
+            let med = median(s.clone());
+            if med > SIGMA_LARGE {
+                warnings.push(format!(
+                    "{name}: column sigma: the median sigma is {med} m, more than any laser tracker's \
+                     uncertainty: millimetres? metres are expected"
+                ));
+            }
+        }
+        warnings
+    }
+
+    /// The warnings over every piece added, one line each, in the order of [`check_against_model`].
+    pub fn warnings(&self) -> Vec<String> {
+        let name = &self.name;
+        let mut warnings = Vec::new();
+        for (j, &(count, worst, row)) in self.outside.iter().enumerate() {
+            if count > 0 {
+                let joint = &self.model.joints()[j];
+                let l = joint.limits.expect("only joints with limits count");
+                let unit = joint.kind.unit();
+                warnings.push(format!(
+                    "{name}: column q{}: {count} row(s) outside the limits [{}, {}] {unit} of joint '{}' by up \
+                     to {worst:.4} {unit} (row {row}), within the {LIMIT_TOLERANCE} {unit} tolerance",
+                    j + 1,
+                    l.lower,
+                    l.upper,
+                    joint.name
+                ));
+            }
+        }
+        for j in 0..self.model.nq() {
+            if let Some(h) = self.hint(j) {
+                warnings.push(format!("{name}: column q{}: {h}", j + 1));
+            }
+        }
+        let (sigma, others): (Vec<&String>, Vec<&String>) = self
+            .first_piece
+            .iter()
+            .partition(|w| w.contains(": column sigma:"));
+        warnings.extend(others.into_iter().cloned());
+        let (count, worst, worst_row) = self.quaternion;
         if count > 0 {
             warnings.push(format!(
                 "{name}: columns qw, qx, qy, qz: {count} row(s) are not unit quaternions within \
@@ -274,26 +380,15 @@ pub fn check_against_model(
                  normalised before use"
             ));
         }
-    }
-
-    if let Some(s) = &table.sigma {
-        let med = median(s.clone());
-        if med > SIGMA_LARGE {
-            warnings.push(format!(
-                "{name}: column sigma: the median sigma is {med} m, more than any laser tracker's \
-                 uncertainty: millimetres? metres are expected"
-            ));
-        }
-    }
-    if let Some(t) = &table.temp {
-        let lo = t.iter().copied().fold(f64::INFINITY, f64::min);
-        let hi = t.iter().copied().fold(f64::NEG_INFINITY, f64::max);
-        if lo < TEMP_RANGE.0 || hi > TEMP_RANGE.1 {
+        warnings.extend(sigma.into_iter().cloned());
+        if let Some((lo, hi)) = self.temp
+            && (lo < TEMP_RANGE.0 || hi > TEMP_RANGE.1)
+        {
             warnings.push(format!(
                 "{name}: column temp: values from {lo} to {hi} are implausible robot temperatures in °C \
                  (kelvin or fahrenheit?); degrees Celsius are expected"
             ));
         }
+        warnings
     }
-    Ok(warnings)
 }

@@ -269,7 +269,10 @@ struct Chunk {
 /// Chunks bigger than this are worth parsing in parallel (bytes).
 const PARALLEL_CHUNK: usize = 1 << 20;
 
-fn parse(bytes: &[u8], file: &str, positions: Positions) -> Result<MeasurementTable> {
+/// The header of a CSV measurement file: its resolved columns, its names, the byte offset where the
+/// data lines start and the 1-based line they start on. `bytes` must hold at least the header line
+/// (the first line that is not blank) and its line end, unless it is the whole file.
+fn header(bytes: &[u8], file: &str, positions: Positions) -> Result<Header> {
     // Control bytes other than tab and line ends in the first line: not text (a binary file); said so
     // before its bytes are taken for cells. Bytes that are not UTF-8 (a Latin-1 name of an ignored
     // column) are read as before.
@@ -330,8 +333,29 @@ fn parse(bytes: &[u8], file: &str, positions: Positions) -> Result<MeasurementTa
         })
         .collect();
     let layout = resolve_columns(&names, file, positions)?;
-    let data_start = rec.pos;
-    let first_line = rec.line;
+    Ok(Header {
+        layout,
+        names,
+        data_start: rec.pos,
+        first_line: rec.line,
+    })
+}
+
+/// What [`header`] finds.
+struct Header {
+    layout: Layout,
+    names: Vec<String>,
+    data_start: usize,
+    first_line: usize,
+}
+
+fn parse(bytes: &[u8], file: &str, positions: Positions) -> Result<MeasurementTable> {
+    let Header {
+        layout,
+        names,
+        data_start,
+        first_line,
+    } = header(bytes, file, positions)?;
     let data = &bytes[data_start..];
     let text = std::str::from_utf8(data).ok();
 
@@ -581,4 +605,208 @@ fn write_rows(table: &MeasurementTable, rows: std::ops::Range<usize>) -> Vec<u8>
         out.push(b'\n');
     }
     out
+}
+
+/// A CSV measurement file read in pieces of whole lines ([`super::chunks`]): at most about
+/// `block` bytes of text are held at a time (more only for a single longer record).
+pub(super) struct CsvChunks {
+    source: std::fs::File,
+    /// Text read and not yet parsed (starts at a line start).
+    buf: Vec<u8>,
+    eof: bool,
+    block: usize,
+    /// The file's columns resolved against the contract.
+    pub(super) layout: Layout,
+    names: Vec<String>,
+    /// Data rows and text lines before `buf`.
+    rows_before: usize,
+    lines_before: usize,
+}
+
+impl CsvChunks {
+    /// Opens the file `source` (`file` names it in errors) and reads its header.
+    pub(super) fn new(
+        mut source: std::fs::File,
+        path: &std::path::Path,
+        file: &str,
+        positions: Positions,
+        block: usize,
+    ) -> Result<Self> {
+        let block = block.max(1 << 12);
+        let mut buf = Vec::with_capacity(block);
+        let mut eof = false;
+        fill(&mut source, &mut buf, block, &mut eof, path)?;
+        if buf.starts_with(b"\xEF\xBB\xBF") {
+            buf.drain(..3);
+        }
+        while !eof && header_line_end(&buf).is_none() {
+            let want = buf.len() + block;
+            fill(&mut source, &mut buf, want, &mut eof, path)?;
+        }
+        let h = header(&buf, file, positions)?;
+        buf.drain(..h.data_start);
+        Ok(CsvChunks {
+            source,
+            buf,
+            eof,
+            block,
+            layout: h.layout,
+            names: h.names,
+            rows_before: 0,
+            lines_before: h.first_line - 1,
+        })
+    }
+
+    /// The next rows (checked as [`MeasurementTable::validate_named`] does, within the piece), with the
+    /// 0-based file row of the first; `None` at the end. Errors name file-wide rows and lines.
+    pub(super) fn next_table(
+        &mut self,
+        path: &std::path::Path,
+        file: &str,
+    ) -> Result<Option<(usize, MeasurementTable)>> {
+        loop {
+            if !self.eof && self.buf.len() < self.block {
+                fill(
+                    &mut self.source,
+                    &mut self.buf,
+                    self.block,
+                    &mut self.eof,
+                    path,
+                )?;
+            }
+            let split = if self.eof {
+                self.buf.len()
+            } else {
+                match last_line_end(&self.buf) {
+                    Some(e) => e,
+                    None => {
+                        // One record longer than a block: read on.
+                        let want = self.buf.len() + self.block;
+                        fill(&mut self.source, &mut self.buf, want, &mut self.eof, path)?;
+                        continue;
+                    }
+                }
+            };
+            if split == 0 {
+                return Ok(None);
+            }
+            let part = &self.buf[..split];
+            let chunk =
+                parse_chunk(part, std::str::from_utf8(part).ok(), &self.layout).map_err(|e| {
+                    SimError::Table {
+                        file: file.to_string(),
+                        row: e.row.map(|r| self.rows_before + r),
+                        line: Some(self.lines_before + e.line),
+                        column: e.column.map(|c| fragment(&self.names[c])),
+                        message: e.message,
+                    }
+                })?;
+            let first_row = self.rows_before;
+            if chunk.rows > 0 {
+                chunk.table.validate_named(file).map_err(|e| match e {
+                    SimError::Table {
+                        file,
+                        row: Some(r),
+                        line: None,
+                        column,
+                        message,
+                    } => SimError::Table {
+                        file,
+                        row: Some(first_row + r),
+                        line: line_of_data_row(part, r).map(|l| self.lines_before + l),
+                        column,
+                        message,
+                    },
+                    e => e,
+                })?;
+            }
+            self.rows_before += chunk.rows;
+            self.lines_before += chunk.lines;
+            self.buf.drain(..split);
+            if chunk.rows > 0 {
+                return Ok(Some((first_row, chunk.table)));
+            }
+        }
+    }
+}
+
+/// Reads from `source` until `buf` holds `want` bytes or the file ends (`eof` set).
+fn fill(
+    source: &mut std::fs::File,
+    buf: &mut Vec<u8>,
+    want: usize,
+    eof: &mut bool,
+    path: &std::path::Path,
+) -> Result<()> {
+    use std::io::Read;
+    while buf.len() < want && !*eof {
+        let start = buf.len();
+        buf.resize(want, 0);
+        match source.read(&mut buf[start..]) {
+            Ok(0) => {
+                buf.truncate(start);
+                *eof = true;
+            }
+            Ok(n) => buf.truncate(start + n),
+            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => buf.truncate(start),
+            Err(e) => {
+                buf.truncate(start);
+                return Err(SimError::Read {
+                    path: path.to_path_buf(),
+                    source: e,
+                });
+            }
+        }
+    }
+    Ok(())
+}
+
+/// The end (one past the `\n`) of the last complete line of `buf` that is not inside a quoted cell
+/// (an even number of `"` before it), if any.
+fn last_line_end(buf: &[u8]) -> Option<usize> {
+    let mut quotes = 0usize;
+    let mut last = None;
+    for (i, &b) in buf.iter().enumerate() {
+        match b {
+            b'"' => quotes += 1,
+            b'\n' if quotes % 2 == 0 => last = Some(i + 1),
+            _ => {}
+        }
+    }
+    last
+}
+
+/// The end of the first line of `buf` that holds more than blanks, outside quotes, if complete.
+fn header_line_end(buf: &[u8]) -> Option<usize> {
+    let mut quotes = 0usize;
+    let mut content = false;
+    for (i, &b) in buf.iter().enumerate() {
+        match b {
+            b'"' => {
+                quotes += 1;
+                content = true;
+            }
+            b'\n' if quotes % 2 == 0 && content => return Some(i + 1),
+            b' ' | b'\t' | b'\r' | b'\n' => {}
+            _ => content = true,
+        }
+    }
+    None
+}
+
+/// The 1-based line, within `part` (whole data lines, no header), of its data row `row` (1-based).
+fn line_of_data_row(part: &[u8], row: usize) -> Option<usize> {
+    let mut rec = Records::new(part);
+    let mut cells = Vec::new();
+    let mut seen = 0usize;
+    while let Ok(Some(line)) = rec.next_record(&mut cells) {
+        if is_blank(&cells) {
+            continue;
+        }
+        seen += 1;
+        if seen == row {
+            return Some(line);
+        }
+    }
+    None
 }

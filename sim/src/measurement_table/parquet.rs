@@ -266,47 +266,90 @@ pub(super) fn read_parquet_file(
 }
 
 fn read_parquet(f: std::fs::File, file: &str, positions: Positions) -> Result<MeasurementTable> {
-    let bad_file = |e: &dyn std::fmt::Display| {
-        table_err(
-            file,
-            None,
-            None,
-            format!("not a readable Parquet file: {e}"),
-        )
-    };
-    let builder = ParquetRecordBatchReaderBuilder::try_new(f).map_err(|e| bad_file(&e))?;
-    let names: Vec<String> = builder
-        .schema()
-        .fields()
-        .iter()
-        .map(|f| f.name().trim().to_string())
-        .collect();
-    let layout = resolve_columns(&names, file, positions)?;
-    let used: Vec<usize> = (0..names.len())
-        .filter(|&i| layout.roles[i] != Role::Ignore)
-        .collect();
-    let role_of: HashMap<&str, Role> = used
-        .iter()
-        .map(|&i| (names[i].as_str(), layout.roles[i]))
-        .collect();
-    let mask = ProjectionMask::roots(builder.parquet_schema(), used.iter().copied());
-    let n_rows = usize::try_from(builder.metadata().file_metadata().num_rows())
-        .unwrap_or(0)
-        .min(MAX_RESERVED_ROWS);
-    let reader = builder
-        .with_projection(mask)
-        .with_batch_size(65_536)
-        .build()
-        .map_err(|e| bad_file(&e))?;
+    let mut open = OpenParquet::new(f, file, positions, 65_536)?;
+    let mut columns = ColumnsBuilder::new(&open.layout, open.n_rows.min(MAX_RESERVED_ROWS));
+    while open.next_batch_into(&mut columns, file)? {}
+    let table = columns.finish();
+    table.validate_named(file)?;
+    Ok(table)
+}
 
-    let mut columns = ColumnsBuilder::new(&layout, n_rows);
-    for batch in reader {
-        let batch = batch.map_err(|e| bad_file(&e))?;
+/// A Parquet measurement file opened for reading: its resolved columns and a reader of record
+/// batches of the contract's columns (the others are not decoded).
+pub(super) struct OpenParquet {
+    reader: parquet::arrow::arrow_reader::ParquetRecordBatchReader,
+    /// The file's columns resolved against the contract.
+    pub(super) layout: super::Layout,
+    role_of: HashMap<String, Role>,
+    /// Rows the file's metadata announces.
+    pub(super) n_rows: usize,
+}
+
+impl OpenParquet {
+    /// Opens `f` (`file` names it in errors), reading batches of at most `batch_rows` rows.
+    pub(super) fn new(
+        f: std::fs::File,
+        file: &str,
+        positions: Positions,
+        batch_rows: usize,
+    ) -> Result<Self> {
+        let builder =
+            ParquetRecordBatchReaderBuilder::try_new(f).map_err(|e| bad_file(file, &e))?;
+        let names: Vec<String> = builder
+            .schema()
+            .fields()
+            .iter()
+            .map(|f| f.name().trim().to_string())
+            .collect();
+        let layout = resolve_columns(&names, file, positions)?;
+        let used: Vec<usize> = (0..names.len())
+            .filter(|&i| layout.roles[i] != Role::Ignore)
+            .collect();
+        let role_of: HashMap<String, Role> = used
+            .iter()
+            .map(|&i| (names[i].clone(), layout.roles[i]))
+            .collect();
+        let mask = ProjectionMask::roots(builder.parquet_schema(), used.iter().copied());
+        let n_rows = usize::try_from(builder.metadata().file_metadata().num_rows()).unwrap_or(0);
+        let reader = builder
+            .with_projection(mask)
+            .with_batch_size(batch_rows.max(1))
+            .build()
+            .map_err(|e| bad_file(file, &e))?;
+        Ok(OpenParquet {
+            reader,
+            layout,
+            role_of,
+            n_rows,
+        })
+    }
+
+    /// Decodes the next record batch into `columns`; `false` at the end of the file. Errors name
+    /// `file` and the file-wide 1-based row (counted by `columns`' rows before the batch).
+    pub(super) fn next_batch_into(
+        &mut self,
+        columns: &mut ColumnsBuilder,
+        file: &str,
+    ) -> Result<bool> {
+        self.next_batch_at(columns, file, 0)
+    }
+
+    /// [`OpenParquet::next_batch_into`] for a builder that starts at file row `rows_before` (0-based).
+    pub(super) fn next_batch_at(
+        &mut self,
+        columns: &mut ColumnsBuilder,
+        file: &str,
+        rows_before: usize,
+    ) -> Result<bool> {
+        let Some(batch) = self.reader.next() else {
+            return Ok(false);
+        };
+        let batch = batch.map_err(|e| bad_file(file, &e))?;
         let schema = batch.schema();
-        let row0 = columns.rows();
+        let row0 = rows_before + columns.rows();
         for (k, arr) in batch.columns().iter().enumerate() {
             let name = schema.field(k).name().trim();
-            let Some(&role) = role_of.get(name) else {
+            let Some(&role) = self.role_of.get(name) else {
                 continue;
             };
             // A dictionary-typed column (a pandas categorical, say) as its plain values.
@@ -331,8 +374,16 @@ fn read_parquet(f: std::fs::File, file: &str, positions: Positions) -> Result<Me
                 ));
             }
         }
+        Ok(true)
     }
-    let table = columns.finish();
-    table.validate_named(file)?;
-    Ok(table)
+}
+
+/// "not a readable Parquet file" naming `file`.
+fn bad_file(file: &str, e: &dyn std::fmt::Display) -> SimError {
+    table_err(
+        file,
+        None,
+        None,
+        format!("not a readable Parquet file: {e}"),
+    )
 }
