@@ -516,3 +516,36 @@ fn calibrate_help_names_every_registered_cause() {
         assert!(help.contains(k.name()), "learned:{k} missing in:\n{help}");
     }
 }
+
+/// `calibrate --model auto` on a small data set (42 poses: the regions left out leave fewer
+/// residuals than parameters) finishes: the rank decision took the short `R` factor of such a
+/// region and indexed past its singular values (a panic before the fix).
+#[test]
+fn auto_on_few_poses_does_not_panic_in_the_region_test() {
+    let d = dir("few_poses");
+    let o = robocal(&[
+        "generate",
+        "--scenario",
+        repo()
+            .join("scenarios/iiwa7_compliance.toml")
+            .to_str()
+            .unwrap(),
+        "--out",
+        d.join("data").to_str().unwrap(),
+        "--poses",
+        "42",
+        "--seed",
+        "5",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let o = robocal(&[
+        "calibrate",
+        "--data",
+        d.join("data/measurements.parquet").to_str().unwrap(),
+        "--model",
+        "auto",
+        "--out",
+        d.join("model.json").to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+}

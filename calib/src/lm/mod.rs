@@ -793,6 +793,33 @@ mod tests {
     /// `step_in_sigmas` is `‖J δ‖ / √variance_factor` for an identifiable step (the change of the
     /// weighted residuals it makes, computed directly), and 0 along a null direction (two equal
     /// columns: `δ = eₐ − e_b` changes nothing).
+    /// A factor with fewer rows than columns (the `R` of 4 residuals for 6 parameters, as a left-out
+    /// region of a small data set gives) is decided as the same factor padded with zero rows, and
+    /// as the Jacobian itself: rank 4, the nonzero singular values of `J D`.
+    #[test]
+    fn a_factor_of_fewer_rows_than_parameters_is_decided_as_its_padded_square() {
+        let j = DMatrix::from_fn(4, 6, |i, k| {
+            ((i * 7 + k * 3) % 5) as f64 - 2.0 + 0.1 * k as f64
+        });
+        let scales = vec![1.0, 2.0, 0.5, 1.0, 3.0, 1.0];
+        let r = crate::linalg::r_factor_scaled(&j, Some(&scales));
+        assert_eq!(r.shape(), (4, 6));
+        let short = Subspace::from_factor(&r, &scales, 1e-10, 0.0, 4);
+        let mut padded = DMatrix::zeros(6, 6);
+        padded.view_mut((0, 0), (4, 6)).copy_from(&r);
+        let square = Subspace::from_factor(&padded, &scales, 1e-10, 0.0, 4);
+        assert_eq!(short, square);
+        let direct = Subspace::analyze(&j, &scales, 1e-10, 0.0);
+        assert_eq!(short.rank, 4);
+        assert_eq!(direct.rank, 4);
+        for (a, b) in short.singular_values.iter().zip(&direct.singular_values) {
+            assert!(
+                (a - b).abs() <= 1e-12 * direct.singular_values[0],
+                "{a} vs {b}"
+            );
+        }
+    }
+
     #[test]
     fn step_in_sigmas_is_the_change_of_the_residuals_in_noise_units() {
         let (m, p) = (12, 4);

@@ -58,8 +58,8 @@ impl Subspace {
         }
     }
 
-    /// The split from a square factor `square` (p × p) of the scaled Jacobian of `m` rows
-    /// ([`Subspace::square_factor`]).
+    /// The split from a square factor `square` (p × p; a factor of fewer rows is padded with zero
+    /// rows) of the scaled Jacobian of `m` rows ([`Subspace::square_factor`]).
     pub fn from_factor(
         square: &DMatrix<f64>,
         scales: &[f64],
@@ -68,6 +68,18 @@ impl Subspace {
         m: usize,
     ) -> Subspace {
         let p = square.ncols();
+        // A factor of fewer rows than columns (the `R` of a stack of fewer residuals than
+        // parameters, `min(n, p) × p`) is padded with zero rows: the same `RᵀR`, its missing
+        // singular values zero.
+        let padded;
+        let square = if square.nrows() < p {
+            let mut sq = DMatrix::zeros(p, p);
+            sq.view_mut((0, 0), (square.nrows(), p)).copy_from(square);
+            padded = sq;
+            &padded
+        } else {
+            square
+        };
         let svd = square.clone().svd(false, true);
         let vt = svd.v_t.expect("SVD was asked for V");
         let mut order: Vec<usize> = (0..p).collect();
