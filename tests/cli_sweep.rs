@@ -445,7 +445,7 @@ fn bad_input_exits_2_naming_the_flag() {
         (
             [
                 base("1", "30", "1"),
-                vec!["--model".into(), "joint_compliance".into()],
+                vec!["--model".into(), "joint_compliance@9".into()],
             ]
             .concat(),
             "--model",
