@@ -6,7 +6,7 @@ use super::paths::Inputs;
 use super::shared::{CliError, CliResult, print_json};
 use crate::sweep::params_table::{self, ParamRow};
 use crate::sweep::table::{self, META_SUBSET, META_SWEEP, SweepRow};
-use crate::sweep::{self as sw, Context, Selection, Subset, SweepSpec};
+use crate::sweep::{self as sw, Context, Score, Selection, Subset, SweepSpec};
 use calib::fit::CalibrationOptions;
 use calib::model::spec::ModelChoice;
 use sim::scenario::{Overrides, Scenario};
@@ -54,6 +54,10 @@ pub struct Args {
     /// --candidates poses drawn by the scenario's campaign).
     #[arg(long, value_name = "random|planned", value_enum, default_value_t = Selection::Random)]
     selection: Selection,
+    /// What to score: `fit` (the fitted model against the truth) or `diagnose` (also run
+    /// `robocal diagnose` on every run's data: the columns hidden, named, detected, false_alarm).
+    #[arg(long, value_name = "fit|diagnose", value_enum, default_value_t = Score::Fit)]
+    score: Score,
     /// Candidate poses per planned run (default: 10 × the pose count).
     #[arg(long, value_name = "N")]
     candidates: Option<usize>,
@@ -418,6 +422,7 @@ pub fn run(args: Args) -> CliResult {
             .as_ref()
             .map_or_else(|| "auto".to_string(), |m| m.name()),
         selection,
+        score: args.score,
         candidates: args.candidates,
         cells: runs / reps,
         runs,
@@ -452,8 +457,12 @@ pub fn run(args: Args) -> CliResult {
         b.finish_and_clear();
     }
     let results = rows?;
-    let rows: Vec<SweepRow> = results.iter().map(|r| r.row).collect();
-    let params: Vec<ParamRow> = results.into_iter().flat_map(|r| r.params).collect();
+    let mut rows: Vec<SweepRow> = Vec::with_capacity(results.len());
+    let mut params: Vec<ParamRow> = Vec::new();
+    for r in results {
+        rows.push(r.row);
+        params.extend(r.params);
+    }
     eprintln!(
         "sweep of {}: {} magnitude(s) × {} noise level(s) × {} pose count(s) × {} reps; {} run(s) in {:.1} s on {} thread(s) ({} model, {} poses)",
         spec.scenario_file,

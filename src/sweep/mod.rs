@@ -28,6 +28,7 @@
 //!    each extension parameter against the simulator's value ([`truth_params`]) in units of its σ,
 //!    and the observability of the training poses ([`table::COLUMNS`], [`params_table::COLUMNS`]).
 
+pub mod detection;
 pub mod magnitude;
 pub mod params_table;
 pub mod score;
@@ -43,7 +44,11 @@ use sim::campaign::splitmix64;
 use sim::scenario::{Overrides, Scenario};
 use table::SweepRow;
 
-/// Regions of diagnose's transfer test when a run resolves `--model auto` (none: see `run_inner`).
+/// Significance level of diagnose's tests with `--score diagnose` (`robocal diagnose`'s default).
+pub const DIAGNOSE_ALPHA: f64 = 1e-3;
+
+/// Regions of diagnose's transfer test when a run resolves `--model auto` or is diagnosed with
+/// `--score diagnose` (none: see `run_inner`).
 pub const AUTO_REGIONS: usize = 0;
 
 /// Version of the sweep file layout (columns and metadata).
@@ -59,6 +64,19 @@ pub enum Selection {
     Random,
     /// D-optimal selection (`calib::fit::plan`) from random candidate configurations.
     Planned,
+}
+
+/// What a sweep scores (also the values of `robocal sweep --score`).
+#[derive(
+    Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize, clap::ValueEnum,
+)]
+#[serde(rename_all = "snake_case")]
+pub enum Score {
+    /// The fitted model against the truth (held-out error, combinations, parameters).
+    Fit,
+    /// Also diagnose on every run's data: which causes it names against those hidden
+    /// ([`detection`]).
+    Diagnose,
 }
 
 /// Everything that decides a sweep's rows; stored as JSON in every file of the sweep.
@@ -95,6 +113,8 @@ pub struct SweepSpec {
     pub model: String,
     /// Pose selection.
     pub selection: Selection,
+    /// What is scored.
+    pub score: Score,
     /// Candidates per planned selection (`selection = planned` only).
     pub candidates: Option<usize>,
     /// Cells (magnitudes × noise levels × pose counts).
@@ -387,6 +407,18 @@ fn run_inner(ctx: &Context<'_>, id: &RunId) -> Result<RunResult, CliError> {
     let combos = score::combinations(&scored, &l, &table, &train.rows, &p_true);
     let (params, causes) = score::extension_params(model, &cal, &res.effects, id.run);
 
+    let (hidden, named, detected, false_alarm) = match spec.score {
+        Score::Fit => (String::new(), String::new(), false, false),
+        Score::Diagnose => {
+            let mut options = crate::cli::diagnose::options(1.0 / 3.0, id.seed, DIAGNOSE_ALPHA)?;
+            options.regions = AUTO_REGIONS;
+            let d = calib::select::diagnose::diagnose(model, &table, "sweep run", &options)
+                .map_err(CliError::from)?;
+            let h = detection::hidden(&res.effects, model.nq());
+            let (detected, false_alarm) = detection::judge(&h, &d.model, model.nq());
+            (h.name(), d.model.name(), detected, false_alarm)
+        }
+    };
     let rows_n = simulation.rows.len().max(1) as f64;
     let sigma_rms = (simulation
         .rows
@@ -450,6 +482,10 @@ fn run_inner(ctx: &Context<'_>, id: &RunId) -> Result<RunResult, CliError> {
         param_z2_mean_transmission_error: f64::NAN,
         params_link_deflection: 0,
         param_z2_mean_link_deflection: f64::NAN,
+        hidden,
+        named,
+        detected,
+        false_alarm,
     };
     let scores: Vec<(i64, f64)> = causes
         .iter()
@@ -488,6 +524,10 @@ pub struct CellSummary {
     pub param_z2_mean_median: f64,
     /// Median of `condition_number`.
     pub condition_number_median: f64,
+    /// `--score diagnose`: runs where diagnose named what was hidden (`None` without it).
+    pub detected: Option<usize>,
+    /// `--score diagnose`: runs with a false alarm (`None` without it).
+    pub false_alarms: Option<usize>,
     /// Per cause in the fitted models: the mean over the runs of `param_z2_mean_<cause>` (runs
     /// without a z for it left out), and how many runs had one. Empty for the kinematic model.
     pub causes: Vec<CauseSummary>,
@@ -554,6 +594,10 @@ pub fn summarize(spec: &SweepSpec, rows: &[SweepRow]) -> Vec<CellSummary> {
             predicted_median_m: quantile(&sorted(&|r| r.test_error_predicted_m), 0.5),
             param_z2_mean_median: quantile(&sorted(&|r| r.param_z2_mean), 0.5),
             condition_number_median: quantile(&sorted(&|r| r.condition_number), 0.5),
+            detected: (spec.score == Score::Diagnose)
+                .then(|| mine.iter().filter(|r| r.detected).count()),
+            false_alarms: (spec.score == Score::Diagnose)
+                .then(|| mine.iter().filter(|r| r.false_alarm).count()),
             causes,
         });
     }
@@ -586,6 +630,12 @@ pub fn summary_text(cells: &[CellSummary]) -> String {
                 String::new()
             }
         ));
+        if let (Some(d), Some(f)) = (c.detected, c.false_alarms) {
+            s.push_str(&format!(
+                "        diagnose: detected in {d} of {} run(s), a false alarm in {f}\n",
+                c.runs
+            ));
+        }
         for k in &c.causes {
             s.push_str(&format!(
                 "        {}: mean z² of its parameters {:.3} over {} run(s)\n",
@@ -744,6 +794,7 @@ mod tests {
             test_fraction: 0.3,
             model: "kinematic".into(),
             selection: Selection::Random,
+            score: Score::Fit,
             candidates: None,
             cells: 6,
             runs: 24,

@@ -6,7 +6,7 @@
 //! what makes a merge of shards byte-identical to a single run.
 
 use arrow_array::{
-    Array, ArrayRef, BooleanArray, Float64Array, Int64Array, RecordBatch, UInt64Array,
+    Array, ArrayRef, BooleanArray, Float64Array, Int64Array, RecordBatch, StringArray, UInt64Array,
 };
 use arrow_schema::{DataType, Field, Schema};
 use std::path::Path;
@@ -24,7 +24,7 @@ pub const META_SUBSET: &str = "robocal.sweep.subset";
 const ROW_GROUP_ROWS: usize = 65_536;
 
 /// An Arrow column type of the sweep table.
-trait ColumnType: Sized + Copy {
+trait ColumnType: Sized + Clone {
     fn data_type() -> DataType;
     fn array(values: Vec<Self>) -> ArrayRef;
     fn read(array: &dyn Array) -> Option<Vec<Self>>;
@@ -82,12 +82,25 @@ impl ColumnType for bool {
     }
 }
 
+impl ColumnType for String {
+    fn data_type() -> DataType {
+        DataType::Utf8
+    }
+    fn array(values: Vec<Self>) -> ArrayRef {
+        Arc::new(StringArray::from(values))
+    }
+    fn read(array: &dyn Array) -> Option<Vec<Self>> {
+        let a = array.as_any().downcast_ref::<StringArray>()?;
+        (a.null_count() == 0).then(|| (0..a.len()).map(|i| a.value(i).to_string()).collect())
+    }
+}
+
 /// Declares [`SweepRow`], [`COLUMNS`] and the conversions from one list of `name: type = "doc"`.
 macro_rules! sweep_columns {
     ($( $field:ident : $ty:ty = $doc:literal ),* $(,)?) => {
         /// One run of a sweep: what was generated, how the calibration went, and its scores against
         /// the truth. Units are in the field names (`_m` metres); see [`COLUMNS`].
-        #[derive(Clone, Copy, Debug, PartialEq)]
+        #[derive(Clone, Debug, PartialEq)]
         pub struct SweepRow {
             $( #[doc = $doc] pub $field: $ty, )*
         }
@@ -96,7 +109,7 @@ macro_rules! sweep_columns {
         pub const COLUMNS: &[(&str, &str)] = &[ $( (stringify!($field), $doc) ),* ];
 
         fn arrays(rows: &[SweepRow]) -> Vec<ArrayRef> {
-            vec![ $( <$ty as ColumnType>::array(rows.iter().map(|r| r.$field).collect()) ),* ]
+            vec![ $( <$ty as ColumnType>::array(rows.iter().map(|r| r.$field.to_owned()).collect()) ),* ]
         }
 
         fn fields() -> Vec<Field> {
@@ -116,7 +129,7 @@ macro_rules! sweep_columns {
                     })?
                 };
             )*
-            Ok((0..batch.num_rows()).map(|i| SweepRow { $( $field: $field[i], )* }).collect())
+            Ok((0..batch.num_rows()).map(|i| SweepRow { $( $field: $field[i].to_owned(), )* }).collect())
         }
     };
 }
@@ -161,6 +174,10 @@ sweep_columns! {
     param_z2_mean_transmission_error: f64 = "mean z² of the transmission_error parameters with a z (1 expected; NaN without any)",
     params_link_deflection: i64 = "link_deflection parameters in the fitted model (0: not in it)",
     param_z2_mean_link_deflection: f64 = "mean z² of the link_deflection parameters with a z (1 expected; NaN without any)",
+    hidden: String = "--score diagnose: the causes the run injected, at their joints, as a model name (`kinematic+gear_backlash@2,4`; `kinematic`: none); empty without --score diagnose",
+    named: String = "--score diagnose: the model diagnose adopted on the run's data (its causes at their joints); empty without --score diagnose",
+    detected: bool = "--score diagnose: diagnose named every hidden cause and none at a joint where it is not hidden (hidden joints may be left out); false without --score diagnose",
+    false_alarm: bool = "--score diagnose: diagnose named a cause that is not hidden, or one at a joint where it is not hidden; false without --score diagnose",
 }
 
 /// The `params_<cause>` and `param_z2_mean_<cause>` fields of a row, in [`calib::model::extensions::Cause::ALL`]
@@ -314,6 +331,14 @@ mod tests {
             param_z2_mean_transmission_error: 1.3,
             params_link_deflection: 0,
             param_z2_mean_link_deflection: 1.4000000000000001,
+            hidden: "kinematic+gear_backlash@2,4".into(),
+            named: if run % 2 == 0 {
+                "kinematic".into()
+            } else {
+                String::new()
+            },
+            detected: run % 3 == 0,
+            false_alarm: false,
         }
     }
 
