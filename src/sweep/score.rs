@@ -128,9 +128,7 @@ pub fn held_out(
     for &row in rows {
         let q = table.q_row(row);
         nom2 += (nominal.row(&none, row, q, &mut scratch) - p_true[row]).norm_squared();
-        let e = (calibrated.row(&sc.regs, row, q, &mut scratch) - p_true[row]).norm();
-        e2 += e * e;
-        emax = emax.max(e);
+        // The physical model's Jacobian at this row first: the learned row below reuses the scratch.
         let pred = physical.physical(&sc.regs, row, q, &mut scratch);
         position_jacobian_row(
             physical.chain(),
@@ -141,6 +139,13 @@ pub fn held_out(
             sc.coef(row),
             &mut jbuf,
         );
+        let p = match cal.learned {
+            Some(_) => calibrated.row(&sc.regs, row, q, &mut scratch),
+            None => pred.p_tracker,
+        };
+        let e = (p - p_true[row]).norm();
+        e2 += e * e;
+        emax = emax.max(e);
         for a in 0..3 {
             let ja = &jbuf[a * np..(a + 1) * np];
             for c in 0..l.ncols() {
