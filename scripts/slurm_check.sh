@@ -187,6 +187,8 @@ tasks=$(jobs_ok "$array")
   || die "the one-machine sweep failed"
 cmp "$work/study.parquet" "$work/single.parquet" || die "the merged shards differ from the one-machine run"
 cmp "$work/study.svg" "$work/single.svg" || die "the merged plot differs from the one-machine plot"
+cmp "$work/study.params.parquet" "$work/single.params.parquet" \
+  || die "the merged parameter table differs from the one-machine run's"
 sum=$(sha256sum "$work/study.parquet" | cut -c1-16)
 status=0
 say "OK: $shards Slurm array tasks + merge give the bytes of the one-machine run" \

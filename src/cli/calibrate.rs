@@ -258,6 +258,33 @@ impl Outcome {
     }
 }
 
+/// What `--model auto` fits for `data` on `model`: diagnose (held-out third, `seed`, `regions`,
+/// α = 10⁻³) and then the learned kinds that still gain ([`calib::select::choose`]); `progress`
+/// hears what is fitted, `note` what was chosen. `robocal calibrate` and `robocal sweep --model auto`
+/// resolve `auto` here.
+pub fn choose_auto(
+    model: &sim::Model,
+    data: Named<'_>,
+    seed: u64,
+    regions: usize,
+    progress: &mut dyn FnMut(&str),
+    note: &mut dyn FnMut(&str),
+) -> Result<AutoChoice, CliError> {
+    let mut diagnose_options = super::diagnose::options(1.0 / 3.0, seed, 1e-3)?;
+    diagnose_options.regions = regions;
+    let (d, choice) = calib::select::choose(
+        model,
+        data.table,
+        data.name,
+        &diagnose_options,
+        &AUTO_LEARNED_KINDS,
+        progress,
+    )?;
+    note(&format!("--model auto: diagnose chose {}", d.model));
+    note(&format!("--model auto: {}", choice.note));
+    Ok(choice)
+}
+
 /// Calibrates `robot` on every pose of `data` as `robocal calibrate` does with `options`, and
 /// validates the model (on `test`, by cross-validation or by one split, as `options` say); `progress`
 /// hears which model `--model auto`'s diagnosis fits, `note` what it chose. A calibration that does not
@@ -279,18 +306,7 @@ pub fn calibrate(
     let model_spec = match model_spec {
         Some(s) => s,
         None => {
-            let mut diagnose_options = super::diagnose::options(1.0 / 3.0, options.seed, 1e-3)?;
-            diagnose_options.regions = options.regions;
-            let (d, choice) = calib::select::choose(
-                model,
-                table,
-                data.name,
-                &diagnose_options,
-                &AUTO_LEARNED_KINDS,
-                progress,
-            )?;
-            note(&format!("--model auto: diagnose chose {}", d.model));
-            note(&format!("--model auto: {}", choice.note));
+            let choice = choose_auto(model, data, options.seed, options.regions, progress, note)?;
             let spec = choice.spec.clone();
             auto = Some(choice);
             spec

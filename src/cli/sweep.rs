@@ -1,11 +1,14 @@
-//! `robocal sweep`: a sensitivity study over noise levels and pose counts (see `crate::sweep` and
-//! `docs/sweep.md`), and `robocal sweep-merge`, which joins the shards of one sweep.
+//! `robocal sweep`: a sensitivity study over effect magnitudes, noise levels and pose counts, for any
+//! model `robocal calibrate` fits (see `crate::sweep` and `docs/sweep.md`), and `robocal sweep-merge`,
+//! which joins the shards of one sweep.
 
 use super::paths::Inputs;
 use super::shared::{CliError, CliResult, print_json};
+use crate::sweep::params_table::{self, ParamRow};
 use crate::sweep::table::{self, META_SUBSET, META_SWEEP, SweepRow};
-use crate::sweep::{self as sw, Context, Selection, Subset, SweepSpec};
+use crate::sweep::{self as sw, Context, Score, Selection, Subset, SweepSpec};
 use calib::fit::CalibrationOptions;
+use calib::model::spec::ModelChoice;
 use sim::scenario::{Overrides, Scenario};
 use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
@@ -24,22 +27,37 @@ pub struct Args {
     /// is the part not held out (--test-fraction).
     #[arg(long, value_name = "LIST", allow_hyphen_values = true)]
     poses: String,
-    /// Runs (repetitions) per cell (noise level × pose count).
+    /// Runs (repetitions) per cell (magnitude × noise level × pose count).
     #[arg(long, value_name = "N", allow_hyphen_values = true)]
     reps: String,
-    /// Output Parquet file, one row per run; the plot goes beside it as FILE.svg.
+    /// Factors on the scenario's injected effects, comma-separated (each ≥ 0: 1 = the scenario as
+    /// written, 0 = the effect absent; a joint stiffness is divided by it). Default: 1 alone.
+    #[arg(long, value_name = "LIST", allow_hyphen_values = true)]
+    magnitude: Option<String>,
+    /// Scale only this effect with --magnitude (e.g. gear_backlash or its key backlash); the
+    /// others stay as the scenario writes them.
+    #[arg(long, value_name = "CAUSE")]
+    magnitude_of: Option<String>,
+    /// Output Parquet file, one row per run; the plot goes beside it as FILE.svg and the extension
+    /// parameters' errors as FILE.params.parquet (one row per run and parameter).
     #[arg(long, value_name = "FILE.parquet")]
     out: PathBuf,
     /// Sweep seed; every run derives its own seed from it, its cell and its repetition.
     #[arg(long, value_name = "N", default_value_t = 0)]
     seed: u64,
-    /// Fitted model; only `kinematic` for now.
+    /// Fitted model, as `robocal calibrate --model`: `kinematic`, `+`-joined causes (a cause may
+    /// be limited to joints, `joint_compliance@2,4`), a learned correction, or `auto` (resolved per
+    /// run on its training poses).
     #[arg(long, value_name = "MODEL", default_value = "kinematic")]
     model: String,
     /// Pose selection: `random` (the scenario's campaign) or `planned` (D-optimal choice among
     /// --candidates poses drawn by the scenario's campaign).
     #[arg(long, value_name = "random|planned", value_enum, default_value_t = Selection::Random)]
     selection: Selection,
+    /// What to score: `fit` (the fitted model against the truth) or `diagnose` (also run
+    /// `robocal diagnose` on every run's data: the columns hidden, named, detected, false_alarm).
+    #[arg(long, value_name = "fit|diagnose", value_enum, default_value_t = Score::Fit)]
+    score: Score,
     /// Candidate poses per planned run (default: 10 × the pose count).
     #[arg(long, value_name = "N")]
     candidates: Option<usize>,
@@ -65,7 +83,9 @@ pub struct MergeArgs {
     /// beside it as FILE.svg.
     #[arg(long, value_name = "F.parquet")]
     out: PathBuf,
-    /// Shard files written by `robocal sweep --shard K/N` (or `--only-cell`) of one sweep.
+    /// Shard files written by `robocal sweep --shard K/N` (or `--only-cell`) of one sweep; each
+    /// shard's parameter table is read beside it (`SHARD.params.parquet`; given as a SHARD too, as
+    /// a glob `part*.parquet` does, it is skipped).
     #[arg(value_name = "SHARD", required = true)]
     shards: Vec<PathBuf>,
     /// Print the per-cell summary as one JSON document on stdout.
@@ -113,6 +133,16 @@ pub(crate) fn parse_noise(text: &str) -> Result<Vec<f64>, CliError> {
     })
 }
 
+/// `--magnitude`: finite factors ≥ 0 (`[1]` when not given).
+pub(crate) fn parse_magnitude(text: Option<&str>) -> Result<Vec<f64>, CliError> {
+    match text {
+        None => Ok(vec![1.0]),
+        Some(t) => parse_list("--magnitude", t, "a finite factor ≥ 0", |s| {
+            s.parse::<f64>().ok().filter(|v| v.is_finite() && *v >= 0.0)
+        }),
+    }
+}
+
 /// `--poses`: integers ≥ 1.
 pub(crate) fn parse_poses(text: &str) -> Result<Vec<usize>, CliError> {
     let poses = parse_list("--poses", text, "a whole number ≥ 1", |s| {
@@ -153,40 +183,51 @@ fn plot_path(out: &Path) -> PathBuf {
     out.with_extension("svg")
 }
 
-/// Refuses an `--out` (or the plot beside it) that is one of `inputs`.
+/// Refuses an `--out` (or the plot or parameter table beside it) that is one of `inputs`.
 fn check_outputs(inputs: &Inputs, out: &Path) -> CliResult {
     inputs.check("--out", out)?;
-    inputs.check_as("--out", out, &plot_path(out))
+    inputs.check_as("--out", out, &plot_path(out))?;
+    inputs.check_as("--out", out, &params_table::path_beside(out))
 }
 
 fn write(path: &Path, bytes: &[u8]) -> CliResult {
     Ok(sim::io::write_atomic(path, bytes)?)
 }
 
-/// Writes the sweep file (and, for a complete sweep, its plot) and reports on stderr / stdout.
+/// Writes the sweep file and its parameter table (and, for a complete sweep, its plot) and reports
+/// on stderr / stdout.
 fn finish(
     spec: &SweepSpec,
     rows: &[SweepRow],
+    params: &[ParamRow],
     subset: Option<String>,
     out: &Path,
     json: bool,
 ) -> CliResult {
-    let columns: serde_json::Map<String, serde_json::Value> = table::COLUMNS
-        .iter()
-        .map(|(n, d)| (n.to_string(), serde_json::Value::from(*d)))
-        .collect();
+    let doc = |cols: &[(&str, &str)]| {
+        let m: serde_json::Map<String, serde_json::Value> = cols
+            .iter()
+            .map(|(n, d)| (n.to_string(), serde_json::Value::from(*d)))
+            .collect();
+        serde_json::Value::Object(m).to_string()
+    };
     let mut meta = vec![
         (META_SWEEP.to_string(), spec.to_json()),
-        (
-            table::META_COLUMNS.to_string(),
-            serde_json::Value::Object(columns).to_string(),
-        ),
+        (table::META_COLUMNS.to_string(), doc(table::COLUMNS)),
+    ];
+    let mut param_meta = vec![
+        (META_SWEEP.to_string(), spec.to_json()),
+        (table::META_COLUMNS.to_string(), doc(params_table::COLUMNS)),
     ];
     if let Some(s) = &subset {
         meta.push((META_SUBSET.to_string(), s.clone()));
+        param_meta.push((META_SUBSET.to_string(), s.clone()));
     }
     let bytes = table::parquet_bytes(rows, &meta).map_err(CliError::Runtime)?;
     write(out, &bytes)?;
+    let params_out = params_table::path_beside(out);
+    let bytes = params_table::parquet_bytes(params, &param_meta).map_err(CliError::Runtime)?;
+    write(&params_out, &bytes)?;
     let cells = sw::summarize(spec, rows);
     let plot = if subset.is_none() {
         let p = plot_path(out);
@@ -197,16 +238,19 @@ fn finish(
     };
     eprint!("{}", sw::summary_text(&cells));
     eprintln!(
-        "wrote {} ({} runs{}){}",
+        "wrote {} ({} runs{}), {} ({} parameter rows){}",
         out.display(),
         rows.len(),
         subset.as_ref().map_or(String::new(), |s| format!(", {s}")),
+        params_out.display(),
+        params.len(),
         plot.as_ref()
             .map_or(String::new(), |p| format!(" and {}", p.display()))
     );
     if json {
         print_json(&serde_json::json!({
             "out": out.display().to_string(),
+            "params": params_out.display().to_string(),
             "plot": plot.map(|p| p.display().to_string()),
             "subset": subset,
             "runs": rows.len(),
@@ -227,14 +271,27 @@ pub fn run(args: Args) -> CliResult {
         .ok()
         .filter(|v| *v >= 1)
         .ok_or_else(|| input("--reps", &args.reps, "must be a whole number ≥ 1"))?;
-    let model_spec = calib::model::spec::ModelSpec::parse(&args.model)?;
-    if !model_spec.is_kinematic() {
-        return Err(input(
-            "--model",
-            &args.model,
-            "sweep fits only the kinematic model for now",
-        ));
-    }
+    let magnitude = parse_magnitude(args.magnitude.as_deref())?;
+    let magnitude_of = match &args.magnitude_of {
+        None => None,
+        Some(_) if args.magnitude.is_none() => {
+            return Err(CliError::Input(
+                "--magnitude-of: only with --magnitude (the factors to scale it by)".into(),
+            ));
+        }
+        Some(w) => Some(sw::magnitude::effect_named(w.trim()).ok_or_else(|| {
+            input(
+                "--magnitude-of",
+                w,
+                &format!("not an effect (known: {})", sw::magnitude::effect_names()),
+            )
+        })?),
+    };
+    // The same parser as `robocal calibrate --model`; `None` is `auto`.
+    let model_spec = match args.model.parse::<ModelChoice>()? {
+        ModelChoice::Auto => None,
+        ModelChoice::Model(m) => Some(m),
+    };
     let selection = args.selection;
     if args.candidates.is_some() && selection != Selection::Planned {
         return Err(input(
@@ -258,7 +315,7 @@ pub fn run(args: Args) -> CliResult {
         }
         (Some(s), None) => parse_shard(s)?,
         (None, Some(c)) => {
-            let cells = noise.len() * poses.len();
+            let cells = magnitude.len() * noise.len() * poses.len();
             if c >= cells {
                 return Err(input(
                     "--only-cell",
@@ -270,9 +327,10 @@ pub fn run(args: Args) -> CliResult {
         }
         (None, None) => Subset::All,
     };
-    let runs = noise
+    let runs = magnitude
         .len()
-        .checked_mul(poses.len())
+        .checked_mul(noise.len())
+        .and_then(|c| c.checked_mul(poses.len()))
         .and_then(|c| c.checked_mul(reps))
         .filter(|r| *r <= 100_000_000)
         .ok_or_else(|| input("--reps", &args.reps, "the grid has more than 10⁸ runs"))?;
@@ -302,6 +360,26 @@ pub fn run(args: Args) -> CliResult {
         poses: poses.iter().max().copied(),
         noise: Some(noise[0]),
     })?;
+    if let Some(m) = &model_spec {
+        m.check_joints(probe.model.nq())?;
+    }
+    if let Some(id) = magnitude_of
+        && !probe.effects.contains(id)
+    {
+        return Err(input(
+            "--magnitude-of",
+            args.magnitude_of.as_deref().unwrap_or_default(),
+            &format!(
+                "the scenario {} injects no {}",
+                args.scenario.display(),
+                id.name()
+            ),
+        ));
+    }
+    // The largest factor must leave every effect within what the simulator accepts.
+    if let Some(&m) = magnitude.iter().max_by(|a, b| a.total_cmp(b)) {
+        sw::magnitude::scaled(&probe.effects, m, magnitude_of)?;
+    }
     let options = CalibrationOptions::default();
     let orientation = probe.tracker.six_dof();
     let rank = calib::fit::generic_rank(&probe.model, orientation, &options);
@@ -333,13 +411,18 @@ pub fn run(args: Args) -> CliResult {
         scenario_file,
         scenario_fnv1a64: format!("{:016x}", sim::scenario::fnv1a64(scenario.text.as_bytes())),
         scenario_text: scenario.text.clone(),
+        magnitude,
+        magnitude_of: magnitude_of.map(|e| e.name().to_string()),
         noise_scale: noise,
         poses,
         reps,
         seed: args.seed,
         test_fraction: args.test_fraction,
-        model: model_spec.name(),
+        model: model_spec
+            .as_ref()
+            .map_or_else(|| "auto".to_string(), |m| m.name()),
         selection,
+        score: args.score,
         candidates: args.candidates,
         cells: runs / reps,
         runs,
@@ -348,6 +431,8 @@ pub fn run(args: Args) -> CliResult {
         scenario: &scenario,
         spec: &spec,
         options,
+        model: model_spec,
+        magnitude_of,
     };
     let todo = (0..runs)
         .filter(|&r| subset.contains(&spec.run_id(r)))
@@ -371,10 +456,17 @@ pub fn run(args: Args) -> CliResult {
     if let Some(b) = &bar {
         b.finish_and_clear();
     }
-    let rows = rows?;
+    let results = rows?;
+    let mut rows: Vec<SweepRow> = Vec::with_capacity(results.len());
+    let mut params: Vec<ParamRow> = Vec::new();
+    for r in results {
+        rows.push(r.row);
+        params.extend(r.params);
+    }
     eprintln!(
-        "sweep of {}: {} noise level(s) × {} pose count(s) × {} reps; {} run(s) in {:.1} s on {} thread(s) ({} model, {} poses)",
+        "sweep of {}: {} magnitude(s) × {} noise level(s) × {} pose count(s) × {} reps; {} run(s) in {:.1} s on {} thread(s) ({} model, {} poses)",
         spec.scenario_file,
+        spec.magnitude.len(),
         spec.noise_scale.len(),
         spec.poses.len(),
         spec.reps,
@@ -387,16 +479,38 @@ pub fn run(args: Args) -> CliResult {
             Selection::Planned => "planned",
         }
     );
-    finish(&spec, &rows, subset.describe(), &args.out, args.json)
+    finish(
+        &spec,
+        &rows,
+        &params,
+        subset.describe(),
+        &args.out,
+        args.json,
+    )
 }
 
 /// Runs `robocal sweep-merge`.
-pub fn run_merge(args: MergeArgs) -> CliResult {
+pub fn run_merge(mut args: MergeArgs) -> CliResult {
+    // A shell glob `part*.parquet` also names the shards' parameter tables: those are read beside
+    // their shards, not as shards.
+    let tables: Vec<PathBuf> = args
+        .shards
+        .iter()
+        .map(|s| params_table::path_beside(s))
+        .collect();
+    args.shards.retain(|s| !tables.contains(s));
     let mut inputs = Inputs::new();
-    for s in &args.shards {
+    let param_paths: Vec<PathBuf> = args
+        .shards
+        .iter()
+        .map(|s| params_table::path_beside(s))
+        .collect();
+    for (s, p) in args.shards.iter().zip(&param_paths) {
         inputs.add("SHARD", s);
+        inputs.add("SHARD", p);
     }
     check_outputs(&inputs, &args.out)?;
+    let mut params: Vec<ParamRow> = Vec::new();
     let mut spec_text: Option<(String, PathBuf)> = None;
     let mut owner: Vec<Option<usize>> = Vec::new();
     let mut rows: Vec<Option<SweepRow>> = Vec::new();
@@ -419,7 +533,10 @@ pub fn run_merge(args: MergeArgs) -> CliResult {
                         "{name}: '{META_SWEEP}' metadata is not a sweep description: {e}"
                     ))
                 })?;
-                if s.runs != s.cells * s.reps || s.cells != s.noise_scale.len() * s.poses.len() {
+                if s.runs != s.cells * s.reps
+                    || s.magnitude.is_empty()
+                    || s.cells != s.magnitude.len() * s.noise_scale.len() * s.poses.len()
+                {
                     return Err(CliError::Input(format!(
                         "{name}: inconsistent sweep description (cells {}, reps {}, runs {})",
                         s.cells, s.reps, s.runs
@@ -470,7 +587,30 @@ pub fn run_merge(args: MergeArgs) -> CliResult {
             owner[r] = Some(f);
             rows[r] = Some(row);
         }
+        let pp = &param_paths[f];
+        if !pp.is_file() {
+            return Err(CliError::Input(format!(
+                "{name}: its parameter table {} is missing (robocal sweep writes it beside the shard)",
+                pp.display()
+            )));
+        }
+        for p in params_table::read(pp).map_err(CliError::Input)? {
+            let mine = usize::try_from(p.run)
+                .ok()
+                .and_then(|r| owner.get(r).copied().flatten())
+                == Some(f);
+            if !mine {
+                return Err(CliError::Input(format!(
+                    "{}: run {} is not a run of {name}",
+                    pp.display(),
+                    p.run
+                )));
+            }
+            params.push(p);
+        }
     }
+    // Stable: within a run, the model file's parameter order is kept.
+    params.sort_by_key(|p| p.run);
     let spec = spec.ok_or_else(|| CliError::Input("sweep-merge: no shard files given".into()))?;
     let missing: Vec<usize> = (0..spec.runs).filter(|&r| rows[r].is_none()).collect();
     if !missing.is_empty() {
@@ -491,7 +631,7 @@ pub fn run_merge(args: MergeArgs) -> CliResult {
         spec.scenario_file,
         rows.len()
     );
-    finish(&spec, &rows, None, &args.out, args.json)
+    finish(&spec, &rows, &params, None, &args.out, args.json)
 }
 
 #[cfg(test)]

@@ -1,42 +1,58 @@
-//! Sensitivity studies: generate, calibrate and score many datasets over a grid of noise levels and
-//! pose counts (`robocal sweep`), in shards that merge to the same bytes (`robocal sweep-merge`).
+//! Sensitivity studies: generate, calibrate and score many datasets over a grid of effect magnitudes,
+//! noise levels and pose counts (`robocal sweep`), in shards that merge to the same bytes
+//! (`robocal sweep-merge`).
 //!
-//! A sweep is a [`SweepSpec`]: a scenario, the noise multipliers, the pose counts, the repetitions per
-//! cell, a seed, the fitted model and the pose selection. Cell `c = i · P + j` pairs noise level `i` with
-//! pose count `j` (`P` pose counts); run `r = c · reps + k` is repetition `k` of cell `c`. Run `r` uses
-//! the seed `splitmix64(splitmix64(splitmix64(seed) ^ c) ^ k)` ([`run_seed`]) for everything random in
-//! it (the scenario's parameter draws, poses, tracker noise, the train/test split), so it depends on
-//! nothing but the sweep seed, its cell and its repetition: it can be re-run alone (`--only-cell`, or
-//! `robocal generate --seed S --poses N --noise M` and `robocal calibrate --seed S`, see
-//! `docs/sweep.md`), on any machine, with any number of threads.
+//! A sweep is a [`SweepSpec`]: a scenario, the magnitudes of its injected effects, the noise
+//! multipliers, the pose counts, the repetitions per cell, a seed, the fitted model and the pose
+//! selection. Cell `c = (m · N + i) · P + j` pairs magnitude `m` with noise level `i` and pose count
+//! `j` (`N` noise levels, `P` pose counts); without `--magnitude` there is one magnitude, 1, and
+//! `c = i · P + j` as in sweeps before the magnitude axis. Run `r = c · reps + k` is repetition `k` of
+//! cell `c`. Run `r` uses the seed `splitmix64(splitmix64(splitmix64(seed) ^ c) ^ k)` ([`run_seed`])
+//! for everything random in it (the scenario's parameter draws, poses, tracker noise, the train/test
+//! split), so it depends on nothing but the sweep seed, its cell and its repetition: it can be re-run
+//! alone (`--only-cell`, or, at magnitude 1, `robocal generate --seed S --poses N --noise M` and
+//! `robocal calibrate --seed S`, see `docs/sweep.md`), on any machine, with any number of threads.
 //!
 //! Each run ([`run_one`]):
-//! 1. resolves the scenario with the run's seed, pose count and noise multiplier and simulates the
-//!    campaign in memory (`sim::generate`, the same code as `robocal generate`);
+//! 1. resolves the scenario with the run's seed, pose count and noise multiplier, scales its injected
+//!    effects by the run's magnitude ([`magnitude::scaled`]) and simulates the campaign in memory
+//!    (`sim::generate`, the same code as `robocal generate`);
 //! 2. splits the poses into training and held-out ones (`calib::model::stats::split_by_pose`, as the validation
 //!    split of `robocal calibrate --test-fraction F --seed S`; with planned selection the training poses are the planned
-//!    ones and the held-out ones random, see [`split_counts`]) and calibrates the kinematic model on the training rows
-//!    (`calib::fit`, default options);
-//! 3. scores the result against the truth: the held-out prediction error against the noise-free true
-//!    target positions and what the covariance predicts for it, the error of each identifiable
-//!    parameter combination in units of its predicted standard deviation, and the observability of the
-//!    training poses ([`table::COLUMNS`]).
+//!    ones and the held-out ones random, see [`split_counts`]) and calibrates the sweep's model on the training rows
+//!    (`calib::fit`, default options; `auto` is resolved on the training rows as `robocal calibrate --model auto`
+//!    resolves it);
+//! 3. scores the result against the truth ([`score`]): the held-out prediction error against the
+//!    noise-free true target positions and what the covariance predicts for it, the error of each
+//!    identifiable parameter combination in units of its predicted standard deviation, the error of
+//!    each extension parameter against the simulator's value ([`truth_params`]) in units of its σ,
+//!    and the observability of the training poses ([`table::COLUMNS`], [`params_table::COLUMNS`]).
 
+pub mod detection;
+pub mod magnitude;
+pub mod params_table;
+pub mod score;
 pub mod table;
+pub mod truth_params;
 
 use crate::error::CliError;
-use calib::fit::{Calibration, CalibrationOptions, Dataset, FitRequest, Part, fit};
-use calib::model::extensions::Regressors;
-use calib::model::params::ParamLayout;
-use calib::model::predict::Prediction;
-use nalgebra::{DMatrix, DVector, Vector3};
+use calib::fit::{CalibrationOptions, Dataset, FitRequest, Part, fit};
+use calib::model::spec::ModelSpec;
+use nalgebra::Vector3;
+use params_table::ParamRow;
 use sim::campaign::splitmix64;
-use sim::measurement_table::MeasurementTable;
 use sim::scenario::{Overrides, Scenario};
 use table::SweepRow;
 
+/// Significance level of diagnose's tests with `--score diagnose` (`robocal diagnose`'s default).
+pub const DIAGNOSE_ALPHA: f64 = 1e-3;
+
+/// Regions of diagnose's transfer test when a run resolves `--model auto` or is diagnosed with
+/// `--score diagnose` (none: see `run_inner`).
+pub const AUTO_REGIONS: usize = 0;
+
 /// Version of the sweep file layout (columns and metadata).
-pub const FORMAT_VERSION: u32 = 1;
+pub const FORMAT_VERSION: u32 = 2;
 
 /// How the calibration poses of a run are chosen (also the values of `robocal sweep --selection`).
 #[derive(
@@ -48,6 +64,19 @@ pub enum Selection {
     Random,
     /// D-optimal selection (`calib::fit::plan`) from random candidate configurations.
     Planned,
+}
+
+/// What a sweep scores (also the values of `robocal sweep --score`).
+#[derive(
+    Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize, clap::ValueEnum,
+)]
+#[serde(rename_all = "snake_case")]
+pub enum Score {
+    /// The fitted model against the truth (held-out error, combinations, parameters).
+    Fit,
+    /// Also diagnose on every run's data: which causes it names against those hidden
+    /// ([`detection`]).
+    Diagnose,
 }
 
 /// Everything that decides a sweep's rows; stored as JSON in every file of the sweep.
@@ -65,6 +94,11 @@ pub struct SweepSpec {
     pub scenario_fnv1a64: String,
     /// The scenario's text.
     pub scenario_text: String,
+    /// Factors on the injected effects (`--magnitude`, see [`magnitude`]), in grid order; `[1]`
+    /// without `--magnitude`.
+    pub magnitude: Vec<f64>,
+    /// The one effect the magnitudes scale (`--magnitude-of`, its name), `None` for all of them.
+    pub magnitude_of: Option<String>,
     /// Noise multipliers (as `robocal generate --noise`), in grid order.
     pub noise_scale: Vec<f64>,
     /// Pose counts per run (as `robocal generate --poses`), in grid order.
@@ -75,13 +109,15 @@ pub struct SweepSpec {
     pub seed: u64,
     /// Fraction of each run's poses held out (as `robocal calibrate --test-fraction`).
     pub test_fraction: f64,
-    /// Fitted model (`kinematic`).
+    /// Fitted model: its canonical name (`kinematic+joint_compliance@2,4`), or `auto`.
     pub model: String,
     /// Pose selection.
     pub selection: Selection,
+    /// What is scored.
+    pub score: Score,
     /// Candidates per planned selection (`selection = planned` only).
     pub candidates: Option<usize>,
-    /// Cells (noise levels × pose counts).
+    /// Cells (magnitudes × noise levels × pose counts).
     pub cells: usize,
     /// Runs (cells × reps).
     pub runs: usize,
@@ -96,6 +132,8 @@ pub struct RunId {
     pub cell: usize,
     /// Repetition.
     pub rep: usize,
+    /// Factor on the injected effects.
+    pub magnitude: f64,
     /// Noise multiplier.
     pub noise_scale: f64,
     /// Poses generated.
@@ -115,11 +153,13 @@ impl SweepSpec {
         let cell = r / self.reps;
         let rep = r % self.reps;
         let np = self.poses.len();
+        let nn = self.noise_scale.len();
         RunId {
             run: r,
             cell,
             rep,
-            noise_scale: self.noise_scale[cell / np],
+            magnitude: self.magnitude[cell / (np * nn)],
+            noise_scale: self.noise_scale[(cell / np) % nn],
             poses: self.poses[cell % np],
             seed: run_seed(self.seed, cell, rep),
         }
@@ -169,11 +209,12 @@ impl Subset {
 }
 
 impl RunId {
-    /// `run R (cell C, rep K, noise N, poses P, seed S)`: the prefix of a failed run's error.
+    /// `run R (cell C, rep K, magnitude M, noise N, poses P, seed S)`: the prefix of a failed run's
+    /// error.
     fn describe(&self) -> String {
         format!(
-            "run {} (cell {}, rep {}, noise {}, poses {}, seed {})",
-            self.run, self.cell, self.rep, self.noise_scale, self.poses, self.seed
+            "run {} (cell {}, rep {}, magnitude {}, noise {}, poses {}, seed {})",
+            self.run, self.cell, self.rep, self.magnitude, self.noise_scale, self.poses, self.seed
         )
     }
 }
@@ -186,6 +227,18 @@ pub struct Context<'a> {
     pub spec: &'a SweepSpec,
     /// Calibration settings (defaults, as `robocal calibrate`).
     pub options: CalibrationOptions,
+    /// The fitted model; `None` for `auto` (resolved per run on its training rows).
+    pub model: Option<ModelSpec>,
+    /// The one effect the magnitudes scale, `None` for all.
+    pub magnitude_of: Option<sim::effects::EffectId>,
+}
+
+/// What one run gives: its row of the wide table and its rows of the parameter table.
+pub struct RunResult {
+    /// The wide row.
+    pub row: SweepRow,
+    /// Its extension parameters (none for the kinematic model).
+    pub params: Vec<ParamRow>,
 }
 
 /// Quantile `q ∈ [0, 1]` of sorted finite values by linear interpolation between order statistics
@@ -260,13 +313,13 @@ fn planned_plan(
 }
 
 /// One run: generate, split, calibrate, score (see the module docs).
-pub fn run_one(ctx: &Context<'_>, id: &RunId) -> Result<SweepRow, CliError> {
+pub fn run_one(ctx: &Context<'_>, id: &RunId) -> Result<RunResult, CliError> {
     run_inner(ctx, id).map_err(|e| e.prefixed(&id.describe()))
 }
 
-fn run_inner(ctx: &Context<'_>, id: &RunId) -> Result<SweepRow, CliError> {
+fn run_inner(ctx: &Context<'_>, id: &RunId) -> Result<RunResult, CliError> {
     let spec = ctx.spec;
-    let res = ctx
+    let mut res = ctx
         .scenario
         .resolve(&Overrides {
             seed: Some(id.seed),
@@ -274,6 +327,9 @@ fn run_inner(ctx: &Context<'_>, id: &RunId) -> Result<SweepRow, CliError> {
             noise: Some(id.noise_scale),
         })
         .map_err(CliError::from)?;
+    if id.magnitude != 1.0 {
+        res.effects = magnitude::scaled(&res.effects, id.magnitude, ctx.magnitude_of)?;
+    }
     let plan = match spec.selection {
         Selection::Random => sim::generate::plan_of(&res).map_err(CliError::from)?,
         Selection::Planned => planned_plan(
@@ -302,6 +358,28 @@ fn run_inner(ctx: &Context<'_>, id: &RunId) -> Result<SweepRow, CliError> {
             (0..table.len()).partition(|&r| table.pose[r] < n_train)
         }
     };
+    let model_spec = match &ctx.model {
+        Some(m) => m.clone(),
+        None => {
+            let train_table = table.select_rows(&train_rows);
+            let data = crate::cli::calibrate::Named {
+                table: &train_table,
+                name: "training set",
+            };
+            // Without the transfer test to unseen regions (`calibrate --model auto --regions 0`):
+            // on training sets of a few dozen poses calib's region refits can panic (index out of
+            // bounds in `Subspace::from_factor`, see docs/sweep.md), which would end the sweep.
+            crate::cli::calibrate::choose_auto(
+                &res.model,
+                data,
+                id.seed,
+                AUTO_REGIONS,
+                &mut |_| {},
+                &mut |_| {},
+            )?
+            .spec
+        }
+    };
     let train = Dataset {
         table: &table,
         rows: train_rows,
@@ -317,17 +395,30 @@ fn run_inner(ctx: &Context<'_>, id: &RunId) -> Result<SweepRow, CliError> {
     let cal = fit(
         &res.model,
         &train,
-        &FitRequest::kinematic(&ctx.options).judged_on((!test.rows.is_empty()).then_some(&test)),
+        &FitRequest::new(&model_spec, &ctx.options)
+            .judged_on((!test.rows.is_empty()).then_some(&test)),
     )
     .map_err(CliError::from)?;
     let report = &cal.report;
     let model = &res.model;
-    let layout = ParamLayout::new(model, cal.params.r_flange_target.is_some());
+    let scored = score::Scored::new(model, &cal, &table).map_err(CliError::from)?;
+    let l = score::covariance_factor(&cal);
+    let held = score::held_out(&scored, &l, &table, &test.rows, &p_true);
+    let combos = score::combinations(&scored, &l, &table, &train.rows, &p_true);
+    let (params, causes) = score::extension_params(model, &cal, &res.effects, id.run);
 
-    let l = covariance_factor(&cal);
-    let held = held_out_scores(model, &cal, &layout, &l, &table, &test.rows, &p_true);
-    let scores = parameter_scores(model, &cal, &layout, &l, &table, &train.rows, &p_true);
-
+    let (hidden, named, detected, false_alarm) = match spec.score {
+        Score::Fit => (String::new(), String::new(), false, false),
+        Score::Diagnose => {
+            let mut options = crate::cli::diagnose::options(1.0 / 3.0, id.seed, DIAGNOSE_ALPHA)?;
+            options.regions = AUTO_REGIONS;
+            let d = calib::select::diagnose::diagnose(model, &table, "sweep run", &options)
+                .map_err(CliError::from)?;
+            let h = detection::hidden(&res.effects, model.nq());
+            let (detected, false_alarm) = detection::judge(&h, &d.model, model.nq());
+            (h.name(), d.model.name(), detected, false_alarm)
+        }
+    };
     let rows_n = simulation.rows.len().max(1) as f64;
     let sigma_rms = (simulation
         .rows
@@ -347,12 +438,13 @@ fn run_inner(ctx: &Context<'_>, id: &RunId) -> Result<SweepRow, CliError> {
         / rows_n)
         .sqrt();
     let o = &report.observability;
-    Ok(SweepRow {
+    let mut row = SweepRow {
         run: id.run as i64,
         cell: id.cell as i64,
         rep: id.rep as i64,
         noise_scale: id.noise_scale,
         poses: id.poses as i64,
+        magnitude: id.magnitude,
         seed: id.seed,
         train_poses: report.n_train_poses as i64,
         test_poses: report.n_test_poses as i64,
@@ -372,173 +464,35 @@ fn run_inner(ctx: &Context<'_>, id: &RunId) -> Result<SweepRow, CliError> {
         test_error_predicted_m: held.predicted_m,
         test_error_nominal_rms_m: held.nominal_rms_m,
         rank: cal.subspace.rank as i64,
-        param_combinations: scores.combinations as i64,
-        param_z2_mean: scores.z2_mean,
-        param_z_abs_max: scores.z_abs_max,
-        param_beyond_3sigma: scores.beyond_3sigma as i64,
+        param_combinations: combos.count as i64,
+        param_z2_mean: combos.z2_mean,
+        param_z_abs_max: combos.z_abs_max,
+        param_beyond_3sigma: combos.beyond_3sigma as i64,
         condition_number: o.condition_number,
         sigma_min: o.sigma_min,
         log_det_information: o.log_det_information,
-    })
-}
-
-/// `L` (np × r, physical units) with `C = L Lᵀ` the calibration's covariance:
-/// `L = σ̂ D V_r Σ_r⁻¹`, `σ̂²` the variance factor (`χ²/dof`, or 1 without degrees of freedom).
-fn covariance_factor(cal: &Calibration) -> DMatrix<f64> {
-    let sub = &cal.subspace;
-    let (np, r) = (sub.n_params(), sub.rank);
-    let vf = if cal.report.dof > 0 {
-        cal.report.chi2_per_dof
-    } else {
-        1.0
+        learned: cal.learned.is_some(),
+        params_joint_compliance: 0,
+        param_z2_mean_joint_compliance: f64::NAN,
+        params_gear_backlash: 0,
+        param_z2_mean_gear_backlash: f64::NAN,
+        params_thermal_drift: 0,
+        param_z2_mean_thermal_drift: f64::NAN,
+        params_transmission_error: 0,
+        param_z2_mean_transmission_error: f64::NAN,
+        params_link_deflection: 0,
+        param_z2_mean_link_deflection: f64::NAN,
+        hidden,
+        named,
+        detected,
+        false_alarm,
     };
-    let sf = vf.sqrt();
-    let mut l = DMatrix::zeros(np, r);
-    for c in 0..r {
-        let s = sub.singular_values[c];
-        for k in 0..np {
-            l[(k, c)] = sf * sub.scales[k] * sub.v[(k, c)] / s;
-        }
-    }
-    l
-}
-
-/// Held-out scores (m; NaN without held-out rows).
-struct HeldOut {
-    rms_m: f64,
-    max_m: f64,
-    predicted_m: f64,
-    nominal_rms_m: f64,
-}
-
-/// Errors of the calibrated and of the nominal (base and target only) model against the noise-free
-/// truth `p_true` (tracker frame, m, per table row) on `rows`, and the covariance's prediction
-/// `√(mean trace(J C Jᵀ))`, with `trace(J C Jᵀ) = ‖J L‖²_F` accumulated without allocating.
-fn held_out_scores(
-    model: &sim::Model,
-    cal: &Calibration,
-    layout: &ParamLayout,
-    l: &DMatrix<f64>,
-    table: &MeasurementTable,
-    rows: &[usize],
-    p_true: &[Vector3<f64>],
-) -> HeldOut {
-    if rows.is_empty() {
-        return HeldOut {
-            rms_m: f64::NAN,
-            max_m: f64::NAN,
-            predicted_m: f64::NAN,
-            nominal_rms_m: f64::NAN,
-        };
-    }
-    let np = layout.len();
-    let calibrated = Prediction::new(model, &cal.params);
-    let nominal = Prediction::new(model, &cal.before);
-    let none = Regressors::none();
-    let mut scratch = calibrated.scratch();
-    let mut jbuf = vec![0.0; 3 * np];
-    let (mut e2, mut emax, mut pred2, mut nom2) = (0.0, 0.0f64, 0.0, 0.0);
-    for &row in rows {
-        let q = table.q_row(row);
-        nom2 += (nominal.row(&none, row, q, &mut scratch) - p_true[row]).norm_squared();
-        let e = (calibrated.row(&none, row, q, &mut scratch) - p_true[row]).norm();
-        e2 += e * e;
-        emax = emax.max(e);
-        calibrated.position_jacobian(&scratch, layout, &mut jbuf);
-        for a in 0..3 {
-            let ja = &jbuf[a * np..(a + 1) * np];
-            for c in 0..l.ncols() {
-                let v: f64 = ja.iter().zip(l.column(c).iter()).map(|(x, y)| x * y).sum();
-                pred2 += v * v;
-            }
-        }
-    }
-    let n = rows.len() as f64;
-    HeldOut {
-        rms_m: (e2 / n).sqrt(),
-        max_m: emax,
-        predicted_m: (pred2 / n).sqrt(),
-        nominal_rms_m: (nom2 / n).sqrt(),
-    }
-}
-
-/// Errors of the identifiable combinations in units of their predicted σ.
-struct ParameterScores {
-    combinations: usize,
-    z2_mean: f64,
-    z_abs_max: f64,
-    beyond_3sigma: usize,
-}
-
-/// The identifiable combinations at the training poses (one position per distinct pose, as in
-/// `calib/tests/recovery.rs`): `B = J L = U S Wᵀ`; the combinations are U's columns, their predicted
-/// σ the singular values `S` (m), their errors `z = S⁻¹ Uᵀ (p_estimated − p_true)`.
-fn parameter_scores(
-    model: &sim::Model,
-    cal: &Calibration,
-    layout: &ParamLayout,
-    l: &DMatrix<f64>,
-    table: &MeasurementTable,
-    rows: &[usize],
-    p_true: &[Vector3<f64>],
-) -> ParameterScores {
-    let np = layout.len();
-    let mut first_rows: Vec<usize> = Vec::with_capacity(rows.len());
-    let mut last_pose = None;
-    for &row in rows {
-        if last_pose != Some(table.pose[row]) {
-            first_rows.push(row);
-            last_pose = Some(table.pose[row]);
-        }
-    }
-    let calibrated = Prediction::new(model, &cal.params);
-    let none = Regressors::none();
-    let mut scratch = calibrated.scratch();
-    let mut jbuf = vec![0.0; 3 * np];
-    let m = 3 * first_rows.len();
-    let mut j = DMatrix::zeros(m, np);
-    let mut d = DVector::zeros(m);
-    for (i, &row) in first_rows.iter().enumerate() {
-        let p = calibrated.row(&none, row, table.q_row(row), &mut scratch);
-        calibrated.position_jacobian(&scratch, layout, &mut jbuf);
-        for a in 0..3 {
-            for k in 0..np {
-                j[(3 * i + a, k)] = jbuf[a * np + k];
-            }
-            d[3 * i + a] = p[a] - p_true[row][a];
-        }
-    }
-    let mut out = ParameterScores {
-        combinations: 0,
-        z2_mean: f64::NAN,
-        z_abs_max: 0.0,
-        beyond_3sigma: 0,
-    };
-    if l.ncols() == 0 || m == 0 {
-        return out;
-    }
-    let svd = (&j * l).svd(true, false);
-    let Some(u) = &svd.u else {
-        return out;
-    };
-    let smax = svd.singular_values.max();
-    let mut z2 = 0.0;
-    for (c, &s) in svd.singular_values.iter().enumerate() {
-        if s <= 1e-8 * smax || s == 0.0 {
-            continue;
-        }
-        let z = u.column(c).dot(&d) / s;
-        out.combinations += 1;
-        z2 += z * z;
-        out.z_abs_max = out.z_abs_max.max(z.abs());
-        if z.abs() > 3.0 {
-            out.beyond_3sigma += 1;
-        }
-    }
-    if out.combinations > 0 {
-        out.z2_mean = z2 / out.combinations as f64;
-    }
-    out
+    let scores: Vec<(i64, f64)> = causes
+        .iter()
+        .map(|c| (c.params as i64, c.z2_mean))
+        .collect();
+    row.set_causes(&scores);
+    Ok(RunResult { row, params })
 }
 
 /// Per-cell statistics of a set of rows (for the summary table, the plot and `--json`).
@@ -546,6 +500,8 @@ fn parameter_scores(
 pub struct CellSummary {
     /// Cell index.
     pub cell: usize,
+    /// Factor on the injected effects.
+    pub magnitude: f64,
     /// Noise multiplier.
     pub noise_scale: f64,
     /// Poses per run.
@@ -568,11 +524,30 @@ pub struct CellSummary {
     pub param_z2_mean_median: f64,
     /// Median of `condition_number`.
     pub condition_number_median: f64,
+    /// `--score diagnose`: runs where diagnose named what was hidden (`None` without it).
+    pub detected: Option<usize>,
+    /// `--score diagnose`: runs with a false alarm (`None` without it).
+    pub false_alarms: Option<usize>,
+    /// Per cause in the fitted models: the mean over the runs of `param_z2_mean_<cause>` (runs
+    /// without a z for it left out), and how many runs had one. Empty for the kinematic model.
+    pub causes: Vec<CauseSummary>,
+}
+
+/// One cause's z² over the runs of a cell.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct CauseSummary {
+    /// Cause name.
+    pub cause: String,
+    /// Runs with a `param_z2_mean_<cause>`.
+    pub runs: usize,
+    /// Their mean of it (1 expected).
+    pub z2_mean: f64,
 }
 
 /// Summaries of the cells present in `rows`, in cell order.
 pub fn summarize(spec: &SweepSpec, rows: &[SweepRow]) -> Vec<CellSummary> {
     let np = spec.poses.len();
+    let nn = spec.noise_scale.len();
     let mut out = Vec::new();
     for cell in 0..spec.cells {
         let mine: Vec<&SweepRow> = rows.iter().filter(|r| r.cell as usize == cell).collect();
@@ -589,9 +564,26 @@ pub fn summarize(spec: &SweepSpec, rows: &[SweepRow]) -> Vec<CellSummary> {
             v
         };
         let err = sorted(&|r| r.test_error_rms_m);
+        let causes = calib::model::extensions::Cause::ALL
+            .iter()
+            .enumerate()
+            .filter_map(|(k, c)| {
+                let z2: Vec<f64> = mine
+                    .iter()
+                    .map(|r| r.causes()[k].1)
+                    .filter(|z| z.is_finite())
+                    .collect();
+                (!z2.is_empty()).then(|| CauseSummary {
+                    cause: c.name().to_string(),
+                    runs: z2.len(),
+                    z2_mean: z2.iter().sum::<f64>() / z2.len() as f64,
+                })
+            })
+            .collect();
         out.push(CellSummary {
             cell,
-            noise_scale: spec.noise_scale[cell / np],
+            magnitude: spec.magnitude[cell / (np * nn)],
+            noise_scale: spec.noise_scale[(cell / np) % nn],
             poses: spec.poses[cell % np],
             runs: mine.len(),
             not_converged: mine.iter().filter(|r| !r.converged).count(),
@@ -602,6 +594,11 @@ pub fn summarize(spec: &SweepSpec, rows: &[SweepRow]) -> Vec<CellSummary> {
             predicted_median_m: quantile(&sorted(&|r| r.test_error_predicted_m), 0.5),
             param_z2_mean_median: quantile(&sorted(&|r| r.param_z2_mean), 0.5),
             condition_number_median: quantile(&sorted(&|r| r.condition_number), 0.5),
+            detected: (spec.score == Score::Diagnose)
+                .then(|| mine.iter().filter(|r| r.detected).count()),
+            false_alarms: (spec.score == Score::Diagnose)
+                .then(|| mine.iter().filter(|r| r.false_alarm).count()),
+            causes,
         });
     }
     out
@@ -610,11 +607,12 @@ pub fn summarize(spec: &SweepSpec, rows: &[SweepRow]) -> Vec<CellSummary> {
 /// The summary table (text for stderr).
 pub fn summary_text(cells: &[CellSummary]) -> String {
     let mut s = String::from(
-        " noise  σ (µm)  poses  runs   held-out error vs truth (µm): median [10 %, 90 %]   predicted   measured/predicted   z² mean   condition\n",
+        " magn.  noise  σ (µm)  poses  runs   held-out error vs truth (µm): median [10 %, 90 %]   predicted   measured/predicted   z² mean   condition\n",
     );
     for c in cells {
         s.push_str(&format!(
-            " {:>5}  {:>6.2}  {:>5}  {:>4}   {:>10.3} [{:>9.3}, {:>9.3}]              {:>9.3}   {:>18.3}   {:>7.3}   {:>9.3e}{}\n",
+            " {:>5}  {:>5}  {:>6.2}  {:>5}  {:>4}   {:>10.3} [{:>9.3}, {:>9.3}]              {:>9.3}   {:>18.3}   {:>7.3}   {:>9.3e}{}\n",
+            c.magnitude,
             c.noise_scale,
             c.sigma_median_m * 1e6,
             c.poses,
@@ -632,18 +630,42 @@ pub fn summary_text(cells: &[CellSummary]) -> String {
                 String::new()
             }
         ));
+        if let (Some(d), Some(f)) = (c.detected, c.false_alarms) {
+            s.push_str(&format!(
+                "        diagnose: detected in {d} of {} run(s), a false alarm in {f}\n",
+                c.runs
+            ));
+        }
+        for k in &c.causes {
+            s.push_str(&format!(
+                "        {}: mean z² of its parameters {:.3} over {} run(s)\n",
+                k.cause, k.z2_mean, k.runs
+            ));
+        }
     }
     s
 }
 
-/// The plot: held-out error against the truth vs poses per run, log-log, one colour per noise level;
+/// The plot: held-out error against the truth vs poses per run, log-log, one colour per noise level
+/// (and magnitude, with several);
 /// measured median (line and markers) with its 10–90 % band, and the covariance's prediction (dashed).
 pub fn plot_svg(spec: &SweepSpec, cells: &[CellSummary]) -> String {
     use plot::{Plot, Series, Style};
     let mut series = Vec::new();
-    for &noise in &spec.noise_scale {
-        let mine: Vec<&CellSummary> = cells.iter().filter(|c| c.noise_scale == noise).collect();
-        let label = format!("noise ×{noise}");
+    let lines = spec
+        .magnitude
+        .iter()
+        .flat_map(|&m| spec.noise_scale.iter().map(move |&n| (m, n)));
+    for (magnitude, noise) in lines {
+        let mine: Vec<&CellSummary> = cells
+            .iter()
+            .filter(|c| c.noise_scale == noise && c.magnitude == magnitude)
+            .collect();
+        let label = if spec.magnitude.len() > 1 {
+            format!("magnitude ×{magnitude}, noise ×{noise}")
+        } else {
+            format!("noise ×{noise}")
+        };
         let x = |c: &CellSummary| c.poses as f64;
         series.push(Series {
             label: label.clone(),
@@ -681,19 +703,19 @@ pub fn plot_svg(spec: &SweepSpec, cells: &[CellSummary]) -> String {
     .to_svg(800, 520)
 }
 
-/// Runs the runs of `subset` in parallel (rayon, the current pool) and returns their rows in run order;
-/// `tick` is called after each run. On failure, the error of the lowest failing run.
+/// Runs the runs of `subset` in parallel (rayon, the current pool) and returns their results in run
+/// order; `tick` is called after each run. On failure, the error of the lowest failing run.
 pub fn run_sweep(
     ctx: &Context<'_>,
     subset: Subset,
     tick: &(dyn Fn() + Sync),
-) -> Result<Vec<SweepRow>, CliError> {
+) -> Result<Vec<RunResult>, CliError> {
     use rayon::prelude::*;
     let ids: Vec<RunId> = (0..ctx.spec.runs)
         .map(|r| ctx.spec.run_id(r))
         .filter(|id| subset.contains(id))
         .collect();
-    let results: Vec<Result<SweepRow, CliError>> = ids
+    let results: Vec<Result<RunResult, CliError>> = ids
         .par_iter()
         .map(|id| {
             let out = run_one(ctx, id);
@@ -763,6 +785,8 @@ mod tests {
             scenario_file: "s.toml".into(),
             scenario_fnv1a64: "0".into(),
             scenario_text: String::new(),
+            magnitude: vec![1.0],
+            magnitude_of: None,
             noise_scale: vec![0.5, 1.0],
             poses: vec![20, 40, 80],
             reps: 4,
@@ -770,6 +794,7 @@ mod tests {
             test_fraction: 0.3,
             model: "kinematic".into(),
             selection: Selection::Random,
+            score: Score::Fit,
             candidates: None,
             cells: 6,
             runs: 24,
@@ -777,6 +802,26 @@ mod tests {
         // Run 17 = cell 4 (17 / 4), rep 1; cell 4 = noise index 1, pose index 1.
         let id = spec.run_id(17);
         assert_eq!((id.cell, id.rep, id.noise_scale, id.poses), (4, 1, 1.0, 40));
+        assert_eq!(id.magnitude, 1.0);
+        // Magnitude outermost: with three magnitudes, cells 0-5 keep their noise and poses, and
+        // cell 6 · 2 + 4 = 16 is magnitude 2 (index 2) at noise index 1, pose index 1.
+        let mut three = spec.clone();
+        three.magnitude = vec![0.0, 0.5, 2.0];
+        three.cells = 18;
+        three.runs = 72;
+        for r in 0..24 {
+            let (a, b) = (spec.run_id(r), three.run_id(r));
+            assert_eq!(
+                (a.cell, a.seed, a.noise_scale, a.poses),
+                (b.cell, b.seed, b.noise_scale, b.poses)
+            );
+            assert_eq!(b.magnitude, 0.0);
+        }
+        let id = three.run_id(16 * 4 + 3);
+        assert_eq!(
+            (id.cell, id.magnitude, id.noise_scale, id.poses),
+            (16, 2.0, 1.0, 40)
+        );
         let mut seen = [0; 24];
         for k in 0..5 {
             for (r, count) in seen.iter_mut().enumerate() {

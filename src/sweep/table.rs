@@ -6,7 +6,7 @@
 //! what makes a merge of shards byte-identical to a single run.
 
 use arrow_array::{
-    Array, ArrayRef, BooleanArray, Float64Array, Int64Array, RecordBatch, UInt64Array,
+    Array, ArrayRef, BooleanArray, Float64Array, Int64Array, RecordBatch, StringArray, UInt64Array,
 };
 use arrow_schema::{DataType, Field, Schema};
 use std::path::Path;
@@ -24,7 +24,7 @@ pub const META_SUBSET: &str = "robocal.sweep.subset";
 const ROW_GROUP_ROWS: usize = 65_536;
 
 /// An Arrow column type of the sweep table.
-trait ColumnType: Sized + Copy {
+trait ColumnType: Sized + Clone {
     fn data_type() -> DataType;
     fn array(values: Vec<Self>) -> ArrayRef;
     fn read(array: &dyn Array) -> Option<Vec<Self>>;
@@ -82,12 +82,25 @@ impl ColumnType for bool {
     }
 }
 
+impl ColumnType for String {
+    fn data_type() -> DataType {
+        DataType::Utf8
+    }
+    fn array(values: Vec<Self>) -> ArrayRef {
+        Arc::new(StringArray::from(values))
+    }
+    fn read(array: &dyn Array) -> Option<Vec<Self>> {
+        let a = array.as_any().downcast_ref::<StringArray>()?;
+        (a.null_count() == 0).then(|| (0..a.len()).map(|i| a.value(i).to_string()).collect())
+    }
+}
+
 /// Declares [`SweepRow`], [`COLUMNS`] and the conversions from one list of `name: type = "doc"`.
 macro_rules! sweep_columns {
     ($( $field:ident : $ty:ty = $doc:literal ),* $(,)?) => {
         /// One run of a sweep: what was generated, how the calibration went, and its scores against
         /// the truth. Units are in the field names (`_m` metres); see [`COLUMNS`].
-        #[derive(Clone, Copy, Debug, PartialEq)]
+        #[derive(Clone, Debug, PartialEq)]
         pub struct SweepRow {
             $( #[doc = $doc] pub $field: $ty, )*
         }
@@ -96,7 +109,7 @@ macro_rules! sweep_columns {
         pub const COLUMNS: &[(&str, &str)] = &[ $( (stringify!($field), $doc) ),* ];
 
         fn arrays(rows: &[SweepRow]) -> Vec<ArrayRef> {
-            vec![ $( <$ty as ColumnType>::array(rows.iter().map(|r| r.$field).collect()) ),* ]
+            vec![ $( <$ty as ColumnType>::array(rows.iter().map(|r| r.$field.to_owned()).collect()) ),* ]
         }
 
         fn fields() -> Vec<Field> {
@@ -116,32 +129,33 @@ macro_rules! sweep_columns {
                     })?
                 };
             )*
-            Ok((0..batch.num_rows()).map(|i| SweepRow { $( $field: $field[i], )* }).collect())
+            Ok((0..batch.num_rows()).map(|i| SweepRow { $( $field: $field[i].to_owned(), )* }).collect())
         }
     };
 }
 
 sweep_columns! {
     run: i64 = "run index, 0-based: cell · reps + rep",
-    cell: i64 = "cell index, 0-based: noise index · (number of pose counts) + pose-count index",
+    cell: i64 = "cell index, 0-based: (magnitude index · (number of noise levels) + noise index) · (number of pose counts) + pose-count index",
     rep: i64 = "repetition within the cell, 0-based",
     noise_scale: f64 = "tracker noise multiplier (the value of --noise, as in `robocal generate --noise`)",
     poses: i64 = "poses generated for the run (as `robocal generate --poses`)",
+    magnitude: f64 = "factor on the injected effects (the value of --magnitude; 1 = the scenario as written, 0 = absent)",
     seed: u64 = "seed of the run's dataset and split (`robocal generate --seed`, `robocal calibrate --seed`)",
     train_poses: i64 = "poses the calibration used",
     test_poses: i64 = "poses held out for scoring",
     sigma_rms_m: f64 = "RMS over the rows of the tracker's per-axis standard deviation, the `sigma` column (m); 0 without noise",
     injected_rms_m: f64 = "RMS over the rows of the displacement of the real target from the nominal one by all injected effects (m)",
-    converged: bool = "the kinematic fit converged",
-    iterations: i64 = "solver iterations of the kinematic fit",
-    chi2_per_dof: f64 = "χ²/dof of the kinematic fit (1 when the noise model is right and the model explains the data)",
+    converged: bool = "the fit converged",
+    iterations: i64 = "solver iterations of the fit",
+    chi2_per_dof: f64 = "χ²/dof of the fit (1 when the noise model is right and the model explains the data)",
     train_rms_m: f64 = "RMS of |predicted − measured| on the training rows after calibration (m)",
     test_rms_measured_m: f64 = "RMS of |predicted − measured| on the held-out rows (m): the test RMS `robocal calibrate` reports",
     test_error_rms_m: f64 = "RMS of |predicted − true| on the held-out rows, against the noise-free true target (m)",
     test_error_max_m: f64 = "largest |predicted − true| on the held-out rows (m)",
     test_error_predicted_m: f64 = "what the covariance predicts for test_error_rms_m: √(mean over held-out rows of trace(J C Jᵀ)) (m)",
     test_error_nominal_rms_m: f64 = "RMS of |predicted − true| on the held-out rows for the nominal robot with only base and target fitted (m)",
-    rank: i64 = "identifiable parameter combinations of the calibration (31 for the iiwa 7 from positions: 4R + 2P + 3)",
+    rank: i64 = "identifiable parameter combinations of the calibration (31 for the kinematic iiwa 7 from positions: 4R + 2P + 3; extension parameters add theirs)",
     param_combinations: i64 = "identifiable parameter combinations scored (rank of J C Jᵀ at the training poses; equals rank unless the prediction Jacobian is degenerate)",
     param_z2_mean: f64 = "mean of z_k² over the identifiable combinations, z_k = their error in units of the predicted σ (1 expected)",
     param_z_abs_max: f64 = "largest |z_k| (about 3 expected for r ≈ 31)",
@@ -149,6 +163,64 @@ sweep_columns! {
     condition_number: f64 = "condition number σ₁/σ_r of the scaled, noise-weighted Jacobian of the training poses",
     sigma_min: f64 = "smallest identifiable singular value σ_r of that Jacobian (dimensionless: scaled by the expected parameter magnitudes and the noise)",
     log_det_information: f64 = "log det of the scaled information matrix in the identifiable subspace (the D-optimal criterion)",
+    learned: bool = "the fitted model has a learned residual correction (held-out errors include it; the predicted error and the combinations are the physical model's)",
+    params_joint_compliance: i64 = "joint_compliance parameters in the fitted model (0: not in it)",
+    param_z2_mean_joint_compliance: f64 = "mean z² of the joint_compliance parameters with a z (FILE.params.parquet; 1 expected; NaN without any)",
+    params_gear_backlash: i64 = "gear_backlash parameters in the fitted model (0: not in it)",
+    param_z2_mean_gear_backlash: f64 = "mean z² of the gear_backlash parameters with a z (1 expected; NaN without any)",
+    params_thermal_drift: i64 = "thermal_drift parameters in the fitted model (0: not in it)",
+    param_z2_mean_thermal_drift: f64 = "mean z² of the thermal_drift parameters with a z (NaN without any: an injected thermal drift is not mapped)",
+    params_transmission_error: i64 = "transmission_error parameters in the fitted model (0: not in it)",
+    param_z2_mean_transmission_error: f64 = "mean z² of the transmission_error parameters with a z (1 expected; NaN without any)",
+    params_link_deflection: i64 = "link_deflection parameters in the fitted model (0: not in it)",
+    param_z2_mean_link_deflection: f64 = "mean z² of the link_deflection parameters with a z (1 expected; NaN without any)",
+    hidden: String = "--score diagnose: the causes the run injected, at their joints, as a model name (`kinematic+gear_backlash@2,4`; `kinematic`: none); empty without --score diagnose",
+    named: String = "--score diagnose: the model diagnose adopted on the run's data (its causes at their joints); empty without --score diagnose",
+    detected: bool = "--score diagnose: diagnose named every hidden cause and none at a joint where it is not hidden (hidden joints may be left out); false without --score diagnose",
+    false_alarm: bool = "--score diagnose: diagnose named a cause that is not hidden, or one at a joint where it is not hidden; false without --score diagnose",
+}
+
+/// The `params_<cause>` and `param_z2_mean_<cause>` fields of a row, in [`calib::model::extensions::Cause::ALL`]
+/// order.
+impl SweepRow {
+    /// `(params, z² mean)` of each cause, in `Cause::ALL` order.
+    pub fn causes(&self) -> [(i64, f64); 5] {
+        [
+            (
+                self.params_joint_compliance,
+                self.param_z2_mean_joint_compliance,
+            ),
+            (self.params_gear_backlash, self.param_z2_mean_gear_backlash),
+            (self.params_thermal_drift, self.param_z2_mean_thermal_drift),
+            (
+                self.params_transmission_error,
+                self.param_z2_mean_transmission_error,
+            ),
+            (
+                self.params_link_deflection,
+                self.param_z2_mean_link_deflection,
+            ),
+        ]
+    }
+
+    /// Sets the cause fields from `scores` (`Cause::ALL` order).
+    pub fn set_causes(&mut self, scores: &[(i64, f64)]) {
+        let get = |k: usize| scores.get(k).copied().unwrap_or((0, f64::NAN));
+        (
+            self.params_joint_compliance,
+            self.param_z2_mean_joint_compliance,
+        ) = get(0);
+        (self.params_gear_backlash, self.param_z2_mean_gear_backlash) = get(1);
+        (self.params_thermal_drift, self.param_z2_mean_thermal_drift) = get(2);
+        (
+            self.params_transmission_error,
+            self.param_z2_mean_transmission_error,
+        ) = get(3);
+        (
+            self.params_link_deflection,
+            self.param_z2_mean_link_deflection,
+        ) = get(4);
+    }
 }
 
 /// Deterministic Parquet bytes of `rows` (in the order given) with the key-value `metadata`.
@@ -225,6 +297,7 @@ mod tests {
             rep: run % 3,
             noise_scale: 0.5,
             poses: 40,
+            magnitude: 1.0,
             seed: u64::MAX - run as u64,
             train_poses: 28,
             test_poses: 12,
@@ -247,6 +320,25 @@ mod tests {
             condition_number: 1.2e3,
             sigma_min: 4.5,
             log_det_information: 201.5,
+            learned: false,
+            params_joint_compliance: 7,
+            param_z2_mean_joint_compliance: 0.9,
+            params_gear_backlash: 0,
+            param_z2_mean_gear_backlash: 1.1,
+            params_thermal_drift: 0,
+            param_z2_mean_thermal_drift: 1.2000000000000002,
+            params_transmission_error: 0,
+            param_z2_mean_transmission_error: 1.3,
+            params_link_deflection: 0,
+            param_z2_mean_link_deflection: 1.4000000000000001,
+            hidden: "kinematic+gear_backlash@2,4".into(),
+            named: if run % 2 == 0 {
+                "kinematic".into()
+            } else {
+                String::new()
+            },
+            detected: run % 3 == 0,
+            false_alarm: false,
         }
     }
 
@@ -267,6 +359,26 @@ mod tests {
         // Written again from what was read: the same bytes.
         assert_eq!(parquet_bytes(&back.rows, &back.metadata).unwrap(), bytes);
         let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    /// The cause columns follow calib's registry: a new cause needs its two columns.
+    #[test]
+    fn every_cause_has_its_columns_in_registry_order() {
+        use calib::model::extensions::Cause;
+        assert_eq!(Cause::ALL.len(), row(0).causes().len());
+        for (k, c) in Cause::ALL.iter().enumerate() {
+            let names: Vec<&str> = COLUMNS.iter().map(|(n, _)| *n).collect();
+            let at = names
+                .iter()
+                .position(|n| *n == format!("params_{}", c.name()))
+                .unwrap_or_else(|| panic!("no column params_{c}"));
+            assert_eq!(names[at + 1], format!("param_z2_mean_{}", c.name()));
+            let mut r = row(0);
+            let mut scores = vec![(0, f64::NAN); Cause::ALL.len()];
+            scores[k] = (3, 0.5);
+            r.set_causes(&scores);
+            assert_eq!(r.causes()[k], (3, 0.5));
+        }
     }
 
     #[test]
