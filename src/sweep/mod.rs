@@ -48,8 +48,9 @@ use table::SweepRow;
 pub const DIAGNOSE_ALPHA: f64 = 1e-3;
 
 /// Regions of diagnose's transfer test when a run resolves `--model auto` or is diagnosed with
-/// `--score diagnose` (none: see `run_inner`).
-pub const AUTO_REGIONS: usize = 0;
+/// `--score diagnose`: the default of `robocal calibrate` and `robocal diagnose`, so that a sweep
+/// studies what users run.
+pub const AUTO_REGIONS: usize = calib::validate::regions::DEFAULT_REGIONS;
 
 /// Version of the sweep file layout (columns and metadata).
 pub const FORMAT_VERSION: u32 = 2;
@@ -366,9 +367,7 @@ fn run_inner(ctx: &Context<'_>, id: &RunId) -> Result<RunResult, CliError> {
                 table: &train_table,
                 name: "training set",
             };
-            // Without the transfer test to unseen regions (`calibrate --model auto --regions 0`):
-            // on training sets of a few dozen poses calib's region refits can panic (index out of
-            // bounds in `Subspace::from_factor`, see docs/sweep.md), which would end the sweep.
+            // As `calibrate --model auto` with its default regions.
             crate::cli::calibrate::choose_auto(
                 &res.model,
                 data,
