@@ -769,7 +769,7 @@ fn last_line_end(buf: &[u8]) -> Option<usize> {
     for (i, &b) in buf.iter().enumerate() {
         match b {
             b'"' => quotes += 1,
-            b'\n' if quotes % 2 == 0 => last = Some(i + 1),
+            b'\n' if quotes.is_multiple_of(2) => last = Some(i + 1),
             _ => {}
         }
     }
@@ -786,7 +786,7 @@ fn header_line_end(buf: &[u8]) -> Option<usize> {
                 quotes += 1;
                 content = true;
             }
-            b'\n' if quotes % 2 == 0 && content => return Some(i + 1),
+            b'\n' if quotes.is_multiple_of(2) && content => return Some(i + 1),
             b' ' | b'\t' | b'\r' | b'\n' => {}
             _ => content = true,
         }
