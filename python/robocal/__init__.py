@@ -194,6 +194,17 @@ class Model:
         model's held-out error."""
         return to_frame(self._native.predict(to_table(data, configurations=True)))
 
+    def predict_file(self, data: str | os.PathLike[str], out: str | os.PathLike[str],
+                     chunk_rows: int = 65_536) -> int:
+        """:meth:`predict` from the file ``data`` (CSV or Parquet) to the CSV file ``out``, as
+        ``robocal predict --data DATA --out OUT`` writes it (the same bytes), streamed: the file is
+        read, predicted and written ``chunk_rows`` rows at a time, so memory stays bounded whatever
+        its length (10⁷ rows in about 53 MB). ``out`` is written atomically. Returns the number of
+        rows predicted; a bad row raises :class:`robocal.BadInput` naming its file-wide row (and
+        leaves ``out`` as it was); the checks' warnings go to stderr, as the command's do."""
+        rows, _outside = self._native.predict_file(os.fspath(data), os.fspath(out), int(chunk_rows))
+        return rows
+
     def compensate(self, data: DataLike, **options: Any) -> "pd.DataFrame":
         """The joints to command so that the calibrated robot puts the target where it should be, as
         ``robocal compensate``: every part of the model inverted (geometry, each cause at the row's

@@ -84,6 +84,8 @@ class CalibratedModel:
     def to_json(self) -> str: ...
     def predict(self, table: Table) -> list[tuple[str, npt.NDArray[Any]]]:
         """``pose, x, y, z`` (and ``qw, qx, qy, qz``): tracker frame, m."""
+    def predict_file(self, data: str, out: str, chunk_rows: int) -> tuple[int, int]:
+        """``robocal predict`` file to file, streamed: (rows, rows outside the support)."""
     @property
     def robot(self) -> str: ...
     @property

@@ -618,6 +618,28 @@ impl CalibratedModel {
         Ok(out)
     }
 
+    /// `robocal predict` from the file `data` to the CSV file `out`, streamed in pieces of
+    /// `chunk_rows` rows (bounded memory, whatever the file's length): `(rows, outside_support)`.
+    fn predict_file(
+        &self,
+        py: Python<'_>,
+        data: &str,
+        out: &str,
+        chunk_rows: usize,
+    ) -> PyResult<(usize, usize)> {
+        if chunk_rows == 0 {
+            return Err(raise(
+                py,
+                CliError::Input("chunk_rows=0: a piece holds at least 1 row".into()),
+            ));
+        }
+        let summary = work(py, || {
+            let mut predictor = Predictor::from_file(&self.file)?;
+            predict::predict_streaming(&mut predictor, Path::new(data), Path::new(out), chunk_rows)
+        })?;
+        Ok((summary.rows, summary.outside_support))
+    }
+
     /// Compensated joints for the rows of `table` as `robocal compensate` with the value flags
     /// `args` (`["--program"]`, `["--frame=base"]`): `(columns, failures)` with columns `pose,
     /// q1..qN, residual_m, outside_support, converged` and the input's context columns; `failures`

@@ -106,6 +106,14 @@ def test_predict_gives_the_cli_predictions(cli, generated, tmp_path):
     assert list(got.columns) == list(expected.columns) == ["pose", "x", "y", "z", "sigma_m", "outside_support"]
     for c in expected.columns:
         np.testing.assert_array_equal(got[c].to_numpy(), expected[c].to_numpy(), err_msg=c)
+    # From file to file, streamed in pieces: the command's bytes, whatever the piece size.
+    for rows in (7, 65_536):
+        out = tmp_path / f"streamed_{rows}.csv"
+        assert model.predict_file(data, out, chunk_rows=rows) == len(expected)
+        assert out.read_bytes() == (tmp_path / "p.csv").read_bytes()
+    with pytest.raises(robocal.BadInput, match="chunk_rows=0"):
+        model.predict_file(data, tmp_path / "never.csv", chunk_rows=0)
+    assert not (tmp_path / "never.csv").exists()
     # Joint configurations alone, as predict reads them: only what the model needs.
     frame = robocal.read_table(data).drop(columns=["x", "y", "z", "sigma", "t", "temp"])
     np.testing.assert_array_equal(model.predict(frame)[["x", "y", "z"]].to_numpy(), expected[["x", "y", "z"]].to_numpy())

@@ -140,21 +140,25 @@ pub fn run(args: Args) -> CliResult {
 }
 
 /// What [`predict_streaming`] wrote.
-struct StreamSummary {
-    rows: usize,
-    outside_support: usize,
-    orientation: bool,
-    sigma_m: bool,
+pub struct StreamSummary {
+    /// Rows predicted.
+    pub rows: usize,
+    /// Rows marked `outside_support`.
+    pub outside_support: usize,
+    /// Whether the output has `qw, qx, qy, qz`.
+    pub orientation: bool,
+    /// Whether the output has `sigma_m`.
+    pub sigma_m: bool,
     /// The first piece's rows (for `--urdf-out`, which compares at the first 200).
-    first_rows: MeasurementTable,
+    pub first_rows: MeasurementTable,
 }
 
 /// Predicts every row of the configurations file `data` into the CSV file `out`, piece by piece
 /// ([`measurement_table::read_configuration_chunks`], `chunk_rows` rows): memory holds one
 /// piece and its predictions, whatever the file's length. Each piece is checked against the robot
 /// ([`ModelCheck`]: errors name file-wide rows); the warnings go to stderr at the end. `out` is
-/// written atomically: an error leaves it as it was.
-fn predict_streaming(
+/// written atomically: an error leaves it as it was. The Python API's `Model.predict_file` calls it.
+pub fn predict_streaming(
     predictor: &mut Predictor,
     data: &Path,
     out: &Path,
