@@ -301,6 +301,32 @@ pub(crate) fn table_err(
     }
 }
 
+/// `e` with a row's error moved to the file's numbering: the 1-based row of a piece (or a whole
+/// table, `first_row` 0) plus the `first_row` rows before it, and, when it names no line yet, the
+/// line `line_of` gives for the piece's row (CSV). Other errors pass unchanged.
+pub(crate) fn at_file_row(
+    e: SimError,
+    first_row: usize,
+    line_of: impl FnOnce(usize) -> Option<usize>,
+) -> SimError {
+    match e {
+        SimError::Table {
+            file,
+            row: Some(r),
+            line,
+            column,
+            message,
+        } => SimError::Table {
+            file,
+            row: Some(first_row + r),
+            line: line.or_else(|| line_of(r)),
+            column,
+            message,
+        },
+        e => e,
+    }
+}
+
 impl MeasurementTable {
     /// An empty table with `n_joints` joint columns and the given optional columns (present ones start
     /// as empty vectors), ready for [`MeasurementTable::push_row`].

@@ -183,22 +183,9 @@ impl<'a> ModelCheck<'a> {
     /// (naming the file-wide row), or `Ok` with its warnings kept for [`ModelCheck::warnings`].
     pub fn add(&mut self, table: &MeasurementTable, first_row: usize) -> Result<()> {
         let name = self.name.clone();
-        table.validate_named(&name).map_err(|e| match e {
-            crate::error::SimError::Table {
-                file,
-                row: Some(r),
-                line,
-                column,
-                message,
-            } => crate::error::SimError::Table {
-                file,
-                row: Some(first_row + r),
-                line,
-                column,
-                message,
-            },
-            e => e,
-        })?;
+        table
+            .validate_named(&name)
+            .map_err(|e| super::at_file_row(e, first_row, |_| None))?;
         let model = self.model;
         let nq = model.nq();
         if table.n_joints != nq {

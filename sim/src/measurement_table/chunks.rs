@@ -152,22 +152,9 @@ impl TableChunks {
                         return Ok(None);
                     }
                     let table = columns.finish();
-                    table.validate_named(name).map_err(|e| match e {
-                        SimError::Table {
-                            file,
-                            row: Some(r),
-                            line,
-                            column,
-                            message,
-                        } => SimError::Table {
-                            file,
-                            row: Some(rows + r),
-                            line,
-                            column,
-                            message,
-                        },
-                        e => e,
-                    })?;
+                    table
+                        .validate_named(name)
+                        .map_err(|e| super::at_file_row(e, rows, |_| None))?;
                     Ok(Some((rows, table)))
                 })
             }

@@ -232,22 +232,9 @@ pub(super) fn read_csv_bytes(
 ) -> Result<MeasurementTable> {
     let bytes = bytes.strip_prefix(b"\xEF\xBB\xBF").unwrap_or(bytes);
     let table = parse(bytes, file, positions)?;
-    table.validate_named(file).map_err(|e| match e {
-        SimError::Table {
-            file,
-            row: Some(r),
-            line: None,
-            column,
-            message,
-        } => SimError::Table {
-            file,
-            row: Some(r),
-            line: line_of_row(bytes, r),
-            column,
-            message,
-        },
-        e => e,
-    })?;
+    table
+        .validate_named(file)
+        .map_err(|e| super::at_file_row(e, 0, |r| line_of_row(bytes, r)))?;
     Ok(table)
 }
 
@@ -703,21 +690,11 @@ impl CsvChunks {
                 })?;
             let first_row = self.rows_before;
             if chunk.rows > 0 {
-                chunk.table.validate_named(file).map_err(|e| match e {
-                    SimError::Table {
-                        file,
-                        row: Some(r),
-                        line: None,
-                        column,
-                        message,
-                    } => SimError::Table {
-                        file,
-                        row: Some(first_row + r),
-                        line: line_of_data_row(part, r).map(|l| self.lines_before + l),
-                        column,
-                        message,
-                    },
-                    e => e,
+                let lines_before = self.lines_before;
+                chunk.table.validate_named(file).map_err(|e| {
+                    super::at_file_row(e, first_row, |r| {
+                        line_of_data_row(part, r).map(|l| lines_before + l)
+                    })
                 })?;
             }
             self.rows_before += chunk.rows;
