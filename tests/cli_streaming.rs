@@ -101,3 +101,102 @@ fn predict_in_pieces_is_the_whole_table_prediction_byte_for_byte() {
     }
     std::fs::remove_dir_all(&d).unwrap();
 }
+
+/// Runs robocal expecting a failure; `(exit code, stderr)`.
+fn robocal_fails(args: &[&str]) -> (Option<i32>, String) {
+    let o = assert_cmd::Command::new(env!("CARGO_BIN_EXE_robocal"))
+        .args(args)
+        .output()
+        .expect("run robocal");
+    (
+        o.status.code(),
+        String::from_utf8_lossy(&o.stderr).into_owned(),
+    )
+}
+
+#[test]
+fn calibrate_streamed_and_in_memory_agree_and_refuse_what_streams_cannot_do() {
+    let d = scratch_dir("robocal_cli_stream", "calibrate");
+    let scenario = repo().join("scenarios/iiwa7_kinematic.toml");
+    let gen_dir = d.join("gen");
+    robocal_ok(&[
+        "generate",
+        "--scenario",
+        &s(&scenario),
+        "--out",
+        &s(&gen_dir),
+        "--seed",
+        "9",
+        "--poses",
+        "3000",
+    ]);
+    let data = gen_dir.join("measurements.parquet");
+    let run = |mode: &str| {
+        let out = d.join(format!("model_{mode}.json"));
+        let (stdout, _) = robocal_ok(&[
+            "calibrate",
+            "--data",
+            &s(&data),
+            "--out",
+            &s(&out),
+            "--folds",
+            "0",
+            "--stream",
+            mode,
+            "--chunk-rows",
+            "700",
+            "--json",
+        ]);
+        let doc: serde_json::Value = serde_json::from_str(&stdout).unwrap();
+        (doc, CalibratedModel::load(&out).unwrap())
+    };
+    let (streamed, _) = run("always");
+    let (memory, _) = run("never");
+    assert_eq!(streamed["stream"]["rows"], 3000, "{}", streamed["stream"]);
+    assert_eq!(streamed["stream"]["chunk_rows"], 700);
+    assert!(memory.get("stream").is_none_or(|v| v.is_null()));
+    let (rs, rm) = (&streamed["report"], &memory["report"]);
+    for key in ["dof", "n_train_rows", "n_train_poses"] {
+        assert_eq!(rs[key], rm[key], "{key}");
+    }
+    assert_eq!(rs["after"]["solver"]["rank"], rm["after"]["solver"]["rank"]);
+    // The same minimum: the training RMS to far below the noise's share of a rounding (the two
+    // solutions lie within the stopping rule's √(decrease_tol) of it, calib/tests/stream.rs).
+    let rms = |r: &serde_json::Value| r["after"]["train"]["rms_m"].as_f64().unwrap();
+    assert!(
+        (rms(rs) - rms(rm)).abs() <= 1e-6 * rms(rm),
+        "streamed {} against in memory {}",
+        rms(rs),
+        rms(rm)
+    );
+    // What streaming cannot do is refused, not done otherwise.
+    let out = d.join("refused.json");
+    let (code, err) = robocal_fails(&[
+        "calibrate",
+        "--data",
+        &s(&data),
+        "--out",
+        &s(&out),
+        "--stream",
+        "always",
+    ]);
+    assert_eq!(code, Some(2), "{err}");
+    assert!(
+        err.contains("--stream always") && err.contains("--folds"),
+        "{err}"
+    );
+    assert!(!out.exists());
+    let (code, err) = robocal_fails(&[
+        "calibrate",
+        "--data",
+        &s(&data),
+        "--out",
+        &s(&out),
+        "--folds",
+        "0",
+        "--chunk-rows",
+        "0",
+    ]);
+    assert_eq!(code, Some(2), "{err}");
+    assert!(err.contains("--chunk-rows 0"), "{err}");
+}

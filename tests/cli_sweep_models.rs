@@ -452,8 +452,10 @@ fn strings(path: &Path, name: &str) -> Vec<String> {
 /// `--score diagnose` on the backlash scenario with the backlash at magnitudes 0 and 1: `hidden` is
 /// nothing at 0 and backlash at every joint at 1 (the scenario's uniform dead band), `named` is
 /// diagnose's model, and `detected` / `false_alarm` agree with the two names at the level of causes:
-/// named causes beyond the hidden ones are a false alarm, equal names a detection. Without
-/// `--score diagnose` the four columns are empty and false.
+/// named causes beyond the hidden ones are a false alarm, equal names a detection. The power table
+/// beside it counts them per cell with Wilson intervals, the plot shows power curves, and an input
+/// where the table would go is refused. Without `--score diagnose` the four columns are empty and
+/// false and no power table is written.
 #[test]
 fn score_diagnose_records_hidden_and_named_causes() {
     let seed = seed();
@@ -527,8 +529,74 @@ fn score_diagnose_records_hidden_and_named_causes() {
             assert_eq!(detected[r], 0.0, "seed {seed}: run {r}: {n:?}");
         }
     }
+    // The power table: one row per cell (magnitudes 0 and 1, 3 runs each), its counts those of
+    // the wide table, each interval end a root of Wilson's defining equation
+    // (p̂ − p)² = z² p (1 − p) / n.
+    let power = std::fs::read_to_string(dir.join("d.power.csv")).unwrap();
+    let mut lines = power.lines();
+    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+    let col = |name: &str| header.iter().position(|h| *h == name).unwrap();
+    let cells: Vec<Vec<f64>> = lines
+        .map(|l| l.split(',').map(|x| x.parse().unwrap()).collect())
+        .collect();
+    assert_eq!(cells.len(), 2, "{power}");
+    let z = 1.959_963_984_540_054_f64;
+    for (k, c) in cells.iter().enumerate() {
+        assert_eq!(c[col("magnitude")], k as f64);
+        assert_eq!(c[col("runs")], 3.0);
+        let runs = 3 * k..3 * k + 3;
+        let d: f64 = detected[runs.clone()].iter().sum();
+        let f: f64 = false_alarm[runs].iter().sum();
+        assert_eq!(c[col("detected")], d, "{power}");
+        assert_eq!(c[col("false_alarms")], f, "{power}");
+        for (count, lo, hi) in [
+            (d, "detection_lower_95", "detection_upper_95"),
+            (f, "false_alarm_lower_95", "false_alarm_upper_95"),
+        ] {
+            let p_hat = count / 3.0;
+            for p in [c[col(lo)], c[col(hi)]] {
+                let gap = (p_hat - p).powi(2) - z * z * p * (1.0 - p) / 3.0;
+                assert!(
+                    gap.abs() < 1e-12,
+                    "{power}: {p} is no Wilson end for {count}/3"
+                );
+            }
+            assert!(c[col(lo)] <= p_hat && p_hat <= c[col(hi)]);
+        }
+    }
+    let svg = std::fs::read_to_string(dir.join("d.svg")).unwrap();
+    assert!(
+        svg.contains("detection rate"),
+        "the plot shows power curves"
+    );
+    // An input where the power table would go is refused before any run.
+    let clash = dir.join("s.power.csv");
+    std::fs::copy(&sc, &clash).unwrap();
+    let o = assert_cmd::Command::new(env!("CARGO_BIN_EXE_robocal"))
+        .args([
+            "sweep",
+            "--scenario",
+            clash.to_str().unwrap(),
+            "--noise",
+            "1",
+            "--reps",
+            "1",
+            "--poses",
+            "60",
+            "--score",
+            "diagnose",
+            "--out",
+            dir.join("s.parquet").to_str().unwrap(),
+        ])
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("would overwrite the input"), "{err}");
+    assert!(!dir.join("s.parquet").exists());
     let plain = dir.join("plain.parquet");
     args("fit", &plain);
+    assert!(!dir.join("plain.power.csv").exists());
     assert!(strings(&plain, "hidden").iter().all(String::is_empty));
     assert!(strings(&plain, "named").iter().all(String::is_empty));
     assert!(wide(&plain, "detected").iter().all(|d| *d == 0.0));

@@ -1,5 +1,9 @@
 //! `robocal calibrate`: identify the kinematic error model from a measurement table.
 
+use super::calibrate_stream::{
+    CheckedFile, STREAM_MIN_ROWS, StreamMode, check_chunk_rows, describe, has_more_rows_than,
+    needs_memory,
+};
 use super::paths::{Inputs, check_distinct};
 use super::robot_arg::RobotArgs;
 use super::shared::{CliError, CliResult, print_json, read_table};
@@ -40,6 +44,15 @@ pub struct Args {
     /// ur.urdf.xacro as kinematics_params); non-geometric causes are left out.
     #[arg(long, value_name = "FILE.yaml")]
     ur_kinematics: Option<PathBuf>,
+    /// Read the table in pieces instead of holding it in memory (docs/calibrate.md, "Streams"):
+    /// `auto` streams a table of more than 262,144 rows when the options allow it (the kinematic
+    /// model, no --robust, --folds 0, no --test-data or --test-fraction); `always` streams any table
+    /// and refuses options that need it in memory; `never` holds it.
+    #[arg(long, value_enum, value_name = "WHEN", default_value_t = StreamMode::Auto)]
+    stream: StreamMode,
+    /// Rows read at a time when streaming.
+    #[arg(long, value_name = "N", default_value_t = sim::measurement_table::DEFAULT_CHUNK_ROWS)]
+    chunk_rows: usize,
     /// Print one JSON document on stdout instead of text on stderr.
     #[arg(long)]
     json: bool,
@@ -397,37 +410,93 @@ pub fn run(args: Args) -> CliResult {
         base_link: args.robot.base_link.clone(),
         tip_link: args.robot.tip_link.clone(),
     };
+    check_chunk_rows(args.chunk_rows)?;
     let robot = Robot::load(&args.robot.robot, &spec)?;
     let model = &robot.model;
-    let table = read_table(&args.data, model)?;
     let data_name = args.data.display().to_string();
-    let test_table = match &args.test_data {
-        Some(p) => Some((read_table(p, model)?, p.display().to_string())),
-        None => None,
-    };
-    let test = test_table
-        .as_ref()
-        .map(|(t, name)| Named { table: t, name });
-    let data = Named {
-        table: &table,
-        name: &data_name,
+    let memory_reason = needs_memory(
+        &args.options.model,
+        args.options.robust.is_some(),
+        args.options.folds,
+        args.options.test_fraction,
+        args.test_data.is_some(),
+    );
+    let stream = match args.stream {
+        StreamMode::Never => false,
+        StreamMode::Always => match &memory_reason {
+            Some(r) => {
+                return Err(CliError::Input(format!(
+                    "--stream always: {r} needs the table in memory"
+                )));
+            }
+            None => true,
+        },
+        StreamMode::Auto => {
+            let large = has_more_rows_than(&args.data, STREAM_MIN_ROWS);
+            if let (true, Some(r), false) = (large, &memory_reason, args.json) {
+                eprintln!(
+                    "note: {data_name} has more than {STREAM_MIN_ROWS} rows, held in memory for {r}; \
+                     the kinematic model with --folds 0 and no --robust reads them in pieces"
+                );
+            }
+            large && memory_reason.is_none()
+        }
     };
     let mut spinner = super::diagnose::Spinner::default();
     let quiet = args.json;
-    let outcome = calibrate(
-        &robot,
-        data,
-        test,
-        &args.options,
-        &mut |m| spinner.show(m),
-        &mut |m| {
-            if !quiet {
-                eprintln!("{m}");
-            }
-        },
-    );
-    drop(spinner);
-    let outcome = outcome?;
+    let (outcome, table, stream_info) = if stream {
+        let source = CheckedFile::new(&args.data, args.chunk_rows, model);
+        let (_, options) = args.options.resolve(false)?;
+        let settings = calib::fit::stream::StreamOptions {
+            seed: args.options.seed,
+            ..Default::default()
+        };
+        let streamed =
+            calib::fit::stream::calibrate(model, &source, &options, &settings, &mut |m| {
+                spinner.say(m)
+            });
+        drop(spinner);
+        let streamed = streamed?;
+        for w in source.warnings() {
+            eprintln!("warning: {w}");
+        }
+        let info = describe(&streamed, args.chunk_rows);
+        let outcome = Outcome {
+            model_spec: ModelSpec::kinematic(),
+            cal: streamed.calibration,
+            split: json!({"kind": "none"}),
+            validation: None,
+            auto: None,
+        };
+        (outcome, streamed.spaced_rows, Some(info))
+    } else {
+        let table = read_table(&args.data, model)?;
+        let test_table = match &args.test_data {
+            Some(p) => Some((read_table(p, model)?, p.display().to_string())),
+            None => None,
+        };
+        let test = test_table
+            .as_ref()
+            .map(|(t, name)| Named { table: t, name });
+        let data = Named {
+            table: &table,
+            name: &data_name,
+        };
+        let outcome = calibrate(
+            &robot,
+            data,
+            test,
+            &args.options,
+            &mut |m| spinner.show(m),
+            &mut |m| {
+                if !quiet {
+                    eprintln!("{m}");
+                }
+            },
+        );
+        drop(spinner);
+        (outcome?, table, None)
+    };
     let cal = &outcome.cal;
     let report = &cal.report;
     if let Some(msg) = outcome.failure() {
@@ -457,15 +526,22 @@ pub fn run(args: Args) -> CliResult {
         sim::io::write_atomic(path, ur.text.as_bytes())?;
     }
     if args.json {
-        print_json(&outcome.json(
+        let mut doc = outcome.json(
             &robot,
             &data_name,
             Some(&args.out),
             args.urdf_out.as_deref(),
-        ))
+        );
+        if let Some((_, s)) = &stream_info {
+            doc["stream"] = s.clone();
+        }
+        print_json(&doc)
     } else {
         eprint!("{}", report.text());
         eprint!("{}", outcome.validation_text());
+        if let Some((line, _)) = &stream_info {
+            eprintln!("{line}");
+        }
         eprintln!("wrote {}", args.out.display());
         if let Some(p) = &args.urdf_out {
             eprintln!("wrote {}", p.display());

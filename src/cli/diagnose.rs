@@ -146,13 +146,18 @@ pub(crate) struct Spinner(Option<indicatif::ProgressBar>);
 impl Spinner {
     /// Shows `fitting {model}`.
     pub(crate) fn show(&mut self, model: &str) {
+        self.say(&format!("fitting {model}"));
+    }
+
+    /// Shows `text`.
+    pub(crate) fn say(&mut self, text: &str) {
         if self.0.is_none() && std::io::stderr().is_terminal() {
             let b = indicatif::ProgressBar::new_spinner();
             b.enable_steady_tick(std::time::Duration::from_millis(120));
             self.0 = Some(b);
         }
         if let Some(b) = &self.0 {
-            b.set_message(format!("fitting {model}"));
+            b.set_message(text.to_string());
         }
     }
 }

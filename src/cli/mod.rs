@@ -4,6 +4,7 @@
 //! glue between reading its inputs and writing its outputs in functions of its own.
 
 pub mod calibrate;
+pub mod calibrate_stream;
 pub mod compensate;
 mod dataset;
 mod demo;

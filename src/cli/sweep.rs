@@ -5,6 +5,7 @@
 use super::paths::Inputs;
 use super::shared::{CliError, CliResult, print_json};
 use crate::sweep::params_table::{self, ParamRow};
+use crate::sweep::power;
 use crate::sweep::table::{self, META_SUBSET, META_SWEEP, SweepRow};
 use crate::sweep::{self as sw, Context, Score, Selection, Subset, SweepSpec};
 use calib::fit::CalibrationOptions;
@@ -39,7 +40,8 @@ pub struct Args {
     #[arg(long, value_name = "CAUSE")]
     magnitude_of: Option<String>,
     /// Output Parquet file, one row per run; the plot goes beside it as FILE.svg and the extension
-    /// parameters' errors as FILE.params.parquet (one row per run and parameter).
+    /// parameters' errors as FILE.params.parquet (one row per run and parameter); with
+    /// --score diagnose the power table as FILE.power.csv and the plot shows power curves.
     #[arg(long, value_name = "FILE.parquet")]
     out: PathBuf,
     /// Sweep seed; every run derives its own seed from it, its cell and its repetition.
@@ -80,7 +82,7 @@ pub struct Args {
 #[derive(clap::Args, Debug)]
 pub struct MergeArgs {
     /// Output Parquet file (byte-identical to a single-machine run of the same sweep); the plot goes
-    /// beside it as FILE.svg.
+    /// beside it as FILE.svg (and, for --score diagnose, the power table as FILE.power.csv).
     #[arg(long, value_name = "F.parquet")]
     out: PathBuf,
     /// Shard files written by `robocal sweep --shard K/N` (or `--only-cell`) of one sweep; each
@@ -183,10 +185,16 @@ fn plot_path(out: &Path) -> PathBuf {
     out.with_extension("svg")
 }
 
-/// Refuses an `--out` (or the plot or parameter table beside it) that is one of `inputs`.
+/// The power table's path beside `out` (`--score diagnose`): `out` with the extension `power.csv`.
+fn power_path(out: &Path) -> PathBuf {
+    out.with_extension("power.csv")
+}
+
+/// Refuses an `--out` (or the plot, power or parameter table beside it) that is one of `inputs`.
 fn check_outputs(inputs: &Inputs, out: &Path) -> CliResult {
     inputs.check("--out", out)?;
     inputs.check_as("--out", out, &plot_path(out))?;
+    inputs.check_as("--out", out, &power_path(out))?;
     inputs.check_as("--out", out, &params_table::path_beside(out))
 }
 
@@ -229,21 +237,41 @@ fn finish(
     let bytes = params_table::parquet_bytes(params, &param_meta).map_err(CliError::Runtime)?;
     write(&params_out, &bytes)?;
     let cells = sw::summarize(spec, rows);
+    // A partial file's cells are incomplete: no plot and no power table for it.
+    let power = subset.is_none().then(|| power::power(&cells)).flatten();
+    let power_out = match &power {
+        Some(p) => {
+            let path = power_path(out);
+            write(&path, power::csv(p).as_bytes())?;
+            Some(path)
+        }
+        None => None,
+    };
     let plot = if subset.is_none() {
         let p = plot_path(out);
-        write(&p, sw::plot_svg(spec, &cells).as_bytes())?;
+        let svg = match &power {
+            Some(pw) => power::plot_svg(&spec.scenario_file, pw),
+            None => sw::plot_svg(spec, &cells),
+        };
+        write(&p, svg.as_bytes())?;
         Some(p)
     } else {
         None
     };
     eprint!("{}", sw::summary_text(&cells));
+    if let Some(p) = &power {
+        eprint!("{}", power::summary_text(p));
+    }
     eprintln!(
-        "wrote {} ({} runs{}), {} ({} parameter rows){}",
+        "wrote {} ({} runs{}), {} ({} parameter rows){}{}",
         out.display(),
         rows.len(),
         subset.as_ref().map_or(String::new(), |s| format!(", {s}")),
         params_out.display(),
         params.len(),
+        power_out
+            .as_ref()
+            .map_or(String::new(), |p| format!(", {}", p.display())),
         plot.as_ref()
             .map_or(String::new(), |p| format!(" and {}", p.display()))
     );
@@ -252,6 +280,8 @@ fn finish(
             "out": out.display().to_string(),
             "params": params_out.display().to_string(),
             "plot": plot.map(|p| p.display().to_string()),
+            "power_table": power_out.map(|p| p.display().to_string()),
+            "power": power,
             "subset": subset,
             "runs": rows.len(),
             "cells": cells,

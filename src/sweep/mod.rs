@@ -31,6 +31,7 @@
 pub mod detection;
 pub mod magnitude;
 pub mod params_table;
+pub mod power;
 pub mod score;
 pub mod table;
 pub mod truth_params;

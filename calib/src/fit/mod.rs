@@ -29,6 +29,7 @@ pub mod register;
 pub mod report;
 pub mod robust;
 pub mod start;
+pub mod stream;
 
 pub use crate::model::predict::prediction_and_jacobian;
 pub use crate::part::Part;
@@ -695,38 +696,20 @@ pub(crate) fn kinematic_fit(
     let m = (obs.len() - excluded.len()) * dim;
     let dof = m.saturating_sub(sub.rank);
     let chi2 = report.cost_final;
-    let (variance_factor, source) = if dof > 0 {
-        (chi2 / dof as f64, "residuals (χ²/dof)")
-    } else {
-        warnings.push(
-            "no redundancy left (as many equations as identifiable parameters): standard deviations \
-             assume the noise model is exact"
-                .into(),
-        );
-        (1.0, "noise model (no degrees of freedom left)")
-    };
+    let (variance_factor, source) = variance_factor(dof, chi2, &mut warnings);
     let covariance = sub.covariance(variance_factor);
     crate::cancel::checkpoint()?;
     let observability = Observability::from_subspace(&sub);
     let null = describe_null_space(model, &params, ws.gram(), &sub, &obs);
-    for line in &null.data_specific {
-        warnings.push(format!("not identifiable from this pose set: {line}"));
-    }
-    if observability.weak_combinations > 0 {
-        warnings.push(format!(
-            "{} identifiable combinations are weakly determined (σ_k < 1: the data know them less well \
-             than their expected magnitude); the worst has σ {:.2e} in units of its expected magnitude",
-            observability.weak_combinations,
-            observability.worst_combination_sigma * variance_factor.sqrt()
-        ));
-    }
-    if train.table.sigma.is_some() && dof > 0 && !(0.25..=4.0).contains(&(chi2 / dof as f64)) {
-        warnings.push(format!(
-            "χ²/dof = {:.3}: the sigma column does not match the residuals (a model error, or sigma in \
-             the wrong unit)",
-            chi2 / dof as f64
-        ));
-    }
+    quality_warnings(
+        &observability,
+        &null,
+        variance_factor,
+        train.table.sigma.is_some(),
+        dof,
+        chi2,
+        &mut warnings,
+    );
 
     crate::cancel::checkpoint()?;
     let outliers = match &final_norms {
@@ -841,17 +824,68 @@ fn full_fit(
             let p = prediction.row_in(&obs.ext, r, obs.q_row(r), c, &mut scratch);
             o.error_m = (p - obs.position[r]).norm();
         }
-        warnings.push(format!(
-            "row {} (pose {}) excluded from the fit as a gross error: {:.4} mm off the fit of \
-             the other rows, {:.0} times the robust residual scale when found (a broken beam or \
-             a wrong row? fix it, or use --robust to down-weight instead)",
-            o.row,
-            o.pose,
-            o.error_m * 1e3,
-            o.normalised_residual
-        ));
+        warnings.push(gross_error_warning(o));
     }
     (out, final_norms)
+}
+
+/// `σ̂² = χ²/dof` and where it comes from; with no degrees of freedom left, 1 (the noise model) and a
+/// warning.
+fn variance_factor(dof: usize, chi2: f64, warnings: &mut Vec<String>) -> (f64, &'static str) {
+    if dof > 0 {
+        (chi2 / dof as f64, "residuals (χ²/dof)")
+    } else {
+        warnings.push(
+            "no redundancy left (as many equations as identifiable parameters): standard deviations \
+             assume the noise model is exact"
+                .into(),
+        );
+        (1.0, "noise model (no degrees of freedom left)")
+    }
+}
+
+/// The warnings of a fit's quality: what this pose set cannot identify, weakly determined
+/// combinations, and a `sigma` column (`sigma_column`) that does not match the residuals.
+fn quality_warnings(
+    observability: &Observability,
+    null: &identifiability::NullSpaceReport,
+    variance_factor: f64,
+    sigma_column: bool,
+    dof: usize,
+    chi2: f64,
+    warnings: &mut Vec<String>,
+) {
+    for line in &null.data_specific {
+        warnings.push(format!("not identifiable from this pose set: {line}"));
+    }
+    if observability.weak_combinations > 0 {
+        warnings.push(format!(
+            "{} identifiable combinations are weakly determined (σ_k < 1: the data know them less well \
+             than their expected magnitude); the worst has σ {:.2e} in units of its expected magnitude",
+            observability.weak_combinations,
+            observability.worst_combination_sigma * variance_factor.sqrt()
+        ));
+    }
+    if sigma_column && dof > 0 && !(0.25..=4.0).contains(&(chi2 / dof as f64)) {
+        warnings.push(format!(
+            "χ²/dof = {:.3}: the sigma column does not match the residuals (a model error, or sigma in \
+             the wrong unit)",
+            chi2 / dof as f64
+        ));
+    }
+}
+
+/// The warning of a row excluded as a gross error (`o.error_m` against the final fit).
+fn gross_error_warning(o: &Outlier) -> String {
+    format!(
+        "row {} (pose {}) excluded from the fit as a gross error: {:.4} mm off the fit of \
+         the other rows, {:.0} times the robust residual scale when found (a broken beam or \
+         a wrong row? fix it, or use --robust to down-weight instead)",
+        o.row,
+        o.pose,
+        o.error_m * 1e3,
+        o.normalised_residual
+    )
 }
 
 /// The "before" stage: the tracker-to-base transform and the target fitted with nominal joints

@@ -7,7 +7,7 @@ use crate::model::predict::Prediction;
 use sim::Model;
 
 /// Median of χ² with `d` degrees of freedom, for the robust scale (d = 3 or 6).
-fn chi2_median(d: usize) -> f64 {
+pub(super) fn chi2_median(d: usize) -> f64 {
     if d == 6 { 5.348_120 } else { 2.365_974 }
 }
 

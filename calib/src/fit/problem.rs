@@ -614,6 +614,54 @@ impl<'a> KinematicProblem<'a> {
         }
         out
     }
+
+    /// At the trial point, with the column scales `scales`: `χ²`, `D Jᵀr` and the `R` factor of the
+    /// scaled Jacobian (p × p, or fewer rows when there are fewer residuals than parameters), from
+    /// one evaluation of each row. Chunks of [`CHUNK_ROWS`] rows run in parallel, each factored by
+    /// Householder QR; sums and the stacked factor are in chunk order, so the result does not depend
+    /// on the number of threads. What a pass of the streamed fit ([`crate::fit::stream`]) takes
+    /// from each piece of a file.
+    pub(crate) fn factor_share(&mut self, scales: &[f64]) -> (f64, Vec<f64>, DMatrix<f64>) {
+        let d = self.obs.dim();
+        let np = self.layout.len();
+        let p = self.active.len();
+        let n = self.obs.len();
+        let this = &*self;
+        let chunks: Vec<(NormalPart, DMatrix<f64>)> = (0..n.div_ceil(CHUNK_ROWS))
+            .into_par_iter()
+            .map(|c| {
+                let rows = c * CHUNK_ROWS..((c + 1) * CHUNK_ROWS).min(n);
+                let mut ws = this.scratch();
+                let mut part = NormalPart {
+                    cost: 0.0,
+                    gradient: vec![0.0; p],
+                    gram: Vec::new(),
+                };
+                let mut j = DMatrix::zeros(rows.len() * d, p);
+                for (k, r) in rows.enumerate() {
+                    this.gather_row(r, d, np, p, scales, &mut ws, &mut part);
+                    for row in 0..d {
+                        for a in 0..p {
+                            j[(k * d + row, a)] = ws.rows[row * p + a];
+                        }
+                    }
+                }
+                let factor = crate::linalg::householder_r(&mut j);
+                (part, factor)
+            })
+            .collect();
+        let mut cost = 0.0;
+        let mut gradient = vec![0.0; p];
+        let mut factors = Vec::with_capacity(chunks.len());
+        for (part, factor) in chunks {
+            cost += part.cost;
+            for (t, v) in gradient.iter_mut().zip(&part.gradient) {
+                *t += v;
+            }
+            factors.push(factor);
+        }
+        (cost, gradient, crate::linalg::stacked_r_factor(&factors, p))
+    }
 }
 
 /// One group's share of the normal equations and its `R` factors ([`KinematicProblem::group_parts`]).

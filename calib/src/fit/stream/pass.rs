@@ -1,0 +1,324 @@
+//! The passes of a streamed fit over the file: the solver's sums at each lane's trial point
+//! ([`solve_pass`]), and the residuals at the solution ([`final_pass`]): statistics, the rows'
+//! residual norms for the gross-error and outlier searches, and evenly spaced rows.
+
+use super::lane::{Evaluation, Lane, Phase};
+use super::source::ChunkSource;
+use crate::cancel;
+use crate::error::{CalibError, Result};
+use crate::fit::problem::{KinematicProblem, NoiseModel, Observations};
+use crate::model::params::KinematicParams;
+use crate::model::predict::Prediction;
+use crate::model::stats::{ResidualStats, residual_stats};
+use sim::Model;
+use sim::measurement_table::{Chunk, MeasurementTable};
+
+/// The piece's rows prepared for the solver: source rows numbered file-wide, excluded rows (sorted
+/// 0-based rows of the file) at weight 0.
+fn observations(
+    chunk: &Chunk,
+    noise: &NoiseModel,
+    name: &str,
+    excluded: &[usize],
+) -> Result<Observations> {
+    let rows: Vec<usize> = (0..chunk.table.len()).collect();
+    let mut obs = Observations::from_table(&chunk.table, &rows, noise, name).map_err(|e| {
+        // Observations name the piece's row: move it to the file's.
+        match e {
+            CalibError::BadValue {
+                context,
+                field,
+                value,
+                problem,
+            } => CalibError::BadValue {
+                context: renumber(&context, chunk.first_row),
+                field,
+                value,
+                problem,
+            },
+            other => other,
+        }
+    })?;
+    for r in &mut obs.source_row {
+        *r += chunk.first_row;
+    }
+    let first = excluded.partition_point(|&r| r < chunk.first_row);
+    for &r in &excluded[first..] {
+        if r >= chunk.first_row + chunk.table.len() {
+            break;
+        }
+        obs.weight[r - chunk.first_row] = 0.0;
+    }
+    Ok(obs)
+}
+
+/// `"{name}: row {k}"` with the piece's row `k` moved by `offset`.
+fn renumber(context: &str, offset: usize) -> String {
+    match context.rsplit_once(": row ") {
+        Some((head, k)) => match k.parse::<usize>() {
+            Ok(k) => format!("{head}: row {}", k + offset),
+            Err(_) => context.to_string(),
+        },
+        None => context.to_string(),
+    }
+}
+
+/// Checks that every row's campaign is one `params` registers.
+fn check_campaigns(obs: &Observations, params: &KinematicParams, name: &str) -> Result<()> {
+    obs.campaign_indices_or_error(params, name).map(|_| ())
+}
+
+/// One pass: every running lane evaluated at its trial point, in file order. `progress` hears
+/// the rows done.
+pub fn solve_pass(
+    model: &Model,
+    source: &dyn ChunkSource,
+    noise: &NoiseModel,
+    excluded: &[usize],
+    lanes: &mut [&mut Lane],
+    label: &str,
+    progress: &mut dyn FnMut(&str),
+) -> Result<()> {
+    let running: Vec<usize> = (0..lanes.len())
+        .filter(|&k| lanes[k].phase == Phase::Running)
+        .collect();
+    let mut sums: Vec<Evaluation> = running
+        .iter()
+        .map(|&k| Evaluation::empty(lanes[k].active.len()))
+        .collect();
+    let mut rows = 0;
+    for chunk in source.pass()? {
+        cancel::checkpoint()?;
+        let chunk = chunk?;
+        let obs = observations(&chunk, noise, source.name(), excluded)?;
+        for (sum, &k) in sums.iter_mut().zip(&running) {
+            let lane = &lanes[k];
+            check_campaigns(&obs, &lane.trial, source.name())?;
+            let mut prob =
+                KinematicProblem::new(model, &obs, lane.trial.clone(), lane.active.clone());
+            let (cost, gradient, factor) = prob.factor_share(&lane.scales);
+            sum.add(cost, &gradient, factor, obs.len() * obs.dim());
+        }
+        rows += chunk.table.len();
+        progress(&format!("{label}: {rows} rows"));
+    }
+    for (sum, &k) in sums.into_iter().zip(&running) {
+        lanes[k].take(sum);
+    }
+    Ok(())
+}
+
+/// Running sums of [`ResidualStats`] over pieces.
+#[derive(Clone, Debug, Default)]
+pub struct StatsSum {
+    n: usize,
+    sum2: f64,
+    sum: f64,
+    vector: [f64; 3],
+    max_m: f64,
+    max_row: usize,
+    sum2_rad: Option<f64>,
+    max_rad: Option<f64>,
+}
+
+impl StatsSum {
+    /// Adds a piece's statistics (its `max_row` file-wide).
+    pub fn add(&mut self, s: &ResidualStats) {
+        let n = s.n as f64;
+        self.n += s.n;
+        self.sum2 += s.rms_m * s.rms_m * n;
+        self.sum += s.mean_m * n;
+        for k in 0..3 {
+            self.vector[k] += s.mean_vector_m[k] * n;
+        }
+        if s.max_m > self.max_m {
+            self.max_m = s.max_m;
+            self.max_row = s.max_row;
+        }
+        if let (Some(r), Some(m)) = (s.rms_rad, s.max_rad) {
+            *self.sum2_rad.get_or_insert(0.0) += r * r * n;
+            let mx = self.max_rad.get_or_insert(0.0);
+            *mx = mx.max(m);
+        }
+    }
+
+    /// The statistics of every piece added.
+    pub fn stats(&self) -> ResidualStats {
+        let n = self.n as f64;
+        if self.n == 0 {
+            return ResidualStats::default();
+        }
+        ResidualStats {
+            n: self.n,
+            rms_m: (self.sum2 / n).sqrt(),
+            mean_m: self.sum / n,
+            max_m: self.max_m,
+            max_row: self.max_row,
+            mean_vector_m: self.vector.map(|v| v / n),
+            rms_rad: self.sum2_rad.map(|s| (s / n).sqrt()),
+            max_rad: self.max_rad,
+        }
+    }
+}
+
+/// A row whose residual norm is among the largest of the pass.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Candidate {
+    /// Weighted residual norm (noise units).
+    pub norm: f64,
+    /// 0-based row of the file.
+    pub row: usize,
+    /// Pose id.
+    pub pose: i64,
+    /// Position error norm (m).
+    pub error_m: f64,
+}
+
+/// Most rows [`final_pass`] keeps as outlier candidates: the largest residual norms.
+pub const MAX_CANDIDATES: usize = 4096;
+
+/// What the residuals at the solution give.
+pub struct FinalPass {
+    /// Statistics at the "before" parameters.
+    pub before: StatsSum,
+    /// Statistics at the solution.
+    pub after: StatsSum,
+    /// Every row's weighted residual norm at the solution (0 for excluded rows), file order.
+    pub norms: Vec<f64>,
+    /// The rows of largest norm (at most [`MAX_CANDIDATES`]), largest first.
+    pub candidates: Vec<Candidate>,
+    /// The excluded rows' (0-based) pose id and position error at the solution, in their order.
+    pub excluded: Vec<(i64, f64)>,
+    /// Rows `0, stride, 2·stride, …` of the file.
+    pub spaced: MeasurementTable,
+    /// Σ σ² of the rows' position standard deviations (m²).
+    pub sigma2: f64,
+}
+
+/// The residuals at `before` and `after` on every row of `source` (`excluded` rows at weight 0),
+/// and its rows `0, stride, …`.
+#[allow(clippy::too_many_arguments)]
+pub fn final_pass(
+    model: &Model,
+    source: &dyn ChunkSource,
+    noise: &NoiseModel,
+    excluded: &[usize],
+    before: &KinematicParams,
+    after: &KinematicParams,
+    stride: usize,
+    progress: &mut dyn FnMut(&str),
+) -> Result<FinalPass> {
+    let mut out = FinalPass {
+        before: StatsSum::default(),
+        after: StatsSum::default(),
+        norms: Vec::new(),
+        candidates: Vec::new(),
+        excluded: vec![(0, 0.0); excluded.len()],
+        spaced: MeasurementTable::new(0, Default::default()),
+        sigma2: 0.0,
+    };
+    let mut heap: std::collections::BinaryHeap<std::cmp::Reverse<HeapItem>> =
+        std::collections::BinaryHeap::new();
+    let mut rows = 0;
+    let prediction = Prediction::new(model, after);
+    for chunk in source.pass()? {
+        cancel::checkpoint()?;
+        let chunk = chunk?;
+        let obs = observations(&chunk, noise, source.name(), excluded)?;
+        check_campaigns(&obs, before, source.name())?;
+        check_campaigns(&obs, after, source.name())?;
+        out.before.add(&residual_stats(model, before, &obs));
+        out.after.add(&residual_stats(model, after, &obs));
+        let active: Vec<usize> = Vec::new();
+        let norms = KinematicProblem::new(model, &obs, after.clone(), active).row_norms();
+        let campaign = prediction.campaigns_of(&obs);
+        let mut scratch = prediction.scratch();
+        let mut error_of = |r: usize| {
+            let c = campaign.get(r).copied().unwrap_or(0);
+            (prediction.row_in(&obs.ext, r, obs.q_row(r), c, &mut scratch) - obs.position[r]).norm()
+        };
+        for (r, &norm) in norms.iter().enumerate() {
+            let item = HeapItem {
+                norm,
+                row: chunk.first_row + r,
+            };
+            if heap.len() < MAX_CANDIDATES {
+                heap.push(std::cmp::Reverse(item));
+            } else if heap.peek().is_some_and(|s| s.0 < item) {
+                heap.pop();
+                heap.push(std::cmp::Reverse(item));
+            } else {
+                continue;
+            }
+            // Kept: its pose and error now, while the row is at hand.
+            out.candidates.push(Candidate {
+                norm,
+                row: chunk.first_row + r,
+                pose: obs.pose[r],
+                error_m: error_of(r),
+            });
+        }
+        let first = excluded.partition_point(|&r| r < chunk.first_row);
+        for (k, &r) in excluded.iter().enumerate().skip(first) {
+            if r >= chunk.first_row + chunk.table.len() {
+                break;
+            }
+            let local = r - chunk.first_row;
+            out.excluded[k] = (obs.pose[local], error_of(local));
+        }
+        out.norms.extend_from_slice(&norms);
+        out.sigma2 += obs.sigma.iter().map(|s| s * s).sum::<f64>();
+        let first_spaced = chunk.first_row.div_ceil(stride) * stride;
+        if out.spaced.n_joints == 0 {
+            out.spaced = MeasurementTable::new(chunk.table.n_joints, chunk.table.columns());
+        }
+        let mut r = first_spaced;
+        while r < chunk.first_row + chunk.table.len() {
+            out.spaced.push_row(&chunk.table.row(r - chunk.first_row))?;
+            r += stride;
+        }
+        rows += chunk.table.len();
+        progress(&format!("residuals at the solution: {rows} rows"));
+        // Candidates no longer in the heap are dropped now and then (bounded memory).
+        if out.candidates.len() > 4 * MAX_CANDIDATES {
+            keep_heap(&mut out.candidates, &heap);
+        }
+    }
+    keep_heap(&mut out.candidates, &heap);
+    out.candidates
+        .sort_by(|a, b| b.norm.total_cmp(&a.norm).then(a.row.cmp(&b.row)));
+    Ok(out)
+}
+
+/// A row's norm, ordered by norm and then by row (earlier rows rank higher on ties).
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct HeapItem {
+    norm: f64,
+    row: usize,
+}
+
+impl Eq for HeapItem {}
+
+impl PartialOrd for HeapItem {
+    fn partial_cmp(&self, other: &Self) -> Option<std::cmp::Ordering> {
+        Some(self.cmp(other))
+    }
+}
+
+impl Ord for HeapItem {
+    fn cmp(&self, other: &Self) -> std::cmp::Ordering {
+        self.norm
+            .total_cmp(&other.norm)
+            .then(other.row.cmp(&self.row))
+    }
+}
+
+/// Keeps the candidates whose rows are still in `heap`.
+fn keep_heap(
+    candidates: &mut Vec<Candidate>,
+    heap: &std::collections::BinaryHeap<std::cmp::Reverse<HeapItem>>,
+) {
+    let mut rows: Vec<usize> = heap.iter().map(|h| h.0.row).collect();
+    rows.sort_unstable();
+    candidates.retain(|c| rows.binary_search(&c.row).is_ok());
+}

@@ -1,0 +1,211 @@
+//! The streamed kinematic fit ([`calib::fit::stream`]) against the in-memory fit of the same rows:
+//! the same minimum within what the two solvers' stopping rule allows, the same covariance, the same
+//! gross errors excluded; the same bytes on any number of threads; errors that name the file's row.
+//! Seeds are drawn per run and printed (`ROBOCAL_TEST_SEED=N` repeats one).
+
+mod common;
+
+use calib::fit::stream::{StreamOptions, TableSource, calibrate};
+use calib::fit::{Calibration, CalibrationOptions, Dataset, FitRequest, fit};
+use common::{Truth, concat, moved_tracker, random_configs, with_campaign};
+use sim::measurement_table::MeasurementTable;
+use sim::robots;
+
+const NOISE_M: f64 = 1e-5;
+
+/// Two campaigns of `rows / 2` poses each of one hidden iiwa 7 (the second tracker moved), position
+/// noise 10 µm, pose ids unique across the table, and `gross` rows moved by 5 mm.
+fn two_campaigns(rows: usize, gross: &[usize], seed: u64) -> MeasurementTable {
+    let model = robots::load_builtin("iiwa7").unwrap();
+    let mut rng = common::rng(seed);
+    let truth = Truth::random(&model, false, &mut rng);
+    let moved = moved_tracker(&truth, &mut rng);
+    let a = random_configs(&model, rows / 2, &mut rng);
+    let b = random_configs(&model, rows - rows / 2, &mut rng);
+    let ta = with_campaign(
+        &common::table(&model, &truth, &a, NOISE_M, 0.0, &mut rng),
+        1,
+    );
+    let mut tb = with_campaign(
+        &common::table(&model, &moved, &b, NOISE_M, 0.0, &mut rng),
+        2,
+    );
+    for p in &mut tb.pose {
+        *p += (rows / 2) as i64;
+    }
+    let mut t = concat(&ta, &tb);
+    for &r in gross {
+        t.position[r][1] += 5e-3;
+    }
+    t
+}
+
+/// `|δₖ|/σₖ ≤ ‖J D δ‖/σ̂` for every parameter: the distance of two solutions in the fit's noise
+/// metric, which bounds each parameter's difference in its standard deviations.
+fn distance_in_sigmas(a: &Calibration, b: &Calibration) -> f64 {
+    let delta = a.params.difference(&a.layout, &b.params);
+    let vf = a.report.chi2_per_dof;
+    a.subspace.step_in_sigmas(&delta, vf)
+}
+
+/// The stopping rule's bound on a solution's distance from the exact minimum, `√pred` with
+/// `pred ≤ decrease_tol + relative_decrease_tol · χ²` (noise units), in units of `σ̂`.
+fn stopping_bound(c: &Calibration, options: &CalibrationOptions) -> f64 {
+    let chi2 = c.report.after.solver.cost_final;
+    (options.lm.decrease_tol + options.lm.relative_decrease_tol * chi2).sqrt()
+        / c.report.chi2_per_dof.sqrt()
+}
+
+#[test]
+fn the_streamed_fit_of_100k_rows_is_the_in_memory_fit_within_the_stopping_rule() {
+    let seed = common::run_seed("stream");
+    let model = robots::load_builtin("iiwa7").unwrap();
+    let gross = [1_234, 50_001, 77_777];
+    let table = two_campaigns(100_000, &gross, seed);
+    let options = CalibrationOptions::default();
+    let memory = fit(
+        &model,
+        &Dataset::all(&table, "t"),
+        &FitRequest::kinematic(&options),
+    )
+    .unwrap();
+    let source = TableSource::new(&table, "t", 8_192);
+    let stream = StreamOptions {
+        sample_rows: 4_096,
+        seed,
+        ..StreamOptions::default()
+    };
+    let streamed = calibrate(&model, &source, &options, &stream, &mut |_| {}).unwrap();
+    assert_eq!(streamed.rows, table.len());
+    eprintln!(
+        "streamed: {} passes, sample {} rows",
+        streamed.passes, streamed.sample_rows
+    );
+    let s = &streamed.calibration;
+    let (rm, rs) = (&memory.report, &s.report);
+    assert!(rs.was_successful(), "{:?}", rs.after.solver.termination);
+    assert_eq!(rs.after.solver.rank, rm.after.solver.rank);
+    assert_eq!(rs.dof, rm.dof);
+    assert_eq!(rs.n_train_poses, rm.n_train_poses);
+    // The same gross errors, with the same errors against the final fit (to the solutions'
+    // difference, far below a micrometre).
+    let rows = |o: &[calib::fit::report::Outlier]| o.iter().map(|o| o.row).collect::<Vec<_>>();
+    let mut expected: Vec<usize> = gross.iter().map(|r| r + 1).collect();
+    expected.sort_unstable();
+    let mut got = rows(&rs.excluded);
+    got.sort_unstable();
+    assert_eq!(got, expected, "gross errors excluded");
+    assert_eq!(rows(&rm.excluded).len(), gross.len());
+    for (a, b) in rs.excluded.iter().zip(&rm.excluded) {
+        let b = rm.excluded.iter().find(|o| o.row == a.row).unwrap_or(b);
+        assert!((a.error_m - b.error_m).abs() < 1e-9, "{a:?} against {b:?}");
+    }
+    assert_eq!(rows(&rs.outliers), rows(&rm.outliers), "outliers");
+    // The same minimum: each solution within √pred of the exact one.
+    let bound = stopping_bound(&memory, &options) + stopping_bound(s, &options);
+    let moved = distance_in_sigmas(&memory, s);
+    eprintln!("solutions {moved:.3e} σ apart (bound {bound:.3e})");
+    assert!(
+        moved <= bound,
+        "{moved} σ apart, the stopping rule allows {bound}"
+    );
+    // The covariance: the predicted σ of the target position at 200 rows' joint values. (Not
+    // parameter by parameter: none is determined alone on the iiwa 7, and the two fits sit at other
+    // points along the null directions — each keeps its start's share there, the sample's fit or
+    // the closed form, about 1e-7 rad apart — where the Jacobian's columns, and with them the
+    // parameters' covariance, turn by as much; predictions do not see the null directions.)
+    let mut worst: f64 = 0.0;
+    for row in (0..table.len()).step_by(table.len() / 200) {
+        let q = table.q_row(row);
+        let sigma = |c: &Calibration| {
+            let (_, _, j) = calib::fit::prediction_and_jacobian(&model, &c.params, q).unwrap();
+            (&j * &c.covariance * j.transpose()).trace().sqrt()
+        };
+        let (a, b) = (sigma(s), sigma(&memory));
+        worst = worst.max((a - b).abs() / b);
+    }
+    // The bound: first order in how far apart the two solutions sit, null directions included,
+    // in radians and metres over the arm's reach (about 1 m): the Jacobian's columns turn by that.
+    let apart = memory
+        .params
+        .difference(&memory.layout, &s.params)
+        .iter()
+        .fold(0.0f64, |m, d| m.max(d.abs()));
+    eprintln!("predicted σ agree to {worst:.1e}; the solutions are {apart:.1e} apart");
+    assert!(worst <= 10.0 * apart + 1e-12, "{worst} against {apart}");
+    // Both stages' objectives agree within what the stopping rule leaves: each solve stops when the
+    // Gauss–Newton step would gain at most `decrease_tol + relative_decrease_tol · cost`, and its
+    // cost lies within twice that of the minimum (the model is not quite quadratic there).
+    let lm = &options.lm;
+    for (a, b) in [(&rs.after, &rm.after), (&rs.before, &rm.before)] {
+        let (ca, cb) = (a.solver.cost_final, b.solver.cost_final);
+        let allowed = 2.0 * (2.0 * lm.decrease_tol + lm.relative_decrease_tol * (ca + cb));
+        assert!(
+            (ca - cb).abs() <= allowed,
+            "cost {ca} against {cb} (allowed {allowed})"
+        );
+        // The unweighted RMS in metres is not what the solve minimises (rows are weighted by their
+        // σ), so it moves to first order in the solutions' difference: about 1e-9 relative at the
+        // base-and-target stage (1.2e-9 at seed 12511784583813755909, 1.4 mm RMS), far below a
+        // nanometre. Checked at 1e-6 relative, 1.4 nm there.
+        let (a, b) = (&a.train, &b.train);
+        assert_eq!(a.n, b.n);
+        assert!((a.rms_m - b.rms_m).abs() <= 1e-6 * b.rms_m, "{a:?} {b:?}");
+        assert_eq!(a.max_row, b.max_row);
+    }
+    let before_moved = s.before.difference(&s.layout, &memory.before);
+    assert!(
+        before_moved.iter().all(|d| d.abs() < 1e-6),
+        "before: {before_moved:?}"
+    );
+    assert!((rs.sigma_hat_m - rm.sigma_hat_m).abs() <= 1e-9 * rm.sigma_hat_m);
+}
+
+#[test]
+fn the_streamed_fit_gives_the_same_bytes_on_one_thread_and_on_several() {
+    let seed = common::run_seed("stream threads");
+    let model = robots::load_builtin("iiwa7").unwrap();
+    let table = two_campaigns(12_000, &[], seed);
+    let options = CalibrationOptions::default();
+    let stream = StreamOptions {
+        sample_rows: 2_000,
+        seed,
+        ..StreamOptions::default()
+    };
+    let run = |threads: usize| {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap();
+        pool.install(|| {
+            let source = TableSource::new(&table, "t", 5_000);
+            calibrate(&model, &source, &options, &stream, &mut |_| {}).unwrap()
+        })
+    };
+    let (one, three) = (run(1), run(3));
+    assert_eq!(one.calibration.params, three.calibration.params);
+    assert_eq!(one.calibration.covariance, three.calibration.covariance);
+    assert_eq!(one.passes, three.passes);
+}
+
+#[test]
+fn a_bad_row_deep_in_the_stream_is_named_by_its_row_of_the_table() {
+    let model = robots::load_builtin("iiwa7").unwrap();
+    let mut table = two_campaigns(6_000, &[], 11);
+    table.sigma = Some(vec![1e-5; table.len()]);
+    table.sigma.as_mut().unwrap()[4_321] = -1.0;
+    let source = TableSource::new(&table, "data.parquet", 1_000);
+    let err = calibrate(
+        &model,
+        &source,
+        &CalibrationOptions::default(),
+        &StreamOptions {
+            sample_rows: 1_000,
+            ..StreamOptions::default()
+        },
+        &mut |_| {},
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(err.contains("row 4322") && err.contains("sigma"), "{err}");
+}
