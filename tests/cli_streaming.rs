@@ -102,18 +102,6 @@ fn predict_in_pieces_is_the_whole_table_prediction_byte_for_byte() {
     std::fs::remove_dir_all(&d).unwrap();
 }
 
-/// Runs robocal expecting a failure; `(exit code, stderr)`.
-fn robocal_fails(args: &[&str]) -> (Option<i32>, String) {
-    let o = assert_cmd::Command::new(env!("CARGO_BIN_EXE_robocal"))
-        .args(args)
-        .output()
-        .expect("run robocal");
-    (
-        o.status.code(),
-        String::from_utf8_lossy(&o.stderr).into_owned(),
-    )
-}
-
 #[test]
 fn calibrate_streamed_and_in_memory_agree_and_refuse_what_streams_cannot_do() {
     let d = scratch_dir("robocal_cli_stream", "calibrate");
@@ -171,7 +159,7 @@ fn calibrate_streamed_and_in_memory_agree_and_refuse_what_streams_cannot_do() {
     );
     // What streaming cannot do is refused, not done otherwise.
     let out = d.join("refused.json");
-    let (code, err) = robocal_fails(&[
+    let (code, err) = common::robocal_status(&[
         "calibrate",
         "--data",
         &s(&data),
@@ -186,7 +174,7 @@ fn calibrate_streamed_and_in_memory_agree_and_refuse_what_streams_cannot_do() {
         "{err}"
     );
     assert!(!out.exists());
-    let (code, err) = robocal_fails(&[
+    let (code, err) = common::robocal_status(&[
         "calibrate",
         "--data",
         &s(&data),

@@ -572,26 +572,22 @@ fn score_diagnose_records_hidden_and_named_causes() {
     // An input where the power table would go is refused before any run.
     let clash = dir.join("s.power.csv");
     std::fs::copy(&sc, &clash).unwrap();
-    let o = assert_cmd::Command::new(env!("CARGO_BIN_EXE_robocal"))
-        .args([
-            "sweep",
-            "--scenario",
-            clash.to_str().unwrap(),
-            "--noise",
-            "1",
-            "--reps",
-            "1",
-            "--poses",
-            "60",
-            "--score",
-            "diagnose",
-            "--out",
-            dir.join("s.parquet").to_str().unwrap(),
-        ])
-        .output()
-        .unwrap();
-    assert_eq!(o.status.code(), Some(2));
-    let err = String::from_utf8_lossy(&o.stderr);
+    let (code, err) = common::robocal_status(&[
+        "sweep",
+        "--scenario",
+        clash.to_str().unwrap(),
+        "--noise",
+        "1",
+        "--reps",
+        "1",
+        "--poses",
+        "60",
+        "--score",
+        "diagnose",
+        "--out",
+        dir.join("s.parquet").to_str().unwrap(),
+    ]);
+    assert_eq!(code, Some(2));
     assert!(err.contains("would overwrite the input"), "{err}");
     assert!(!dir.join("s.parquet").exists());
     let plain = dir.join("plain.parquet");

@@ -31,6 +31,18 @@ pub fn robocal_ok(args: &[&str]) -> (String, String) {
     (out, err)
 }
 
+/// Runs robocal with `args`, whatever its exit; `(exit code, stderr)`.
+pub fn robocal_status(args: &[&str]) -> (Option<i32>, String) {
+    let o = assert_cmd::Command::new(env!("CARGO_BIN_EXE_robocal"))
+        .args(args)
+        .output()
+        .expect("run robocal");
+    (
+        o.status.code(),
+        String::from_utf8_lossy(&o.stderr).into_owned(),
+    )
+}
+
 /// The run's seed: `ROBOCAL_TEST_SEED`, or drawn from the clock.
 pub fn seed() -> u64 {
     std::env::var("ROBOCAL_TEST_SEED")

@@ -149,14 +149,18 @@ pub fn calibrate(
         &options.lm,
         stream.max_passes,
     );
-    let mut after = Lane::new(
-        layout.clone(),
-        start.params.clone(),
-        (0..p).collect(),
-        scales.as_slice().to_vec(),
-        &options.lm,
-        stream.max_passes,
-    );
+    // The full fit's lane over every parameter, from `from`.
+    let full_lane = |from| {
+        Lane::new(
+            layout.clone(),
+            from,
+            (0..p).collect(),
+            scales.as_slice().to_vec(),
+            &options.lm,
+            stream.max_passes,
+        )
+    };
+    let mut after = full_lane(start.params.clone());
     let stride = scan
         .rows
         .div_ceil(super::model_file::SIGMA_SAMPLE_ROWS)
@@ -218,14 +222,7 @@ pub fn calibrate(
         }
         excluded_rows.sort_unstable();
         // The full fit resumes from its solution without the excluded rows.
-        let resumed = Lane::new(
-            layout.clone(),
-            after.lin.clone(),
-            (0..p).collect(),
-            scales.as_slice().to_vec(),
-            &options.lm,
-            stream.max_passes,
-        );
+        let resumed = full_lane(after.lin.clone());
         let done = std::mem::replace(&mut after, resumed);
         first_after.get_or_insert(done.report);
         round += 1;
