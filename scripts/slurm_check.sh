@@ -1,10 +1,11 @@
 #!/usr/bin/env bash
-# A robocal sweep on a real Slurm cluster (issue 15, item 7): the tested recipe of docs/sweep.md.
+# robocal sweeps on a real Slurm cluster (issues 15 and 27, item 7): the tested recipe of docs/sweep.md.
 #
 # Starts a one-node Slurm cluster on this machine (munged, slurmctld and slurmd on 127.0.0.1, run
-# directly: no systemd; every file in one temporary folder), submits `robocal sweep` as a job array of
-# 4 shards (`--shard K/4`), then `robocal sweep-merge` as a job that depends on the array
-# (`--dependency=afterok`), waits for both, and compares the merged file and its plot with a
+# directly: no systemd; every file in one temporary folder), submits two `robocal sweep`s, a kinematic
+# one and a `--score diagnose` power study, each as a job array of 4 shards (`--shard K/4`), then
+# `robocal sweep-merge` as a job that depends on the array (`--dependency=afterok`), waits for both,
+# and compares every file the merge writes (table, plot, parameter table, power table) with a
 # one-machine run of the same sweep: they must be identical bytes. Daemons and files are removed on
 # exit, whatever happens.
 #
@@ -47,7 +48,7 @@ ROBOCAL=$(cd "$(dirname "$ROBOCAL")" && pwd)/$(basename "$ROBOCAL")
 # ---- one folder for everything, removed on exit ---------------------------------------------------
 work=$(mktemp -d "${TMPDIR:-/tmp}/robocal-slurm.XXXXXX")
 chmod 755 "$work" # munged wants the socket's folder searchable by all
-mkdir -p "$work/state" "$work/spool" "$work/logs" "$work/parts"
+mkdir -p "$work/state" "$work/spool" "$work/logs"
 status=1
 cleanup() {
   local rc=$?
@@ -143,53 +144,72 @@ done
 [ "$state" = idle ] || die "the node is '$state', not idle, after 20 s"
 say "$slurm_version: one node ($host, $cpus CPUs) up in $(($(date +%s) - start)) s"
 
-# ---- the sweep: a job array of 4 shards, then the merge -------------------------------------------
-# Small on purpose (12 generate-calibrate-score runs): the point is the cluster path, not the study.
-sweep=(sweep --scenario "$repo/scenarios/iiwa7_kinematic.toml" --noise 0.5,1 --poses 20,40 --reps 3 --seed 11)
+# ---- the studies: each a job array of 4 shards, then the merge -----------------------------------
 shards=4
-cat >"$work/sweep.sbatch" <<EOF
+jobs_ok() { scontrol -o show job "$1" 2>/dev/null | grep -c 'JobState=COMPLETED .*ExitCode=0:0' || true; }
+
+# study NAME ARGS…: `robocal sweep ARGS` as a Slurm job array of $shards shards and a merge job that
+# waits for it (afterok), then on this machine alone: every file the merge writes must be the bytes
+# of the one-machine run's, and they must write the same files.
+study() {
+  local name=$1
+  shift
+  local sweep=(sweep "$@")
+  local dir="$work/$name"
+  mkdir -p "$dir/parts"
+  cat >"$dir/sweep.sbatch" <<SBATCH
 #!/bin/bash
-#SBATCH --job-name=robocal-sweep
+#SBATCH --job-name=robocal-$name
 #SBATCH --array=0-$((shards - 1))
 #SBATCH --cpus-per-task=1
 #SBATCH --time=10
-#SBATCH --output=$work/logs/sweep_%A_%a.out
+#SBATCH --output=$work/logs/${name}_%A_%a.out
 set -euo pipefail
 export RAYON_NUM_THREADS=\$SLURM_CPUS_PER_TASK
-"$ROBOCAL" ${sweep[*]} --shard "\$SLURM_ARRAY_TASK_ID/$shards" --out "$work/parts/part\$SLURM_ARRAY_TASK_ID.parquet"
-EOF
-cat >"$work/merge.sbatch" <<EOF
+"$ROBOCAL" ${sweep[*]} --shard "\$SLURM_ARRAY_TASK_ID/$shards" --out "$dir/parts/part\$SLURM_ARRAY_TASK_ID.parquet"
+SBATCH
+  cat >"$dir/merge.sbatch" <<SBATCH
 #!/bin/bash
-#SBATCH --job-name=robocal-merge
+#SBATCH --job-name=robocal-$name-merge
 #SBATCH --cpus-per-task=1
 #SBATCH --time=10
-#SBATCH --output=$work/logs/merge_%j.out
+#SBATCH --output=$work/logs/${name}_merge_%j.out
 set -euo pipefail
-"$ROBOCAL" sweep-merge --out "$work/study.parquet" "$work"/parts/part*.parquet
-EOF
-array=$(sbatch --parsable "$work/sweep.sbatch" </dev/null) || die "sbatch refused the array job"
-array=${array%%;*}
-say "submitted the array job $array ($shards shards); the merge waits for it (afterok)"
-timeout 600 sbatch --parsable --wait --dependency="afterok:$array" --kill-on-invalid-dep=yes \
-  "$work/merge.sbatch" </dev/null >"$work/merge.jobid" \
-  || die "the merge job did not complete (array $array failed, or the wait timed out)"
-# Every array task and the merge must have completed with exit code 0 (sbatch --wait alone does not
-# tell a merge cancelled for a failed dependency from one that ran).
-merge=$(cut -d';' -f1 "$work/merge.jobid")
-jobs_ok() { scontrol -o show job "$1" 2>/dev/null | grep -c 'JobState=COMPLETED .*ExitCode=0:0' || true; }
-tasks=$(jobs_ok "$array")
-[ "$tasks" = "$shards" ] || die "$tasks of $shards array tasks completed with exit code 0"
-[ "$(jobs_ok "$merge")" = 1 ] || die "the merge job $merge did not complete: $(scontrol -o show job "$merge" | grep -o 'JobState=[^ ]*')"
-[ -s "$work/study.parquet" ] && [ -s "$work/study.svg" ] || die "the merge wrote no study.parquet/.svg"
+"$ROBOCAL" sweep-merge --out "$dir/study.parquet" "$dir"/parts/part*.parquet
+SBATCH
+  local array merge tasks
+  array=$(sbatch --parsable "$dir/sweep.sbatch" </dev/null) || die "$name: sbatch refused the array job"
+  array=${array%%;*}
+  say "$name: submitted the array job $array ($shards shards); the merge waits for it (afterok)"
+  timeout 600 sbatch --parsable --wait --dependency="afterok:$array" --kill-on-invalid-dep=yes \
+    "$dir/merge.sbatch" </dev/null >"$dir/merge.jobid" \
+    || die "$name: the merge job did not complete (array $array failed, or the wait timed out)"
+  # Every array task and the merge must have completed with exit code 0 (sbatch --wait alone does
+  # not tell a merge cancelled for a failed dependency from one that ran).
+  merge=$(cut -d';' -f1 "$dir/merge.jobid")
+  tasks=$(jobs_ok "$array")
+  [ "$tasks" = "$shards" ] || die "$name: $tasks of $shards array tasks completed with exit code 0"
+  [ "$(jobs_ok "$merge")" = 1 ] \
+    || die "$name: the merge job $merge did not complete: $(scontrol -o show job "$merge" | grep -o 'JobState=[^ ]*')"
+  [ -s "$dir/study.parquet" ] && [ -s "$dir/study.svg" ] || die "$name: the merge wrote no study.parquet/.svg"
+  # The same sweep on one machine, and the comparison of every file the merge wrote.
+  "$ROBOCAL" "${sweep[@]}" --out "$dir/single.parquet" 2>"$work/logs/${name}_single.err" </dev/null \
+    || die "$name: the one-machine sweep failed"
+  local merged single f
+  merged=$(cd "$dir" && ls study.* | sed 's/^study\.//' | tr '\n' ' ')
+  single=$(cd "$dir" && ls single.* | sed 's/^single\.//' | tr '\n' ' ')
+  [ "$merged" = "$single" ] || die "$name: the merge wrote $merged, the one-machine run $single"
+  for f in $merged; do
+    cmp "$dir/study.$f" "$dir/single.$f" || die "$name: the merged study.$f differs from the one-machine run's"
+  done
+  say "$name: OK, $shards Slurm array tasks + merge give the bytes of the one-machine run" \
+    "(study.{${merged% }} identical; study.parquet sha256 $(sha256sum "$dir/study.parquet" | cut -c1-16)…)"
+}
 
-# ---- the same sweep on one machine, and the comparison --------------------------------------------
-"$ROBOCAL" "${sweep[@]}" --out "$work/single.parquet" 2>"$work/logs/single.err" </dev/null \
-  || die "the one-machine sweep failed"
-cmp "$work/study.parquet" "$work/single.parquet" || die "the merged shards differ from the one-machine run"
-cmp "$work/study.svg" "$work/single.svg" || die "the merged plot differs from the one-machine plot"
-cmp "$work/study.params.parquet" "$work/single.params.parquet" \
-  || die "the merged parameter table differs from the one-machine run's"
-sum=$(sha256sum "$work/study.parquet" | cut -c1-16)
+# Small on purpose: the point is the cluster path, not the studies. A kinematic sweep (12
+# generate-calibrate-score runs) and a diagnose power study (8 runs; its power table too).
+study kinematic --scenario "$repo/scenarios/iiwa7_kinematic.toml" --noise 0.5,1 --poses 20,40 --reps 3 --seed 11
+study diagnose --scenario "$repo/scenarios/iiwa7_backlash.toml" --score diagnose --noise 1 --poses 60 \
+  --magnitude 0,1 --magnitude-of gear_backlash --reps 4 --seed 12
 status=0
-say "OK: $shards Slurm array tasks + merge give the bytes of the one-machine run" \
-  "(study.parquet sha256 $sum…, plot identical); $(($(date +%s) - start)) s in all"
+say "OK: both studies on Slurm give the bytes of the one-machine runs; $(($(date +%s) - start)) s in all"

@@ -662,32 +662,56 @@ impl MeasurementTable {
     /// Every row of a pose (id, per campaign) at the joint values of its first row, within
     /// [`POSE_REPEAT_TOLERANCE`].
     fn check_pose_repeats(&self, file: &str) -> Result<()> {
+        // A stream's usual order, pose keys ascending with each pose's rows together, needs no map:
+        // a row can only repeat the first row of its run. Any other order takes the map, from the
+        // first row, so that the first bad row is named either way.
+        let mut run_first = 0;
+        let mut ascending = true;
+        for r in 1..self.len() {
+            let (prev, key) = (self.pose_key(r - 1), self.pose_key(r));
+            if key == prev {
+                self.check_repeat(run_first, r, file)?;
+            } else if key > prev {
+                run_first = r;
+            } else {
+                ascending = false;
+                break;
+            }
+        }
+        if ascending {
+            return Ok(());
+        }
         let mut first: HashMap<(i64, i64), usize> = HashMap::with_capacity(self.len());
         for r in 0..self.len() {
             let f = *first.entry(self.pose_key(r)).or_insert(r);
-            if f == r {
-                continue;
-            }
-            let (a, b) = (self.q_row(f), self.q_row(r));
-            if let Some(j) = (0..a.len()).find(|&j| (a[j] - b[j]).abs() > POSE_REPEAT_TOLERANCE) {
-                return Err(table_err(
-                    file,
-                    Some(r + 1),
-                    Some("pose"),
-                    format!(
-                        "pose {} is reused with other joint values: q{} is {:?} here but {:?} in row {} \
-                         (rows sharing a pose id are repeated measurements of one pose, within {:e})",
-                        self.pose[r],
-                        j + 1,
-                        b[j],
-                        a[j],
-                        f + 1,
-                        POSE_REPEAT_TOLERANCE
-                    ),
-                ));
+            if f != r {
+                self.check_repeat(f, r, file)?;
             }
         }
         Ok(())
+    }
+
+    /// Row `r` at the joint values of row `f`, the first of its pose.
+    fn check_repeat(&self, f: usize, r: usize, file: &str) -> Result<()> {
+        let (a, b) = (self.q_row(f), self.q_row(r));
+        let Some(j) = (0..a.len()).find(|&j| (a[j] - b[j]).abs() > POSE_REPEAT_TOLERANCE) else {
+            return Ok(());
+        };
+        Err(table_err(
+            file,
+            Some(r + 1),
+            Some("pose"),
+            format!(
+                "pose {} is reused with other joint values: q{} is {:?} here but {:?} in row {} \
+                 (rows sharing a pose id are repeated measurements of one pose, within {:e})",
+                self.pose[r],
+                j + 1,
+                b[j],
+                a[j],
+                f + 1,
+                POSE_REPEAT_TOLERANCE
+            ),
+        ))
     }
 
     fn validate_row(&self, r: usize, file: &str) -> Result<()> {
@@ -710,12 +734,13 @@ impl MeasurementTable {
             finite(name, v)?;
         }
         let p = self.position[r];
-        // Scaled by the largest coordinate, so that 1e300 m gives its distance, not infinity.
-        let largest = p.iter().fold(0.0f64, |m, v| m.max(v.abs()));
-        let distance = if largest > 0.0 {
-            largest * p.iter().map(|v| (v / largest).powi(2)).sum::<f64>().sqrt()
+        let d2 = p[0] * p[0] + p[1] * p[1] + p[2] * p[2];
+        let distance = if d2.is_finite() {
+            d2.sqrt()
         } else {
-            0.0
+            // Scaled by the largest coordinate, so that 1e300 m gives its distance, not infinity.
+            let largest = p.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+            largest * p.iter().map(|v| (v / largest).powi(2)).sum::<f64>().sqrt()
         };
         if distance > MAX_POSITION_M {
             let axis = (0..3)

@@ -1552,3 +1552,48 @@ fn streamed_errors_name_the_file_wide_row_and_line() {
     assert!(it.next().is_none());
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// Repeats are checked against the first row of their pose whatever the order: consecutive runs
+/// (a stream's order, checked without a map) and poses that come back later (with one) name the
+/// same first bad row, and a run that drifts by less than the tolerance a row at a time but more
+/// in all is caught against its first row.
+#[test]
+fn pose_repeats_are_checked_against_the_first_row_in_any_order() {
+    let tol = mt::POSE_REPEAT_TOLERANCE;
+    let row = |pose: i64, q1: f64| format!("{pose},{q1},0.2,0.5,0.5,0.5\n");
+    // Pose 1 drifts by 0.6 tol a row: rows 3 and 4 each within tol of the row before, row 4 not
+    // of row 2, its first.
+    let drift = format!(
+        "pose,q1,q2,x,y,z\n{}{}{}{}{}",
+        row(0, 0.1),
+        row(1, 0.3),
+        row(1, 0.3 + 0.6 * tol),
+        row(1, 0.3 + 1.2 * tol),
+        row(2, 0.5)
+    );
+    csv_error(
+        &drift,
+        &["row 4", "column pose", "pose 1 is reused", "in row 2"],
+    );
+    // The same bad run followed by a pose that comes back out of order: still row 4 first.
+    let then_back = format!("{drift}{}", row(0, 0.9));
+    csv_error(&then_back, &["row 4", "pose 1 is reused", "in row 2"]);
+    // A pose that comes back out of order at other joint values: named against its first row.
+    let back = format!(
+        "pose,q1,q2,x,y,z\n{}{}{}{}",
+        row(0, 0.1),
+        row(1, 0.3),
+        row(2, 0.5),
+        row(1, 0.35)
+    );
+    csv_error(&back, &["row 4", "pose 1 is reused", "in row 2"]);
+    // Within the tolerance of the first row, in and out of order: accepted.
+    let fine = format!(
+        "pose,q1,q2,x,y,z\n{}{}{}{}",
+        row(1, 0.3),
+        row(1, 0.3 + 0.9 * tol),
+        row(0, 0.1),
+        row(1, 0.3 - 0.9 * tol)
+    );
+    assert_eq!(read_csv_str(&fine, "data.csv").unwrap().len(), 4);
+}

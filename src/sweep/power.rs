@@ -212,12 +212,18 @@ pub fn csv(power: &Power) -> String {
 pub fn summary_text(power: &Power) -> String {
     let mut s = String::from("detection power (95 % Wilson intervals in FILE.power.csv):\n");
     for c in &power.curves {
-        let m90 = c.magnitude_90.map_or_else(
-            || "not reached at the largest magnitude".to_string(),
-            |m| format!("{m}"),
-        );
+        let swept = power.cells.iter().any(|cell| {
+            cell.noise_scale == c.noise_scale && cell.poses == c.poses && cell.magnitude > 0.0
+        });
+        let m90 = match c.magnitude_90 {
+            Some(m) => format!("detected in ≥ 90 % of runs from magnitude {m}"),
+            None if swept => {
+                "detected in ≥ 90 % of runs: not reached at the largest magnitude".to_string()
+            }
+            None => "no magnitude above 0 swept".to_string(),
+        };
         s.push_str(&format!(
-            "  noise ×{}, {} poses: detected in ≥ 90 % of runs from magnitude {m90}",
+            "  noise ×{}, {} poses: {m90}",
             c.noise_scale, c.poses
         ));
         if let Some((f, n)) = c.false_alarms_at_0 {
@@ -362,5 +368,30 @@ mod tests {
         let mut plain = cells[0].clone();
         plain.detected = None;
         assert!(power(&[plain]).is_none());
+        let text = summary_text(&p);
+        assert!(
+            text.contains("100 poses: detected in ≥ 90 % of runs from magnitude 0.4"),
+            "{text}"
+        );
+        assert!(
+            text.contains("200 poses: detected in ≥ 90 % of runs: not reached"),
+            "{text}"
+        );
+    }
+
+    #[test]
+    fn a_sweep_of_clean_runs_alone_says_so() {
+        let p = power(&[cell(0.0, 200, 4000, 4000, 0)]).unwrap();
+        let text = summary_text(&p);
+        assert!(
+            text.contains(
+                "200 poses: no magnitude above 0 swept; false alarms at magnitude 0: 0 of 4000"
+            ),
+            "{text}"
+        );
+        assert!(
+            text.contains("0 of 4000 = 0.00 %, 95 % interval [0.00 %, 0.10 %]"),
+            "{text}"
+        );
     }
 }

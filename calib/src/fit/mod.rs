@@ -26,6 +26,7 @@ mod outliers;
 pub mod plan;
 pub mod problem;
 pub mod register;
+pub mod repeats;
 pub mod report;
 pub mod robust;
 pub mod start;
@@ -755,6 +756,11 @@ pub(crate) fn kinematic_fit(
         excluded,
         robust: robust_summary,
         learned: None,
+        repeatability: if lean {
+            None
+        } else {
+            repeats::of_rows(train.table, &train.rows)
+        },
         warnings,
         health,
     };

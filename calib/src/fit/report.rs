@@ -132,6 +132,10 @@ pub struct CalibrationReport {
     pub robust: Option<RobustSummary>,
     /// The learned residual correction on top of the physical model, with a `learned:` model.
     pub learned: Option<LearnedStage>,
+    /// The scatter of repeated measurements of a pose among the training rows, as read (gross
+    /// errors included), when there are repeats ([`super::repeats`]).
+    #[serde(default)]
+    pub repeatability: Option<super::repeats::Repeatability>,
     /// Things a user should know (data-specific unidentifiable parameters, weak combinations, …).
     pub warnings: Vec<String>,
     /// Numerical warnings of every solve behind this report (base-and-target fit, full fit, robust
@@ -188,6 +192,20 @@ impl CalibrationReport {
                 self.dof
             ),
         );
+        if let Some(r) = &self.repeatability {
+            line(
+                &mut s,
+                format!(
+                    "repeatability: {:.2} µm RMS about each pose's mean ({:.2} µm per axis), from {} \
+                     repeats of {} poses; noise estimate σ̂ {:.2} µm per axis",
+                    r.rms_m * 1e6,
+                    r.per_axis_m() * 1e6,
+                    r.repeats,
+                    r.poses,
+                    self.sigma_hat_m * 1e6
+                ),
+            );
+        }
         line(&mut s, "position errors (|predicted − measured|):".into());
         line(
             &mut s,

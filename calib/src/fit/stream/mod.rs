@@ -10,17 +10,25 @@
 //!    lies within a few standard deviations *of the sample* from the minimum on every row.
 //! 3. **Solve** ([`lane`]): two Levenberg–Marquardt solves carried across passes, the
 //!    base-and-target fit from the sample's "before" and the full fit from the sample's solution.
-//!    Each pass evaluates both at their trial points: `χ²`, `D Jᵀr` and the `R` factor of the scaled
-//!    Jacobian, summed piece by piece in file order (each piece's factor from a blocked Householder
-//!    QR, stacked into the running factor: a tall-skinny QR whose result does not depend on the
-//!    number of threads). The rank decision and the covariance come from the factor at the
-//!    solution, as in memory. From the sample's start one Gauss–Newton step converges, so the solve
-//!    takes two passes.
-//! 4. **Residuals** ([`pass::final_pass`]): statistics at "before" and at the solution, every row's
+//!    Each pass evaluates both at their trial points: `χ²` and `D Jᵀr`, and where a lane asks for it
+//!    the `R` factor of the scaled Jacobian, summed piece by piece in file order (each piece's
+//!    factor from a blocked Householder QR, stacked into the running factor: a tall-skinny QR whose
+//!    result does not depend on the number of threads). The factor, two thirds of a pass's work, is
+//!    computed at the start and kept while the steps go as it predicts (a chord method,
+//!    [`lane`]'s docs). From the sample's start one Gauss–Newton step converges, so the solve takes
+//!    two passes: the first with the factor, the second without.
+//! 4. **Residuals** ([`pass::FinalPass`]): statistics at "before" and at the solution, every row's
 //!    residual norm (8 bytes a row: the only memory that grows with the rows), the rows of largest
-//!    norm with their pose and error, and evenly spaced rows for the model file's predicted σ.
+//!    norm with their pose and error, and evenly spaced rows for the model file's predicted σ. A
+//!    pass without factors is expected to end both solves, so it computes these at the points the
+//!    solves end at if it does (from the same evaluation of each row); only when a solve goes on is
+//!    that work thrown away, and a last pass computes them at the solution.
 //!    Gross errors (beyond [`CalibrationOptions::gross_error_threshold`] of the robust scale) are
 //!    excluded and the full fit resumed, up to [`super::GROSS_ERROR_ROUNDS`] times, as in memory.
+//!
+//! The file is decoded one piece ahead, on a thread of its own ([`FileSource`]). Measured on the
+//! 2-core machine (`scripts/bench_streaming.sh`, iiwa 7, 10⁷ rows): 3 passes, about 3 s for the
+//! scan, 34 s for the pass with the factor and 11 s for the last one.
 //!
 //! # What differs from the in-memory fit
 //! - The minimum is the same, reached by another path: both solves stop when the full Gauss–Newton
@@ -30,6 +38,10 @@
 //!   its standard deviation: `|δₖ|/σₖ ≤ ‖J δ‖/σ̂` (tested on 10⁵ rows).
 //! - Sums are in piece order: `χ²`, statistics and the factor agree with the in-memory ones to
 //!   rounding.
+//! - The covariance and the rank decision come from the factor where it was last computed
+//!   ([`StreamedCalibration::factor_at`]), one step from the solution, where the in-memory fit
+//!   takes it at its solution: they agree to first order in how far apart those points sit (the
+//!   Jacobian's columns turn by that, in radians and metres over the arm's reach).
 //! - The null-space report names the joints that do not move from the sample's rows.
 //! - Poses are counted as runs of consecutive rows with the same campaign and pose id (a stream's
 //!   repeats of a pose follow each other).
@@ -71,7 +83,7 @@ pub struct StreamOptions {
 /// well within the region where one Gauss–Newton step converges.
 pub const DEFAULT_SAMPLE_ROWS: usize = 16_384;
 
-/// Most passes of a streamed solve: two suffice from the sample's start.
+/// Most evaluations of a streamed solve: two suffice from the sample's start.
 pub const DEFAULT_MAX_PASSES: usize = 30;
 
 impl Default for StreamOptions {
@@ -98,6 +110,9 @@ pub struct StreamedCalibration {
     /// Every `⌈rows / 10,000⌉`th row of the table from the first: the rows
     /// [`crate::model::file::CalibratedModel::record_calibration_sigma`] takes on the whole table.
     pub spaced_rows: MeasurementTable,
+    /// The parameters at which the `R` factor behind the covariance and the rank decision was
+    /// computed (the solution, or a point one step or a few before it).
+    pub factor_at: crate::model::params::KinematicParams,
 }
 
 /// The kinematic calibration of every row of `source` (module docs), with `options` (no robust
@@ -172,30 +187,50 @@ pub fn calibrate(
     let dim = if scan.orientation { 6 } else { 3 };
     let mut round = 0;
     let last = loop {
-        while before.phase == Phase::Running || after.phase == Phase::Running {
+        let fin = loop {
+            if before.phase == Phase::Done && after.phase == Phase::Done {
+                let fin = pass::final_pass(
+                    model,
+                    source,
+                    &options.noise,
+                    &excluded_rows,
+                    &before.lin,
+                    &after.lin,
+                    stride,
+                    progress,
+                )?;
+                passes += 1;
+                break fin;
+            }
+            // A pass without factors is expected to end both solves: it computes the residuals
+            // at the points they end at if it does, which saves the final pass.
+            let speculate = !before.wants_factor() && !after.wants_factor();
+            let (end_before, end_after) = (before.next_point().clone(), after.next_point().clone());
+            let request = speculate.then_some(pass::FinalRequest {
+                before: &end_before,
+                after: &end_after,
+                stride,
+            });
             let label = format!("pass {}", passes + 1);
-            pass::solve_pass(
+            let fin = pass::solve_pass(
                 model,
                 source,
                 &options.noise,
                 &excluded_rows,
                 &mut [&mut before, &mut after],
+                request,
                 &label,
                 progress,
             )?;
             passes += 1;
-        }
-        let fin = pass::final_pass(
-            model,
-            source,
-            &options.noise,
-            &excluded_rows,
-            &before.lin,
-            &after.lin,
-            stride,
-            progress,
-        )?;
-        passes += 1;
+            let ended_there = before.phase == Phase::Done
+                && after.phase == Phase::Done
+                && before.lin == end_before
+                && after.lin == end_after;
+            if let (Some(fin), true) = (fin, ended_there) {
+                break fin;
+            }
+        };
         if round == GROSS_ERROR_ROUNDS || !after.report.was_successful() {
             break fin;
         }
@@ -249,7 +284,7 @@ pub fn calibrate(
         value: scan.rows.to_string(),
         problem: "the streamed fit evaluated no point".into(),
     })?;
-    let gram = after.at_lin().map(|e| e.gram()).expect("evaluated");
+    let gram = after.gram().expect("evaluated");
     let params = after.lin.clone();
     let mut warnings = Vec::new();
     if !before.report.was_successful() {
@@ -344,6 +379,7 @@ pub fn calibrate(
         excluded,
         robust: None,
         learned: None,
+        repeatability: scan.repeatability,
         warnings,
         health,
     };
@@ -363,6 +399,10 @@ pub fn calibrate(
         passes,
         sample_rows: scan.sample.len(),
         spaced_rows: last.spaced,
+        factor_at: after
+            .factor_at()
+            .cloned()
+            .unwrap_or_else(|| after.lin.clone()),
     })
 }
 

@@ -6,10 +6,10 @@ use super::lane::{Evaluation, Lane, Phase};
 use super::source::ChunkSource;
 use crate::cancel;
 use crate::error::{CalibError, Result};
-use crate::fit::problem::{KinematicProblem, NoiseModel, Observations};
+use crate::fit::problem::{KinematicProblem, NoiseModel, Observations, RowResiduals, ShareRequest};
 use crate::model::params::KinematicParams;
 use crate::model::predict::Prediction;
-use crate::model::stats::{ResidualStats, residual_stats};
+use crate::model::stats::{ResidualStats, residual_stats, stats_of_errors};
 use sim::Model;
 use sim::measurement_table::{Chunk, MeasurementTable};
 
@@ -68,36 +68,91 @@ fn check_campaigns(obs: &Observations, params: &KinematicParams, name: &str) -> 
     obs.campaign_indices_or_error(params, name).map(|_| ())
 }
 
-/// One pass: every running lane evaluated at its trial point, in file order. `progress` hears
+/// What a pass computes besides the lanes' sums: the residuals at `before` and `after`
+/// ([`FinalPass`]), with every `stride`th row kept.
+#[derive(Clone, Copy)]
+pub struct FinalRequest<'a> {
+    /// The base-and-target fit's solution.
+    pub before: &'a KinematicParams,
+    /// The full fit's solution.
+    pub after: &'a KinematicParams,
+    /// Rows `0, stride, 2·stride, …` are kept.
+    pub stride: usize,
+}
+
+/// One pass: every running lane evaluated at its trial point (with the `R` factor where the lane
+/// wants it), and, when asked, the residuals at `final_at`'s points, in file order. `progress` hears
 /// the rows done.
+#[allow(clippy::too_many_arguments)]
 pub fn solve_pass(
     model: &Model,
     source: &dyn ChunkSource,
     noise: &NoiseModel,
     excluded: &[usize],
     lanes: &mut [&mut Lane],
+    final_at: Option<FinalRequest>,
     label: &str,
     progress: &mut dyn FnMut(&str),
-) -> Result<()> {
+) -> Result<Option<FinalPass>> {
     let running: Vec<usize> = (0..lanes.len())
         .filter(|&k| lanes[k].phase == Phase::Running)
         .collect();
     let mut sums: Vec<Evaluation> = running
         .iter()
-        .map(|&k| Evaluation::empty(lanes[k].active.len()))
+        .map(|&k| Evaluation::empty(lanes[k].active.len(), lanes[k].wants_factor()))
         .collect();
+    let mut fin = final_at.map(|f| FinalSums::new(model, f, excluded.len()));
+    // A lane evaluated at a point where the residuals are asked for gives them (one evaluation of
+    // each row instead of two): 0 for `before`, 1 for `after`.
+    let gives_rows = |k: usize| -> Option<usize> {
+        let f = final_at?;
+        let lane = &lanes[k];
+        if lane.active.len() == lane.layout.len() && &lane.trial == f.after {
+            Some(1)
+        } else if &lane.trial == f.before {
+            Some(0)
+        } else {
+            None
+        }
+    };
+    let roles: Vec<Option<usize>> = running.iter().map(|&k| gives_rows(k)).collect();
     let mut rows = 0;
     for chunk in source.pass()? {
         cancel::checkpoint()?;
         let chunk = chunk?;
         let obs = observations(&chunk, noise, source.name(), excluded)?;
-        for (sum, &k) in sums.iter_mut().zip(&running) {
+        let mut at_points: [Option<RowResiduals>; 2] = [None, None];
+        for ((sum, &k), role) in sums.iter_mut().zip(&running).zip(&roles) {
             let lane = &lanes[k];
             check_campaigns(&obs, &lane.trial, source.name())?;
             let mut prob =
                 KinematicProblem::new(model, &obs, lane.trial.clone(), lane.active.clone());
-            let (cost, gradient, factor) = prob.factor_share(&lane.scales);
-            sum.add(cost, &gradient, factor, obs.len() * obs.dim());
+            let want = ShareRequest {
+                factor: sum.factor.is_some(),
+                rows: role.is_some(),
+            };
+            let share = prob.factor_share(&lane.scales, want);
+            sum.add(
+                share.cost,
+                &share.gradient,
+                share.factor,
+                obs.len() * obs.dim(),
+            );
+            if let (Some(role), Some(rows)) = (role, share.rows) {
+                at_points[*role] = Some(rows);
+            }
+        }
+        if let Some(fin) = fin.as_mut() {
+            let [at_before, at_after] = at_points;
+            fin.add(
+                model,
+                &chunk,
+                &obs,
+                excluded,
+                source.name(),
+                at_before.as_ref(),
+                at_after.as_ref(),
+            )?;
         }
         rows += chunk.table.len();
         progress(&format!("{label}: {rows} rows"));
@@ -105,7 +160,7 @@ pub fn solve_pass(
     for (sum, &k) in sums.into_iter().zip(&running) {
         lanes[k].take(sum);
     }
-    Ok(())
+    Ok(fin.map(FinalSums::finish))
 }
 
 /// Running sums of [`ResidualStats`] over pieces.
@@ -196,7 +251,7 @@ pub struct FinalPass {
 }
 
 /// The residuals at `before` and `after` on every row of `source` (`excluded` rows at weight 0),
-/// and its rows `0, stride, …`.
+/// and its rows `0, stride, …`: a pass with no lane to evaluate.
 #[allow(clippy::too_many_arguments)]
 pub fn final_pass(
     model: &Model,
@@ -208,35 +263,94 @@ pub fn final_pass(
     stride: usize,
     progress: &mut dyn FnMut(&str),
 ) -> Result<FinalPass> {
-    let mut out = FinalPass {
-        before: StatsSum::default(),
-        after: StatsSum::default(),
-        norms: Vec::new(),
-        candidates: Vec::new(),
-        excluded: vec![(0, 0.0); excluded.len()],
-        spaced: MeasurementTable::new(0, Default::default()),
-        sigma2: 0.0,
+    let request = FinalRequest {
+        before,
+        after,
+        stride,
     };
-    let mut heap: std::collections::BinaryHeap<std::cmp::Reverse<HeapItem>> =
-        std::collections::BinaryHeap::new();
-    let mut rows = 0;
-    let prediction = Prediction::new(model, after);
-    for chunk in source.pass()? {
-        cancel::checkpoint()?;
-        let chunk = chunk?;
-        let obs = observations(&chunk, noise, source.name(), excluded)?;
-        check_campaigns(&obs, before, source.name())?;
-        check_campaigns(&obs, after, source.name())?;
-        out.before.add(&residual_stats(model, before, &obs));
-        out.after.add(&residual_stats(model, after, &obs));
-        let active: Vec<usize> = Vec::new();
-        let norms = KinematicProblem::new(model, &obs, after.clone(), active).row_norms();
-        let campaign = prediction.campaigns_of(&obs);
+    let fin = solve_pass(
+        model,
+        source,
+        noise,
+        excluded,
+        &mut [],
+        Some(request),
+        "residuals at the solution",
+        progress,
+    )?;
+    Ok(fin.expect("asked for"))
+}
+
+/// [`FinalPass`] piece by piece.
+struct FinalSums<'a> {
+    out: FinalPass,
+    request: FinalRequest<'a>,
+    prediction: Prediction<'a>,
+    heap: std::collections::BinaryHeap<std::cmp::Reverse<HeapItem>>,
+}
+
+impl<'a> FinalSums<'a> {
+    fn new(model: &'a Model, request: FinalRequest<'a>, excluded: usize) -> Self {
+        FinalSums {
+            out: FinalPass {
+                before: StatsSum::default(),
+                after: StatsSum::default(),
+                norms: Vec::new(),
+                candidates: Vec::new(),
+                excluded: vec![(0, 0.0); excluded],
+                spaced: MeasurementTable::new(0, Default::default()),
+                sigma2: 0.0,
+            },
+            request,
+            prediction: Prediction::new(model, request.after),
+            heap: std::collections::BinaryHeap::new(),
+        }
+    }
+
+    /// Adds a piece (its rows prepared as `obs`), with the residuals at `before` and `after` where
+    /// a lane's evaluation gave them (else they are computed here).
+    #[allow(clippy::too_many_arguments)]
+    fn add(
+        &mut self,
+        model: &Model,
+        chunk: &Chunk,
+        obs: &Observations,
+        excluded: &[usize],
+        name: &str,
+        at_before: Option<&RowResiduals>,
+        at_after: Option<&RowResiduals>,
+    ) -> Result<()> {
+        let FinalRequest {
+            before,
+            after,
+            stride,
+        } = self.request;
+        let out = &mut self.out;
+        check_campaigns(obs, before, name)?;
+        check_campaigns(obs, after, name)?;
+        // Statistics from the lanes' errors when there is no orientation to add.
+        let stats = |params: &KinematicParams, given: Option<&RowResiduals>| match given {
+            Some(rows) if obs.orientation.is_none() => stats_of_errors(&rows.errors, obs),
+            _ => residual_stats(model, params, obs),
+        };
+        out.before.add(&stats(before, at_before));
+        out.after.add(&stats(after, at_after));
+        let computed;
+        let norms: &[f64] = match at_after {
+            Some(rows) => &rows.norms,
+            None => {
+                computed = KinematicProblem::new(model, obs, after.clone(), Vec::new()).row_norms();
+                &computed
+            }
+        };
+        let prediction = &self.prediction;
+        let campaign = prediction.campaigns_of(obs);
         let mut scratch = prediction.scratch();
         let mut error_of = |r: usize| {
             let c = campaign.get(r).copied().unwrap_or(0);
             (prediction.row_in(&obs.ext, r, obs.q_row(r), c, &mut scratch) - obs.position[r]).norm()
         };
+        let heap = &mut self.heap;
         for (r, &norm) in norms.iter().enumerate() {
             let item = HeapItem {
                 norm,
@@ -266,7 +380,7 @@ pub fn final_pass(
             let local = r - chunk.first_row;
             out.excluded[k] = (obs.pose[local], error_of(local));
         }
-        out.norms.extend_from_slice(&norms);
+        out.norms.extend_from_slice(norms);
         out.sigma2 += obs.sigma.iter().map(|s| s * s).sum::<f64>();
         let first_spaced = chunk.first_row.div_ceil(stride) * stride;
         if out.spaced.n_joints == 0 {
@@ -277,17 +391,20 @@ pub fn final_pass(
             out.spaced.push_row(&chunk.table.row(r - chunk.first_row))?;
             r += stride;
         }
-        rows += chunk.table.len();
-        progress(&format!("residuals at the solution: {rows} rows"));
         // Candidates no longer in the heap are dropped now and then (bounded memory).
         if out.candidates.len() > 4 * MAX_CANDIDATES {
-            keep_heap(&mut out.candidates, &heap);
+            keep_heap(&mut out.candidates, heap);
         }
+        Ok(())
     }
-    keep_heap(&mut out.candidates, &heap);
-    out.candidates
-        .sort_by(|a, b| b.norm.total_cmp(&a.norm).then(a.row.cmp(&b.row)));
-    Ok(out)
+
+    fn finish(mut self) -> FinalPass {
+        keep_heap(&mut self.out.candidates, &self.heap);
+        self.out
+            .candidates
+            .sort_by(|a, b| b.norm.total_cmp(&a.norm).then(a.row.cmp(&b.row)));
+        self.out
+    }
 }
 
 /// A row's norm, ordered by norm and then by row (earlier rows rank higher on ties).

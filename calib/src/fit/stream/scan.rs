@@ -73,6 +73,8 @@ pub struct Scan {
     pub pose_runs: usize,
     /// The sample, rows in table order.
     pub sample: MeasurementTable,
+    /// The scatter of each run's repeated measurements, when a run has several rows.
+    pub repeatability: Option<crate::fit::repeats::Repeatability>,
 }
 
 /// Reads every row of `source` once: counts them and draws the sample of about `sample_rows` rows
@@ -89,6 +91,7 @@ pub fn scan(
     let mut layout: Option<(usize, sim::measurement_table::OptionalColumns)> = None;
     let mut pose_runs = 0;
     let mut last: Option<(i64, i64)> = None;
+    let mut scatter = crate::fit::repeats::RepeatScatter::default();
     for chunk in source.pass()? {
         cancel::checkpoint()?;
         let chunk = chunk?;
@@ -112,6 +115,7 @@ pub fn scan(
                 pose_runs += 1;
                 last = Some(key);
             }
+            scatter.add(key, t.position[r]);
             let campaign = t.campaign_of(r).unwrap_or(0);
             let res = reservoirs.entry(campaign).or_insert_with(|| Reservoir {
                 keys: Vec::new(),
@@ -167,5 +171,6 @@ pub fn scan(
         campaigns: reservoirs.keys().copied().collect(),
         pose_runs,
         sample,
+        repeatability: scatter.finish(),
     })
 }

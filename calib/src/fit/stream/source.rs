@@ -39,9 +39,60 @@ impl ChunkSource for FileSource {
         &self.name
     }
 
+    /// The pieces are decoded one ahead, on a thread of their own, while the caller works on the
+    /// previous one (decoding is serial; the solver's work on a piece is parallel).
     fn pass(&self) -> Result<Box<dyn Iterator<Item = Result<Chunk>> + '_>> {
         let chunks = read_chunks(&self.path, self.rows_per_chunk)?;
-        Ok(Box::new(chunks.map(|c| c.map_err(Into::into))))
+        Ok(Box::new(Prefetched::new(chunks, &self.name)))
+    }
+}
+
+/// The pieces of a file decoded on a thread of their own, one piece ahead of the consumer.
+struct Prefetched {
+    pieces: std::sync::mpsc::Receiver<Result<Chunk>>,
+    reader: Option<std::thread::JoinHandle<()>>,
+    name: String,
+}
+
+impl Prefetched {
+    fn new(chunks: sim::measurement_table::TableChunks, name: &str) -> Self {
+        let (send, pieces) = std::sync::mpsc::sync_channel(1);
+        let reader = std::thread::spawn(move || {
+            for piece in chunks {
+                // A consumer that stopped (an error, a cancel) ends the reading.
+                if send.send(piece.map_err(Into::into)).is_err() {
+                    break;
+                }
+            }
+        });
+        Prefetched {
+            pieces,
+            reader: Some(reader),
+            name: name.to_string(),
+        }
+    }
+}
+
+impl Iterator for Prefetched {
+    type Item = Result<Chunk>;
+
+    fn next(&mut self) -> Option<Result<Chunk>> {
+        match self.pieces.recv() {
+            Ok(piece) => Some(piece),
+            Err(_) => {
+                // The reader is done: a panic there must not pass for the end of the file.
+                let reader = self.reader.take()?;
+                match reader.join() {
+                    Ok(()) => None,
+                    Err(_) => Some(Err(crate::error::CalibError::BadValue {
+                        context: self.name.clone(),
+                        field: "file".into(),
+                        value: self.name.clone(),
+                        problem: "reading the file failed part way (its reader stopped)".into(),
+                    })),
+                }
+            }
+        }
     }
 }
 
