@@ -272,6 +272,8 @@ def calibrate(
     robot: str | os.PathLike[str] | Robot = "iiwa7",
     model: str = "kinematic",
     test_data: DataLike | None = None,
+    stream: str = "auto",
+    chunk_rows: int = 65536,
     **options: Any,
 ) -> Model:
     """Identifies the robot's error model from measurements, as ``robocal calibrate``.
@@ -288,10 +290,18 @@ def calibrate(
             ``robust="huber"|"cauchy"``; :func:`options` lists them. The model is fitted on every
             pose of ``data`` whichever validation is chosen; a ``campaign`` column gives each
             campaign its own tracker registration.
+        stream: for a ``.csv``/``.parquet`` path, whether the file is read in pieces, as
+            ``calibrate --stream``: ``"auto"`` (files of more than 262,144 rows when the options allow
+            it: the kinematic model, ``folds=0``, no ``robust``, no test data), ``"always"`` (any
+            file; options that need the table in memory raise ``BadInput``) or ``"never"``. Memory
+            then does not grow with the rows (10⁷ rows: about 250 MB). A DataFrame is in memory
+            already: ``"always"`` with one raises ``BadInput``.
+        chunk_rows: rows read at a time when streaming.
 
     Returns:
         The :class:`Model`, with ``report`` (dict, as ``calibrate --json``; ``validation`` holds the
-        held-out RMS, mean, max and ISO 9283-style mean before and after).
+        held-out RMS, mean, max and ISO 9283-style mean before and after; a streamed fit adds
+        ``stream``: rows, passes, piece and sample sizes).
 
     Raises:
         BadInput: unusable data or options (the message names the column, row and field).
@@ -300,6 +310,22 @@ def calibrate(
     options = {"model": model, **options}
     _check_options("calibrate", options)
     rob = _robot(robot)
+    if isinstance(data, (str, os.PathLike)) and test_data is None:
+        streamed = _robocal.calibrate_file(rob, os.fspath(data), flags(options), stream, chunk_rows)
+        if streamed is not None:
+            native, report_text, failure = streamed
+            report = json.loads(report_text)
+            if failure is not None:
+                raise RuntimeFailure(failure, report)
+            return Model(native, report)
+    elif stream == "always":
+        what = "test_data is given" if test_data is not None else "data is not a file path"
+        raise BadInput(
+            f"stream='always' reads a .csv or .parquet file in pieces, but {what}: a DataFrame is in "
+            "memory already, and held-out data needs the table in memory"
+        )
+    elif stream not in ("auto", "never"):
+        raise BadInput(f"stream='{stream}': one of 'auto', 'always' or 'never'")
     table = to_table(data)
     test = None if test_data is None else to_table(test_data)
     native, report_text, failure = _robocal.calibrate(rob, table, test, flags(options))

@@ -96,6 +96,12 @@ def calibrate(
 ) -> tuple[CalibratedModel | None, str, str | None]:
     """``robocal calibrate`` with value flags ``args``: (model, report JSON, failure message)."""
 
+def calibrate_file(
+    robot: Robot, path: str, args: list[str], stream: str, chunk_rows: int
+) -> tuple[CalibratedModel | None, str, str | None] | None:
+    """``robocal calibrate --data PATH --stream STREAM`` when that reads the file in pieces: (model,
+    report JSON, failure message); None when the table is to be held in memory."""
+
 def diagnose(robot: Robot, data: Table, args: list[str]) -> str:
     """``robocal diagnose --json`` with value flags ``args``: the JSON text."""
 

@@ -767,6 +767,76 @@ fn calibrate(
     Ok((model, report.to_string(), failure))
 }
 
+/// What a calibration returns to Python: the model (`None` on failure), the report JSON text and the
+/// failure message.
+type Calibrated = (Option<CalibratedModel>, String, Option<String>);
+
+/// Calibrates the file `path` as `robocal calibrate --data PATH --stream STREAM --chunk-rows N` does
+/// when that reads it in pieces (`args`: the value flags). Returns `(model or None, report JSON text,
+/// failure message or None)`, or `None` when the table is to be held in memory (`never`; `auto` with
+/// a small file or options that need it), for the caller to read it; the robot checks' warnings are
+/// issued as `DataWarning`s.
+#[pyfunction]
+#[pyo3(signature = (robot, path, args, stream, chunk_rows))]
+fn calibrate_file(
+    py: Python<'_>,
+    robot: &Robot,
+    path: String,
+    args: Vec<String>,
+    stream: &str,
+    chunk_rows: usize,
+) -> PyResult<Option<Calibrated>> {
+    use robocal::cli::calibrate_stream::StreamMode;
+    let options: cal_cli::Options = quick(py, flags::parse("calibrate", &args))?;
+    let mode = match stream {
+        "auto" => StreamMode::Auto,
+        "always" => StreamMode::Always,
+        "never" => StreamMode::Never,
+        other => {
+            return Err(raise(
+                py,
+                CliError::Input(format!(
+                    "stream='{other}': one of 'auto', 'always' or 'never'"
+                )),
+            ));
+        }
+    };
+    let path = std::path::PathBuf::from(path);
+    let robot = &robot.robot;
+    let streamed = work(py, || {
+        let reason = options.needs_memory(false);
+        let (stream, _) = cal_cli::decide_stream(mode, &path, reason.as_deref())?;
+        if !stream {
+            return Ok(None);
+        }
+        let s = cal_cli::calibrate_streamed(robot, &path, &options, chunk_rows, &mut |_| {})?;
+        Ok(Some(s))
+    })?;
+    let Some(s) = streamed else {
+        return Ok(None);
+    };
+    warn(py, &s.warnings, 2)?;
+    let name = path.display().to_string();
+    let mut report = s.outcome.json(robot, &name, None, None);
+    report["stream"] = s.json.clone();
+    let failure = s.outcome.failure();
+    let model = match failure {
+        Some(_) => None,
+        None => Some(CalibratedModel {
+            file: work(py, || {
+                Ok(s.outcome.model_file(
+                    robot,
+                    cal_cli::Named {
+                        table: &s.spaced_rows,
+                        name: &name,
+                    },
+                )?)
+            })?,
+        }),
+    };
+    Ok(Some((model, report.to_string(), failure)))
+}
+
 /// Registers a new campaign as `robocal register`: `args` are its value flags (`["--target"]`).
 /// Returns `(model with the campaign registered, the `register --json` document as text)`; warnings about the
 /// data are issued as `DataWarning`s.
@@ -859,6 +929,7 @@ fn _robocal(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<Table>()?;
     m.add_class::<CalibratedModel>()?;
     m.add_function(wrap_pyfunction!(calibrate, m)?)?;
+    m.add_function(wrap_pyfunction!(calibrate_file, m)?)?;
     m.add_function(wrap_pyfunction!(diagnose, m)?)?;
     m.add_function(wrap_pyfunction!(register, m)?)?;
     m.add_function(wrap_pyfunction!(generate, m)?)?;

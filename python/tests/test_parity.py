@@ -168,3 +168,34 @@ def test_test_data_and_base_tip_links_as_the_cli(cli, generated, tmp_path):
     robot = robocal.Robot.load("iiwa7", tip_link="iiwa7_flange")
     got = robocal.calibrate(str(tmp_path / "train.csv"), robot=robot, test_data=str(tmp_path / "test.csv"))
     assert report_without_outputs(got.report) == report_without_outputs(expected)
+
+
+@pytest.mark.parametrize("stream", ["always", "never"])
+def test_calibrate_of_a_file_streams_as_the_cli(cli, generated, tmp_path, stream):
+    """A path streams as `calibrate --stream` (issue 28): the same report (with its `stream` object)
+    and the same model file, in pieces of 40 rows."""
+    data = generated / "measurements.parquet"
+    out = tmp_path / "cli.json"
+    expected = cli.json(
+        "calibrate", "--data", data, "--out", out, "--folds", "0", "--stream", stream, "--chunk-rows", "40"
+    )
+    model = robocal.calibrate(str(data), robot="iiwa7", folds=0, stream=stream, chunk_rows=40)
+    assert report_without_outputs(model.report) == report_without_outputs(expected)
+    assert ("stream" in model.report) == (stream == "always")
+    if stream == "always":
+        assert model.report["stream"]["rows"] == 150 and model.report["stream"]["chunk_rows"] == 40
+    model.save(tmp_path / "py.json")
+    assert (tmp_path / "py.json").read_bytes() == out.read_bytes()
+
+
+def test_streaming_refuses_what_needs_the_table_in_memory(cli, generated, tmp_path):
+    data = generated / "measurements.parquet"
+    code, message = cli.error("calibrate", "--data", data, "--out", tmp_path / "m.json", "--stream", "always")
+    assert code == 2
+    with pytest.raises(robocal.BadInput) as e:
+        robocal.calibrate(str(data), robot="iiwa7", stream="always")
+    assert str(e.value) == message and "cross-validation" in message
+    with pytest.raises(robocal.BadInput, match="reads a .csv or .parquet file in pieces"):
+        robocal.calibrate(robocal.read_table(data), robot="iiwa7", folds=0, stream="always")
+    with pytest.raises(robocal.BadInput, match="one of 'auto', 'always' or 'never'"):
+        robocal.calibrate(str(data), robot="iiwa7", folds=0, stream="sometimes")

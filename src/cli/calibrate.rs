@@ -116,6 +116,18 @@ impl Robust {
 }
 
 impl Options {
+    /// Why these options need the table in memory (`None`: the streamed fit applies), with held-out
+    /// data given or not (`test_data`).
+    pub fn needs_memory(&self, test_data: bool) -> Option<String> {
+        needs_memory(
+            &self.model,
+            self.robust.is_some(),
+            self.folds,
+            self.test_fraction,
+            test_data,
+        )
+    }
+
     /// The model `--model` names, `None` for `auto`.
     fn model_spec(&self) -> Result<Option<ModelSpec>, CliError> {
         Ok(match self.model.parse::<ModelChoice>()? {
@@ -414,61 +426,34 @@ pub fn run(args: Args) -> CliResult {
     let robot = Robot::load(&args.robot.robot, &spec)?;
     let model = &robot.model;
     let data_name = args.data.display().to_string();
-    let memory_reason = needs_memory(
-        &args.options.model,
-        args.options.robust.is_some(),
-        args.options.folds,
-        args.options.test_fraction,
-        args.test_data.is_some(),
-    );
-    let stream = match args.stream {
-        StreamMode::Never => false,
-        StreamMode::Always => match &memory_reason {
-            Some(r) => {
-                return Err(CliError::Input(format!(
-                    "--stream always: {r} needs the table in memory"
-                )));
-            }
-            None => true,
-        },
-        StreamMode::Auto => {
-            let large = has_more_rows_than(&args.data, STREAM_MIN_ROWS);
-            if let (true, Some(r), false) = (large, &memory_reason, args.json) {
-                eprintln!(
-                    "note: {data_name} has more than {STREAM_MIN_ROWS} rows, held in memory for {r}; \
-                     the kinematic model with --folds 0 and no --robust reads them in pieces"
-                );
-            }
-            large && memory_reason.is_none()
-        }
-    };
+    let memory_reason = args.options.needs_memory(args.test_data.is_some());
+    let (stream, large) = decide_stream(args.stream, &args.data, memory_reason.as_deref())?;
+    if let (true, false, Some(r), false) = (large, stream, &memory_reason, args.json) {
+        eprintln!(
+            "note: {data_name} has more than {STREAM_MIN_ROWS} rows, held in memory for {r}; \
+             the kinematic model with --folds 0 and no --robust reads them in pieces"
+        );
+    }
     let mut spinner = super::diagnose::Spinner::default();
     let quiet = args.json;
     let (outcome, table, stream_info) = if stream {
-        let source = CheckedFile::new(&args.data, args.chunk_rows, model);
-        let (_, options) = args.options.resolve(false)?;
-        let settings = calib::fit::stream::StreamOptions {
-            seed: args.options.seed,
-            ..Default::default()
-        };
-        let streamed =
-            calib::fit::stream::calibrate(model, &source, &options, &settings, &mut |m| {
-                spinner.say(m)
-            });
+        let streamed = calibrate_streamed(
+            &robot,
+            &args.data,
+            &args.options,
+            args.chunk_rows,
+            &mut |m| spinner.say(m),
+        );
         drop(spinner);
         let streamed = streamed?;
-        for w in source.warnings() {
+        for w in &streamed.warnings {
             eprintln!("warning: {w}");
         }
-        let info = describe(&streamed, args.chunk_rows);
-        let outcome = Outcome {
-            model_spec: ModelSpec::kinematic(),
-            cal: streamed.calibration,
-            split: json!({"kind": "none"}),
-            validation: None,
-            auto: None,
-        };
-        (outcome, streamed.spaced_rows, Some(info))
+        (
+            streamed.outcome,
+            streamed.spaced_rows,
+            Some((streamed.line, streamed.json)),
+        )
     } else {
         let table = read_table(&args.data, model)?;
         let test_table = match &args.test_data {
@@ -551,4 +536,76 @@ pub fn run(args: Args) -> CliResult {
         }
         Ok(())
     }
+}
+
+/// Whether `calibrate` reads `path` in pieces under `mode`, given why the options need the table in
+/// memory (`memory_reason`), and whether the file has more than [`STREAM_MIN_ROWS`] rows (known
+/// under `auto` only). `--stream always` with such options is an input error naming them.
+pub fn decide_stream(
+    mode: StreamMode,
+    path: &Path,
+    memory_reason: Option<&str>,
+) -> Result<(bool, bool), CliError> {
+    match mode {
+        StreamMode::Never => Ok((false, false)),
+        StreamMode::Always => match memory_reason {
+            Some(r) => Err(CliError::Input(format!(
+                "--stream always: {r} needs the table in memory"
+            ))),
+            None => Ok((true, false)),
+        },
+        StreamMode::Auto => {
+            let large = has_more_rows_than(path, STREAM_MIN_ROWS);
+            Ok((large && memory_reason.is_none(), large))
+        }
+    }
+}
+
+/// A calibration of a file read in pieces ([`calibrate_streamed`]).
+pub struct Streamed {
+    /// The calibration, as the in-memory path reports one (no validation).
+    pub outcome: Outcome,
+    /// Evenly spaced rows of the file: those the model file's predicted σ is computed on.
+    pub spaced_rows: MeasurementTable,
+    /// The `streamed:` line of the text report.
+    pub line: String,
+    /// The JSON report's `stream` object.
+    pub json: serde_json::Value,
+    /// The robot checks' warnings over the whole file, one line each.
+    pub warnings: Vec<String>,
+}
+
+/// The kinematic calibration of the file `path`, read in pieces of `chunk_rows` rows
+/// ([`calib::fit::stream`]), its rows checked against the robot on the first pass. The options must
+/// allow it ([`Options::needs_memory`] is `None`). `progress` hears each pass's rows.
+pub fn calibrate_streamed(
+    robot: &Robot,
+    path: &Path,
+    options: &Options,
+    chunk_rows: usize,
+    progress: &mut dyn FnMut(&str),
+) -> Result<Streamed, CliError> {
+    check_chunk_rows(chunk_rows)?;
+    let source = CheckedFile::new(path, chunk_rows, &robot.model);
+    let (_, fit_options) = options.resolve(false)?;
+    let settings = calib::fit::stream::StreamOptions {
+        seed: options.seed,
+        ..Default::default()
+    };
+    let streamed =
+        calib::fit::stream::calibrate(&robot.model, &source, &fit_options, &settings, progress)?;
+    let (line, json) = describe(&streamed, chunk_rows);
+    Ok(Streamed {
+        outcome: Outcome {
+            model_spec: ModelSpec::kinematic(),
+            cal: streamed.calibration,
+            split: json!({"kind": "none"}),
+            validation: None,
+            auto: None,
+        },
+        spaced_rows: streamed.spaced_rows,
+        line,
+        json,
+        warnings: source.warnings(),
+    })
 }
