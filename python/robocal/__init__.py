@@ -294,7 +294,7 @@ def calibrate(
             ``calibrate --stream``: ``"auto"`` (files of more than 262,144 rows when the options allow
             it: the kinematic model, ``folds=0``, no ``robust``, no test data), ``"always"`` (any
             file; options that need the table in memory raise ``BadInput``) or ``"never"``. Memory
-            then does not grow with the rows (10⁷ rows: about 250 MB). A DataFrame is in memory
+            then grows by 8 bytes a row only (10⁷ rows: about 160 MB). A DataFrame is in memory
             already: ``"always"`` with one raises ``BadInput``.
         chunk_rows: rows read at a time when streaming.
 

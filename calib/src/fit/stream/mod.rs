@@ -186,8 +186,8 @@ pub fn calibrate(
     let mut first_after: Option<crate::lm::MinimizationReport> = None;
     let dim = if scan.orientation { 6 } else { 3 };
     let mut round = 0;
-    let last = loop {
-        let fin = loop {
+    let mut last = loop {
+        let mut fin = loop {
             if before.phase == Phase::Done && after.phase == Phase::Done {
                 let fin = pass::final_pass(
                     model,
@@ -197,6 +197,7 @@ pub fn calibrate(
                     &before.lin,
                     &after.lin,
                     stride,
+                    scan.rows,
                     progress,
                 )?;
                 passes += 1;
@@ -210,6 +211,7 @@ pub fn calibrate(
                 before: &end_before,
                 after: &end_after,
                 stride,
+                rows: scan.rows,
             });
             let label = format!("pass {}", passes + 1);
             let fin = pass::solve_pass(
@@ -234,7 +236,7 @@ pub fn calibrate(
         if round == GROSS_ERROR_ROUNDS || !after.report.was_successful() {
             break fin;
         }
-        let scale = robust_scale(&fin.norms, dim);
+        let scale = robust_scale(&mut fin.norms, dim);
         let gross: Vec<&pass::Candidate> = fin
             .candidates
             .iter()
@@ -321,7 +323,7 @@ pub fn calibrate(
     for o in &excluded {
         warnings.push(super::gross_error_warning(o));
     }
-    let scale = robust_scale(&last.norms, dim);
+    let scale = robust_scale(&mut last.norms, dim);
     let threshold = options.outlier_threshold;
     let outliers: Vec<Outlier> = last
         .candidates
@@ -407,9 +409,10 @@ pub fn calibrate(
 }
 
 /// The robust scale of weighted residual norms of rows of `dim` residuals: their median over the
-/// median of `√χ²(dim)` (1 when the median is 0), as the in-memory outlier search takes it.
-fn robust_scale(norms: &[f64], dim: usize) -> f64 {
-    let mut v = norms.to_vec();
+/// median of `√χ²(dim)` (1 when the median is 0), as the in-memory outlier search takes it. Reorders
+/// `norms` (a selection in place: a copy would double the 8 bytes a row).
+fn robust_scale(norms: &mut [f64], dim: usize) -> f64 {
+    let v = norms;
     if v.is_empty() {
         return 1.0;
     }

@@ -78,6 +78,9 @@ pub struct FinalRequest<'a> {
     pub after: &'a KinematicParams,
     /// Rows `0, stride, 2·stride, …` are kept.
     pub stride: usize,
+    /// Rows of the file: the row norms' room, reserved at once (a growing vector would double its
+    /// room, up to twice the 8 bytes a row).
+    pub rows: usize,
 }
 
 /// One pass: every running lane evaluated at its trial point (with the `R` factor where the lane
@@ -238,7 +241,8 @@ pub struct FinalPass {
     pub before: StatsSum,
     /// Statistics at the solution.
     pub after: StatsSum,
-    /// Every row's weighted residual norm at the solution (0 for excluded rows), file order.
+    /// Every row's weighted residual norm at the solution (0 for excluded rows), file order (the
+    /// robust scale reorders them: only their median is used).
     pub norms: Vec<f64>,
     /// The rows of largest norm (at most [`MAX_CANDIDATES`]), largest first.
     pub candidates: Vec<Candidate>,
@@ -251,7 +255,7 @@ pub struct FinalPass {
 }
 
 /// The residuals at `before` and `after` on every row of `source` (`excluded` rows at weight 0),
-/// and its rows `0, stride, …`: a pass with no lane to evaluate.
+/// and its rows `0, stride, …` (`rows`: the file's): a pass with no lane to evaluate.
 #[allow(clippy::too_many_arguments)]
 pub fn final_pass(
     model: &Model,
@@ -261,12 +265,14 @@ pub fn final_pass(
     before: &KinematicParams,
     after: &KinematicParams,
     stride: usize,
+    rows: usize,
     progress: &mut dyn FnMut(&str),
 ) -> Result<FinalPass> {
     let request = FinalRequest {
         before,
         after,
         stride,
+        rows,
     };
     let fin = solve_pass(
         model,
@@ -295,7 +301,7 @@ impl<'a> FinalSums<'a> {
             out: FinalPass {
                 before: StatsSum::default(),
                 after: StatsSum::default(),
-                norms: Vec::new(),
+                norms: Vec::with_capacity(request.rows),
                 candidates: Vec::new(),
                 excluded: vec![(0, 0.0); excluded],
                 spaced: MeasurementTable::new(0, Default::default()),
@@ -324,6 +330,7 @@ impl<'a> FinalSums<'a> {
             before,
             after,
             stride,
+            ..
         } = self.request;
         let out = &mut self.out;
         check_campaigns(obs, before, name)?;
