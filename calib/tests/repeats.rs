@@ -6,8 +6,8 @@
 mod common;
 
 use calib::fit::stream::{StreamOptions, TableSource, calibrate};
-use calib::fit::{Calibration, CalibrationOptions, Dataset, FitRequest, fit};
-use common::{Truth, random_configs, table_with};
+use calib::fit::{CalibrationOptions, Dataset, FitRequest, fit};
+use common::{Truth, distance_in_sigmas, random_configs, stopping_bound, table_with};
 use sim::measurement_table::{MeasurementTable, Row};
 use sim::robots;
 
@@ -61,19 +61,6 @@ fn means(t: &MeasurementTable) -> MeasurementTable {
         .unwrap();
     }
     out
-}
-
-/// `|δₖ|/σₖ ≤ ‖J D δ‖/σ̂`: the distance of two solutions in the fit's noise metric.
-fn distance_in_sigmas(a: &Calibration, b: &Calibration) -> f64 {
-    let delta = a.params.difference(&a.layout, &b.params);
-    a.subspace.step_in_sigmas(&delta, a.report.chi2_per_dof)
-}
-
-/// The stopping rule's bound on a solution's distance from the exact minimum, in units of `σ̂`.
-fn stopping_bound(c: &Calibration, options: &CalibrationOptions) -> f64 {
-    let chi2 = c.report.after.solver.cost_final;
-    (options.lm.decrease_tol + options.lm.relative_decrease_tol * chi2).sqrt()
-        / c.report.chi2_per_dof.sqrt()
 }
 
 #[test]

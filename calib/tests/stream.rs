@@ -7,7 +7,9 @@ mod common;
 
 use calib::fit::stream::{StreamOptions, TableSource, calibrate};
 use calib::fit::{Calibration, CalibrationOptions, Dataset, FitRequest, fit};
-use common::{Truth, concat, moved_tracker, random_configs, with_campaign};
+use common::{
+    Truth, concat, distance_in_sigmas, moved_tracker, random_configs, stopping_bound, with_campaign,
+};
 use sim::measurement_table::MeasurementTable;
 use sim::robots;
 
@@ -38,22 +40,6 @@ fn two_campaigns(rows: usize, gross: &[usize], seed: u64) -> MeasurementTable {
         t.position[r][1] += 5e-3;
     }
     t
-}
-
-/// `|δₖ|/σₖ ≤ ‖J D δ‖/σ̂` for every parameter: the distance of two solutions in the fit's noise
-/// metric, which bounds each parameter's difference in its standard deviations.
-fn distance_in_sigmas(a: &Calibration, b: &Calibration) -> f64 {
-    let delta = a.params.difference(&a.layout, &b.params);
-    let vf = a.report.chi2_per_dof;
-    a.subspace.step_in_sigmas(&delta, vf)
-}
-
-/// The stopping rule's bound on a solution's distance from the exact minimum, `√pred` with
-/// `pred ≤ decrease_tol + relative_decrease_tol · χ²` (noise units), in units of `σ̂`.
-fn stopping_bound(c: &Calibration, options: &CalibrationOptions) -> f64 {
-    let chi2 = c.report.after.solver.cost_final;
-    (options.lm.decrease_tol + options.lm.relative_decrease_tol * chi2).sqrt()
-        / c.report.chi2_per_dof.sqrt()
 }
 
 #[test]

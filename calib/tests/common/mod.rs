@@ -219,3 +219,21 @@ pub fn concat(a: &MeasurementTable, b: &MeasurementTable) -> MeasurementTable {
     }
     t
 }
+
+/// `|δₖ|/σₖ ≤ ‖J D δ‖/σ̂` for every parameter: the distance of two solutions in the fit's noise
+/// metric, which bounds each parameter's difference in its standard deviations.
+pub fn distance_in_sigmas(a: &calib::fit::Calibration, b: &calib::fit::Calibration) -> f64 {
+    let delta = a.params.difference(&a.layout, &b.params);
+    a.subspace.step_in_sigmas(&delta, a.report.chi2_per_dof)
+}
+
+/// The stopping rule's bound on a solution's distance from the exact minimum, `√pred` with
+/// `pred ≤ decrease_tol + relative_decrease_tol · χ²` (noise units), in units of `σ̂`.
+pub fn stopping_bound(
+    c: &calib::fit::Calibration,
+    options: &calib::fit::CalibrationOptions,
+) -> f64 {
+    let chi2 = c.report.after.solver.cost_final;
+    (options.lm.decrease_tol + options.lm.relative_decrease_tol * chi2).sqrt()
+        / c.report.chi2_per_dof.sqrt()
+}

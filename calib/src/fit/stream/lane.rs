@@ -374,13 +374,19 @@ impl Lane {
 mod tests {
     use super::*;
 
-    /// A two-parameter problem on joint 1's and 2's zero offsets (additive, so the lane's point is
-    /// read back exactly): residuals `r(a, b) = [a − 1 + c·b², b − 2, 0.1·(a + b)]`, whose curvature
+    /// The residuals and Jacobian of a two-parameter problem on joint 1's and 2's zero offsets
+    /// (additive, so the lane's point is read back exactly): residuals `r(a, b) = [a − 1 + c·b², b − 2, 0.1·(a + b)]`, whose curvature
     /// `c` decides how far a Gauss–Newton step on an old Jacobian misses.
-    fn evaluation(a: f64, b: f64, c: f64, with_factor: bool) -> Evaluation {
-        let r = [a - 1.0 + c * b * b, b - 2.0, 0.1 * (a + b)];
+    fn residuals(a: f64, b: f64, c: f64) -> (nalgebra::DVector<f64>, DMatrix<f64>) {
+        let r =
+            nalgebra::DVector::from_column_slice(&[a - 1.0 + c * b * b, b - 2.0, 0.1 * (a + b)]);
         let j = DMatrix::from_row_slice(3, 2, &[1.0, 2.0 * c * b, 0.0, 1.0, 0.1, 0.1]);
-        let rv = nalgebra::DVector::from_column_slice(&r);
+        (r, j)
+    }
+
+    /// The pass's sums at `(a, b)`.
+    fn evaluation(a: f64, b: f64, c: f64, with_factor: bool) -> Evaluation {
+        let (rv, j) = residuals(a, b, c);
         let g = j.tr_mul(&rv);
         Evaluation {
             cost: rv.norm_squared(),
@@ -426,12 +432,7 @@ mod tests {
     fn minimum(c: f64) -> [f64; 2] {
         let (mut a, mut b) = (0.0, 0.0);
         for _ in 0..100 {
-            let r = nalgebra::DVector::from_column_slice(&[
-                a - 1.0 + c * b * b,
-                b - 2.0,
-                0.1 * (a + b),
-            ]);
-            let j = DMatrix::from_row_slice(3, 2, &[1.0, 2.0 * c * b, 0.0, 1.0, 0.1, 0.1]);
+            let (r, j) = residuals(a, b, c);
             let step = (j.tr_mul(&j)).lu().solve(&(-j.tr_mul(&r))).unwrap();
             a += step[0];
             b += step[1];

@@ -15,28 +15,11 @@ pub fn estimate(
     test_rows: &[usize],
     noise: &NoiseModel,
 ) -> (f64, String) {
-    let groups = table.rows_by_pose();
-    let (mut ss, mut dof) = (0.0, 0usize);
-    for (_, rows) in groups.iter().filter(|(_, g)| g.len() > 1) {
-        let n = rows.len() as f64;
-        let mut mean = [0.0; 3];
-        for &r in rows.iter() {
-            for (m, x) in mean.iter_mut().zip(table.position[r]) {
-                *m += x / n;
-            }
-        }
-        for &r in rows.iter() {
-            ss += (0..3)
-                .map(|k| (table.position[r][k] - mean[k]).powi(2))
-                .sum::<f64>();
-        }
-        dof += rows.len() - 1;
-    }
-    if dof >= MIN_REPEAT_DOF {
-        return (
-            (ss / dof as f64).sqrt(),
-            format!("repeated poses ({dof} repeats)"),
-        );
+    let all: Vec<usize> = (0..table.len()).collect();
+    if let Some(r) = crate::fit::repeats::of_rows(table, &all)
+        && r.repeats >= MIN_REPEAT_DOF
+    {
+        return (r.rms_m, format!("repeated poses ({} repeats)", r.repeats));
     }
     let sigma = |r: usize| match &table.sigma {
         Some(s) => s[r],
