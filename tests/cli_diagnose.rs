@@ -421,25 +421,19 @@ fn the_readme_session_runs_and_every_fit_converges() {
     let _ = std::fs::remove_dir_all(&d);
 }
 
-/// A robot without `<inertial>` cannot be checked for joint compliance: diagnose says so in its text
-/// and JSON (`not_tried`, with the reason naming the links) instead of dropping the candidate
-/// silently (issue 15); so for thermal drift on a table without `temp` or `t`. With `--json`, stderr
-/// has one warning line naming the causes not tried (issue 23: it had nothing).
+/// A robot without `<inertial>` cannot be checked for link deflection (the gravity moments need the
+/// masses): diagnose says so in its text and JSON (`not_tried`, with the reason naming the links)
+/// instead of dropping the candidate silently (issue 15); so for thermal drift on a table without
+/// `temp` or `t`. With `--json`, stderr has one warning line naming the causes not tried (issue 23:
+/// it had nothing). Joint compliance is tried, as lumped products (issue 25; before, it was not
+/// tried either).
 #[test]
 fn candidates_that_cannot_be_tried_are_named_with_the_reason() {
     let d = dir("not_tried");
     let data = generate("iiwa7_kinematic.toml", &d.join("data"));
     let urdf = sim::robots::builtin_urdf("iiwa7").unwrap();
-    let mut stripped = String::new();
-    let mut rest = urdf;
-    while let Some(a) = rest.find("<inertial>") {
-        stripped.push_str(&rest[..a]);
-        let b = rest[a..].find("</inertial>").unwrap() + a + "</inertial>".len();
-        rest = &rest[b..];
-    }
-    stripped.push_str(rest);
     let robot = d.join("no_inertials.urdf");
-    std::fs::write(&robot, stripped).unwrap();
+    std::fs::write(&robot, sim::urdf_text::without_inertials(urdf)).unwrap();
     let o = robocal(&[
         "diagnose",
         "--robot",
@@ -458,7 +452,7 @@ fn candidates_that_cannot_be_tried_are_named_with_the_reason() {
     assert_eq!(warnings.len(), 1, "{}", stderr(&o));
     assert!(
         warnings[0].contains("not tried")
-            && warnings[0].contains("joint_compliance: the gravity torques"),
+            && warnings[0].contains("link_deflection: the gravity moments"),
         "{}",
         warnings[0]
     );
@@ -474,17 +468,19 @@ fn candidates_that_cannot_be_tried_are_named_with_the_reason() {
             .find(|n| n["cause"] == cause)
             .map(|n| n["reason"].as_str().unwrap().to_string())
     };
-    let compliance = reason("joint_compliance").expect("joint_compliance not tried");
+    let deflection = reason("link_deflection").expect("link_deflection not tried");
     assert!(
-        compliance.contains("inertial") && compliance.contains("iiwa7_link_1"),
-        "{compliance}"
+        deflection.contains("inertial") && deflection.contains("iiwa7_link_1"),
+        "{deflection}"
     );
+    assert!(reason("joint_compliance").is_none(), "{not_tried:?}");
     assert!(
         v["trials"]
             .as_array()
             .unwrap()
             .iter()
-            .all(|t| t["cause"] != "joint_compliance")
+            .any(|t| t["cause"] == "joint_compliance"),
+        "compliance is tried as lumped products"
     );
     // The generated table has `t` and `temp`: thermal drift was tried.
     assert!(reason("thermal_drift").is_none(), "{not_tried:?}");
@@ -496,7 +492,7 @@ fn candidates_that_cannot_be_tried_are_named_with_the_reason() {
         data.to_str().unwrap(),
     ]));
     assert!(
-        text.contains("not tried: joint_compliance: the gravity torques"),
+        text.contains("not tried: link_deflection: the gravity moments"),
         "{text}"
     );
     let _ = std::fs::remove_dir_all(&d);

@@ -30,11 +30,14 @@ pub enum Unit {
     MetrePerWarmUp,
     /// Dimensionless per unit of warm-up (link growth from time stamps alone).
     PerWarmUp,
+    /// Radian per kilogram: a joint's compliance times gravity times the payload's centre of mass
+    /// (robot without masses, payload of known mass and unknown centre of mass).
+    RadianPerKilogram,
 }
 
 impl Unit {
     /// Every unit.
-    pub const ALL: [Unit; 10] = [
+    pub const ALL: [Unit; 11] = [
         Unit::Radian,
         Unit::Metre,
         Unit::RadianPerNewtonMetre,
@@ -45,6 +48,7 @@ impl Unit {
         Unit::RadianPerWarmUp,
         Unit::MetrePerWarmUp,
         Unit::PerWarmUp,
+        Unit::RadianPerKilogram,
     ];
 
     /// The unit's text, as reports and model files write it.
@@ -60,6 +64,7 @@ impl Unit {
             Unit::RadianPerWarmUp => "rad per warm-up",
             Unit::MetrePerWarmUp => "m per warm-up",
             Unit::PerWarmUp => "1 per warm-up",
+            Unit::RadianPerKilogram => "rad/kg",
         }
     }
 

@@ -12,7 +12,10 @@
 //! movable joint (through fixed joints only: `flange`, `tool0`); that leaf is the tip. Leaves hanging
 //! off earlier links through fixed joints only (a ROS-Industrial `base` frame off the root, a camera on
 //! link 3) are frames on the chain, not branches of it: their masses are welded to the body they hang
-//! from. Two cases are errors that list the leaf links to choose from:
+//! from. So are the links of a branch off a chosen chain (`--tip-link` on one arm of a torso with two):
+//! with the branch's movable joints at zero, the second arm, a head or a cable carrier load the chain
+//! in the statics, and the model's notes name those joints. Two cases are errors that list the leaf
+//! links to choose from:
 //! * movable joints on two branches (gripper fingers, a second arm): the chain's joints are ambiguous,
 //!   whatever the joint counts (an earlier rule took the branch with the most movable joints);
 //! * several leaves below the last movable joint (`tool0` and `ft_frame` off the last link): the joints
@@ -607,16 +610,46 @@ impl<'a> Builder<'a> {
             if on_chain.contains(child) {
                 continue;
             }
+            let tc = t * self.joint_origin(j)?;
+            parts.push((child, tc));
             if is_movable(j) {
+                let mut movable = vec![j.name.clone()];
+                self.branch_subtree(child, tc, parts, &mut movable)?;
                 notes.push(format!(
-                    "joint '{}' is off the chain and movable: its links' masses are ignored",
-                    j.name
+                    "a branch leaves the chain at joint '{}': its links' masses load the chain with \
+                     its movable joints ({}) at zero",
+                    j.name,
+                    movable
+                        .iter()
+                        .map(|n| format!("'{n}'"))
+                        .collect::<Vec<_>>()
+                        .join(", ")
                 ));
                 continue;
             }
+            self.fixed_subtree(child, tc, on_chain, parts, notes)?;
+        }
+        Ok(())
+    }
+
+    /// Every link below `link` of a branch off the chain (pose `t` in the body's frame), with the
+    /// branch's movable joints at zero (the child frame at the joint's origin), into `parts`; the
+    /// movable joints' names into `movable`.
+    fn branch_subtree(
+        &self,
+        link: &'a str,
+        t: Pose,
+        parts: &mut Vec<(&'a str, Pose)>,
+        movable: &mut Vec<String>,
+    ) -> Result<()> {
+        for j in self.child_joints.get(link).into_iter().flatten() {
+            let child = j.child.link.as_str();
             let tc = t * self.joint_origin(j)?;
             parts.push((child, tc));
-            self.fixed_subtree(child, tc, on_chain, parts, notes)?;
+            if is_movable(j) {
+                movable.push(j.name.clone());
+            }
+            self.branch_subtree(child, tc, parts, movable)?;
         }
         Ok(())
     }

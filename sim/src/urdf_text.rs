@@ -11,6 +11,47 @@ use crate::error::{Result, SimError};
 use std::collections::HashMap;
 use std::ops::Range;
 
+/// `urdf` without its `<inertial>` elements (and every other byte kept): the robot as a vendor's
+/// kinematics file or a DH table describes it, with no masses. What a study of calibration without
+/// masses starts from (joint compliance then identifies lumped products; see
+/// `calib::model::extensions::lumped_gravity`). An unterminated `<inertial>` is left as it is.
+pub fn without_inertials(urdf: &str) -> String {
+    let mut out = String::with_capacity(urdf.len());
+    let mut rest = urdf;
+    while let Some(a) = find_tag(rest, "inertial") {
+        let open_end = match rest[a..].find('>') {
+            Some(e) => a + e,
+            None => break,
+        };
+        let end = if rest[..open_end].ends_with('/') {
+            Some(open_end + 1)
+        } else {
+            rest[open_end..]
+                .find("</inertial>")
+                .map(|e| open_end + e + "</inertial>".len())
+        };
+        let Some(end) = end else { break };
+        out.push_str(&rest[..a]);
+        rest = &rest[end..];
+    }
+    out.push_str(rest);
+    out
+}
+
+/// The byte offset of the first start tag `<name` (followed by `>`, `/` or white space) in `text`.
+fn find_tag(text: &str, name: &str) -> Option<usize> {
+    let open = format!("<{name}");
+    let mut from = 0;
+    while let Some(k) = text[from..].find(&open) {
+        let at = from + k;
+        match text[at + open.len()..].chars().next() {
+            Some(c) if c == '>' || c == '/' || c.is_whitespace() => return Some(at),
+            _ => from = at + open.len(),
+        }
+    }
+    None
+}
+
 /// A new origin for one joint: `xyz` (m) and `rpy` (rad, URDF roll-pitch-yaw).
 #[derive(Clone, Debug, PartialEq)]
 pub struct OriginEdit {
@@ -497,6 +538,30 @@ mod tests {
     }
 
     const MARK: &str = "robocal-test";
+
+    /// Inertials go, in every spelling; `<inertia>` inside them with them; everything else stays,
+    /// and the built-in robots lose their masses and nothing else.
+    #[test]
+    fn without_inertials_removes_the_masses_only() {
+        let text = "<robot name=\"r\"><link name=\"a\"><inertial>\n<mass value=\"2\"/>\
+                    <inertia ixx=\"1\" ixy=\"0\" ixz=\"0\" iyy=\"1\" iyz=\"0\" izz=\"1\"/></inertial>\
+                    <visual/></link><link name=\"b\"><inertial  /></link><inertials_note/>\
+                    <link name=\"c\"><inertial\n><mass value=\"1\"/></inertial></link></robot>";
+        assert_eq!(
+            without_inertials(text),
+            "<robot name=\"r\"><link name=\"a\"><visual/></link><link name=\"b\"></link>\
+             <inertials_note/><link name=\"c\"></link></robot>"
+        );
+        assert_eq!(without_inertials("<inertial><mass/>"), "<inertial><mass/>");
+        for (name, urdf) in crate::robots::BUILTIN {
+            let full = crate::urdf::load_str(urdf, name, &Default::default()).unwrap();
+            let bare =
+                crate::urdf::load_str(&without_inertials(urdf), name, &Default::default()).unwrap();
+            assert!(full.require_inertials().is_ok() && bare.require_inertials().is_err());
+            assert_eq!(bare.massless_links().len(), bare.nq(), "{name}");
+            assert_eq!(full.home_flange(), bare.home_flange(), "{name}");
+        }
+    }
 
     fn run(text: &str, edits: &[OriginEdit]) -> Result<String> {
         let lines = vec!["line one".to_string(), "a -- b".to_string()];

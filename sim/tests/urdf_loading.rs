@@ -138,13 +138,17 @@ fn a_branching_tree_needs_a_tip_link() {
     };
     let model = urdf::load_str(&text, "test.urdf", &spec).unwrap();
     assert_eq!(model.joints()[1].name, "jr");
-    // The other branch moves, so its mass is not folded into 'mid'; the user is told.
+    // The other branch loads 'mid' with its joint at zero (its mass folded in); the user is told
+    // which joint is held there.
     assert!(
-        model.notes().iter().any(|n| n.contains("'jl'")),
+        model
+            .notes()
+            .iter()
+            .any(|n| n.contains("'jl'") && n.contains("at zero")),
         "{:?}",
         model.notes()
     );
-    assert_eq!(model.bodies()[0].mass, 1.0);
+    assert_eq!(model.bodies()[0].mass, 2.0);
     let bad = ChainSpec {
         base_link: None,
         tip_link: Some("nope".into()),

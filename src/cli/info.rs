@@ -16,7 +16,7 @@ pub struct Args {
 
 /// Runs `robocal info`.
 pub fn run(args: Args) -> CliResult {
-    let model = args.robot.load()?;
+    let model = args.robot.load_quietly()?;
     if args.json {
         let joints: Vec<_> = model
             .joints()

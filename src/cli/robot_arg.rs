@@ -17,8 +17,19 @@ pub struct RobotArgs {
 }
 
 impl RobotArgs {
-    /// Loads the model, or a one-line input error.
+    /// Loads the model, or a one-line input error. What the loader tolerated but a user should
+    /// know (a branch off the chain loading it with its joints at zero, say) goes to stderr as
+    /// warnings.
     pub fn load(&self) -> Result<Model, crate::error::CliError> {
+        let model = self.load_quietly()?;
+        for note in model.notes() {
+            eprintln!("warning: robot '{}': {note}", model.name());
+        }
+        Ok(model)
+    }
+
+    /// [`RobotArgs::load`] without the warnings, for a command that shows the notes itself (`info`).
+    pub fn load_quietly(&self) -> Result<Model, crate::error::CliError> {
         let spec = ChainSpec {
             base_link: self.base_link.clone(),
             tip_link: self.tip_link.clone(),

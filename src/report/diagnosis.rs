@@ -99,7 +99,7 @@ pub fn document(d: &Diagnosis, data_name: &str, figures: &[(String, String)]) ->
             for p in &f.parameters {
                 let determined = p.sigma.is_finite() && p.sigma > 0.0;
                 let (sigma, z, note) = if determined {
-                    let remark = f.cause.model().remark(p.value);
+                    let remark = f.cause.model().remark(p.unit, p.value);
                     (
                         format!("{:.1e} {}", p.sigma, p.unit),
                         format!("{:.1}", p.value / p.sigma),

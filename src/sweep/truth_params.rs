@@ -111,6 +111,7 @@ mod tests {
             thermal: Some(ThermalInput::Temperature { t_ref_c: 20.0 }),
             transmission_joints: (0..model.nq()).collect(),
             joints: Default::default(),
+            lumped_gravity: None,
         }
     }
 

@@ -224,11 +224,14 @@ pub(super) fn fit_at_equilibrium(
     if !settings.needs_equilibrium() {
         return Ok(cal);
     }
-    let payload = train
-        .table
-        .payload
-        .as_ref()
-        .is_some_and(|m| train.rows.iter().any(|&r| m[r] > 0.0));
+    // The centre of mass is searched only where the regressors read it through the robot's statics
+    // (without masses, joint compliance has its own linear products with it).
+    let payload = (settings.needs_gravity_torque() || settings.needs_gravity_moment())
+        && train
+            .table
+            .payload
+            .as_ref()
+            .is_some_and(|m| train.rows.iter().any(|&r| m[r] > 0.0));
     let mut health = cal.report.health;
     let (mut last_move, mut last_com): (Option<f64>, Option<f64>) = (None, None);
     let mut inflation: Option<DMatrix<f64>> = None;

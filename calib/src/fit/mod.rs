@@ -429,7 +429,10 @@ impl<'a> WarmStart<'a> {
                 self.extensions
                     .iter()
                     .position(|q| {
-                        q.cause == p.cause && q.term == p.term && q.quantity == p.quantity
+                        q.cause == p.cause
+                            && q.term == p.term
+                            && q.quantity == p.quantity
+                            && q.pattern == p.pattern
                     })
                     .map_or(0.0, |k| self.physical.extension[k])
             })

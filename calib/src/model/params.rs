@@ -719,6 +719,7 @@ mod tests {
             quantity: "compliance",
             unit: Unit::RadianPerNewtonMetre,
             scale: 1e-5,
+            pattern: None,
         };
         let ext = vec![compliance(1), compliance(3)];
         let start = KinematicParams::nominal(model.nq(), true)

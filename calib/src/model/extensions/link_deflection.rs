@@ -178,6 +178,7 @@ impl CauseModel for LinkDeflection {
                         quantity: "bending compliance",
                         unit: Unit::RadianPerNewtonMetre,
                         scale: SCALE_RAD_PER_NM,
+                        pattern: None,
                     })
             })
             .collect()
@@ -199,7 +200,7 @@ impl CauseModel for LinkDeflection {
         format!("the bending moment across {joints}")
     }
 
-    fn remark(&self, value: f64) -> String {
+    fn remark(&self, _unit: Unit, value: f64) -> String {
         if value > 0.0 {
             format!(" (stiffness {:.3e} N m/rad)", 1.0 / value)
         } else {

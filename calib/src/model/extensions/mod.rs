@@ -31,6 +31,7 @@
 pub mod gear_backlash;
 pub mod joint_compliance;
 pub mod link_deflection;
+pub mod lumped_gravity;
 mod regressors;
 mod settings;
 pub mod thermal_drift;
@@ -88,6 +89,12 @@ pub trait CauseModel: Sync {
     /// Whether the regressors read the gravity torques (N m) under `settings`.
     fn needs_gravity_torque(&self, settings: &ExtensionSettings) -> bool;
 
+    /// Whether the regressors read the joint frames at the link angles ([`RowInputs::frames`]) without
+    /// the gravity torques (joint compliance of a robot without masses). Default: no.
+    fn needs_frames(&self, _settings: &ExtensionSettings) -> bool {
+        false
+    }
+
     /// Whether the regressors read the gravity moment each joint transmits
     /// ([`RowInputs::moment`], N m; link deflection). Default: no.
     fn needs_gravity_moment(&self) -> bool {
@@ -134,9 +141,9 @@ pub trait CauseModel: Sync {
     /// joints as text (e.g. `joints 2 and 4`): "the gravity torque of joints 2 and 4".
     fn evidence_subject(&self, joints: &str) -> String;
 
-    /// A remark on an identified value `value` (parameter unit) for the evidence, e.g. the stiffness a
-    /// compliance implies, with a leading space; default none.
-    fn remark(&self, _value: f64) -> String {
+    /// A remark on an identified value `value` (in `unit`, the parameter's) for the evidence, e.g.
+    /// the stiffness a compliance implies, with a leading space; default none.
+    fn remark(&self, _unit: Unit, _value: f64) -> String {
         String::new()
     }
 
@@ -305,13 +312,19 @@ pub struct ExtensionParam {
     pub unit: Unit,
     /// Expected magnitude (parameter unit), the column scaling of the solver.
     pub scale: f64,
+    /// The 1-based number of the parameter among several of one quantity at one term (the lumped
+    /// products of a robot without masses, [`lumped_gravity`]); `None` for the only one.
+    pub pattern: Option<usize>,
 }
 
 impl ExtensionParam {
     /// Human name, joints numbered from 1 (e.g. `joint 2 compliance`, `link growth`).
     pub fn name(&self) -> String {
         match self.term {
-            Term::JointAngle { joint } => format!("joint {} {}", joint + 1, self.quantity),
+            Term::JointAngle { joint } => match self.pattern {
+                Some(k) => format!("joint {} {} {k}", joint + 1, self.quantity),
+                None => format!("joint {} {}", joint + 1, self.quantity),
+            },
             Term::Bend { joint, about } => {
                 format!(
                     "joint {} {} about {}",
@@ -349,6 +362,7 @@ pub(crate) fn per_joint_params(
                 prismatic_unit
             },
             scale,
+            pattern: None,
         })
         .collect()
 }
@@ -402,6 +416,7 @@ mod tests {
             thermal: Some(ThermalInput::Temperature { t_ref_c: 20.0 }),
             transmission_joints: (0..model.nq()).collect(),
             joints: Default::default(),
+            lumped_gravity: None,
         };
         let params = settings.params(&model);
         for c in Cause::ALL {

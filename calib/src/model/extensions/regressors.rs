@@ -22,6 +22,11 @@ pub struct RowInputs<'a> {
     /// (N m; [`super::link_deflection::gravity_moments`]), at the link angles of the current estimate;
     /// zeros when no cause needs them.
     pub moment: &'a [Vector3<f64>],
+    /// The joint frames at the link angles the torques are evaluated at, when a cause reads the
+    /// torques or the frames ([`super::CauseModel::needs_frames`]).
+    pub frames: Option<&'a sim::Data>,
+    /// Mass carried at the flange (kg; 0 without payload).
+    pub payload_kg: f64,
     /// Approach direction sign of each joint (−1, 0, +1), when the table has `dir` columns.
     pub dir: Option<&'a [i8]>,
     /// Temperature (°C), when the table has a `temp` column.
@@ -156,6 +161,8 @@ pub struct RowRegressors<'m> {
     /// A cause's regressors (or values) at all its joints, for a cause limited to some of them.
     full: Vec<f64>,
     needs_tau: bool,
+    /// The frames without the torques (forward kinematics at `θ`).
+    needs_frames: bool,
     needs_moment: bool,
     moves_links: bool,
     gravity_base: Vector3<f64>,
@@ -177,6 +184,7 @@ impl<'m> RowRegressors<'m> {
         let n = params.len();
         let needs_moment = settings.needs_gravity_moment();
         let needs_tau = settings.needs_gravity_torque() || needs_moment;
+        let needs_frames = !needs_tau && settings.needs_frames();
         let parts: Vec<CauseColumns> = settings
             .causes
             .iter()
@@ -204,6 +212,7 @@ impl<'m> RowRegressors<'m> {
             parts,
             full: vec![0.0; widest],
             needs_tau,
+            needs_frames,
             needs_moment,
             moves_links,
             gravity_base: Vector3::from(settings.gravity_base),
@@ -238,7 +247,7 @@ impl<'m> RowRegressors<'m> {
         at: &[f64],
     ) -> std::result::Result<(), String> {
         let n = self.one.params.len();
-        let iterations = if self.needs_tau
+        let iterations = if (self.needs_tau || self.needs_frames)
             && self.moves_links
             && at.len() == n
             && at.iter().any(|x| *x != 0.0)
@@ -270,12 +279,16 @@ impl<'m> RowRegressors<'m> {
                         &mut self.moment,
                     );
                 }
+            } else if self.needs_frames {
+                sim::kinematics::forward_kinematics(self.model, &mut self.data, &self.theta);
             }
             let inputs = RowInputs {
                 joints: self.model.joints(),
                 q,
                 tau: &self.tau,
                 moment: &self.moment,
+                frames: (self.needs_tau || self.needs_frames).then_some(&self.data),
+                payload_kg: context.payload_kg,
                 dir: context.dir,
                 temp_c: context.temp_c,
                 t_s: context.t_s,
@@ -337,6 +350,8 @@ impl<'m> RowRegressors<'m> {
             q,
             tau: &self.tau,
             moment: &self.moment,
+            frames: (self.needs_tau || self.needs_frames).then_some(&self.data),
+            payload_kg: context.payload_kg,
             dir: context.dir,
             temp_c: context.temp_c,
             t_s: context.t_s,

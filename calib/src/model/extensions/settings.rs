@@ -62,6 +62,11 @@ pub struct ExtensionSettings {
     /// limits existed load unchanged). Parameters of the other joints are absent, not zero.
     #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
     pub joints: BTreeMap<Cause, Vec<usize>>,
+    /// The gravity torques as combinations of unknown mass moments, for a robot without inertials
+    /// ([`super::lumped_gravity`]): joint compliance then identifies the products of each joint's
+    /// compliance with them. `None` for a robot with its masses.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub lumped_gravity: Option<super::lumped_gravity::LumpedGravity>,
 }
 
 impl ExtensionSettings {
@@ -99,6 +104,7 @@ impl ExtensionSettings {
             thermal: None,
             transmission_joints: Vec::new(),
             joints,
+            lumped_gravity: None,
         };
         let mut refused = None;
         for c in settings.causes.clone() {
@@ -130,6 +136,11 @@ impl ExtensionSettings {
         self.causes
             .iter()
             .any(|c| c.model().needs_gravity_torque(self))
+    }
+
+    /// Whether any cause's regressors read the joint frames at the link angles without the torques.
+    pub fn needs_frames(&self) -> bool {
+        self.causes.iter().any(|c| c.model().needs_frames(self))
     }
 
     /// Whether any cause's regressors read the gravity moments the joints transmit.

@@ -172,6 +172,7 @@ impl CauseModel for ThermalDrift {
             quantity: "link growth",
             unit: growth,
             scale: ALPHA_SCALE_PER_K * gain,
+            pattern: None,
         });
         out
     }

@@ -178,6 +178,7 @@ impl CauseModel for TransmissionError {
                     quantity,
                     unit: Unit::Radian,
                     scale: SCALE_RAD,
+                    pattern: None,
                 })
             })
             .collect()

@@ -135,7 +135,7 @@ pub(super) fn parameter_values(cause: Cause, params: &[FoundParameter]) -> Strin
                 p.value,
                 p.sigma,
                 p.unit,
-                cause.model().remark(p.value)
+                cause.model().remark(p.unit, p.value)
             )
         })
         .collect::<Vec<_>>()
