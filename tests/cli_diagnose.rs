@@ -421,16 +421,22 @@ fn the_readme_session_runs_and_every_fit_converges() {
     let _ = std::fs::remove_dir_all(&d);
 }
 
-/// A robot without `<inertial>` cannot be checked for link deflection (the gravity moments need the
-/// masses): diagnose says so in its text and JSON (`not_tried`, with the reason naming the links)
-/// instead of dropping the candidate silently (issue 15); so for thermal drift on a table without
-/// `temp` or `t`. With `--json`, stderr has one warning line naming the causes not tried (issue 23:
-/// it had nothing). Joint compliance is tried, as lumped products (issue 25; before, it was not
-/// tried either).
+/// A robot without `<inertial>` and a table without `dir` columns: load-signed backlash cannot be
+/// tried (the gravity torques that would sign the lost motion need the masses): diagnose says so in
+/// its text and JSON (`not_tried`, with the reason naming the links) instead of dropping the
+/// candidate silently (issue 15); so for thermal drift on a table without `temp` or `t`. With
+/// `--json`, stderr has one warning line naming the causes not tried (issue 23: it had nothing).
+/// Joint compliance and link deflection are tried, as lumped products (issue 25; before, they were
+/// not tried either).
 #[test]
 fn candidates_that_cannot_be_tried_are_named_with_the_reason() {
     let d = dir("not_tried");
-    let data = generate("iiwa7_kinematic.toml", &d.join("data"));
+    let generated = generate("iiwa7_kinematic.toml", &d.join("data"));
+    // The same measurements without the approach directions.
+    let mut table = sim::measurement_table::read(&generated).unwrap();
+    table.dir = None;
+    let data = d.join("no_dir.parquet");
+    sim::measurement_table::write(&data, &table).unwrap();
     let urdf = sim::robots::builtin_urdf("iiwa7").unwrap();
     let robot = d.join("no_inertials.urdf");
     std::fs::write(&robot, sim::urdf_text::without_inertials(urdf)).unwrap();
@@ -452,7 +458,7 @@ fn candidates_that_cannot_be_tried_are_named_with_the_reason() {
     assert_eq!(warnings.len(), 1, "{}", stderr(&o));
     assert!(
         warnings[0].contains("not tried")
-            && warnings[0].contains("link_deflection: the gravity moments"),
+            && warnings[0].contains("gear_backlash: the table has no dir1..dirN columns"),
         "{}",
         warnings[0]
     );
@@ -468,20 +474,19 @@ fn candidates_that_cannot_be_tried_are_named_with_the_reason() {
             .find(|n| n["cause"] == cause)
             .map(|n| n["reason"].as_str().unwrap().to_string())
     };
-    let deflection = reason("link_deflection").expect("link_deflection not tried");
+    let backlash = reason("gear_backlash").expect("gear_backlash not tried");
     assert!(
-        deflection.contains("inertial") && deflection.contains("iiwa7_link_1"),
-        "{deflection}"
+        backlash.contains("inertial") && backlash.contains("iiwa7_link_1"),
+        "{backlash}"
     );
-    assert!(reason("joint_compliance").is_none(), "{not_tried:?}");
-    assert!(
-        v["trials"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .any(|t| t["cause"] == "joint_compliance"),
-        "compliance is tried as lumped products"
-    );
+    let trials = v["trials"].as_array().unwrap();
+    for cause in ["joint_compliance", "link_deflection"] {
+        assert!(reason(cause).is_none(), "{cause}: {not_tried:?}");
+        assert!(
+            trials.iter().any(|t| t["cause"] == cause),
+            "{cause} is tried as lumped products"
+        );
+    }
     // The generated table has `t` and `temp`: thermal drift was tried.
     assert!(reason("thermal_drift").is_none(), "{not_tried:?}");
     let text = stderr(&robocal(&[
@@ -492,7 +497,7 @@ fn candidates_that_cannot_be_tried_are_named_with_the_reason() {
         data.to_str().unwrap(),
     ]));
     assert!(
-        text.contains("not tried: link_deflection: the gravity moments"),
+        text.contains("not tried: gear_backlash: the table has no dir1..dirN columns"),
         "{text}"
     );
     let _ = std::fs::remove_dir_all(&d);

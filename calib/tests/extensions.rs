@@ -616,6 +616,153 @@ fn transmission_error_and_link_deflection_are_recovered_within_their_standard_de
 /// The payload's centre of mass in the flange frame (m) in the run with payloads.
 const PAYLOAD_COM_M: [f64; 3] = [0.01, -0.02, 0.08];
 
+/// The mass moments `φ = (m L, m c)` (kg m; joint frames) of the iiwa 7's bodies beyond 0-based
+/// joint `i`, in the order of [`calib::model::extensions::lumped_gravity`]'s combinations.
+fn true_moments(full: &sim::Model, length_m: f64, i: usize) -> Vec<f64> {
+    full.bodies()[i..]
+        .iter()
+        .flat_map(|b| {
+            let s = b.com * b.mass;
+            [b.mass * length_m, s.x, s.y, s.z]
+        })
+        .collect()
+}
+
+/// `|g| v · φ` (N m): a combination `v` of the true mass moments beyond 0-based joint `i`.
+fn combined_moment(full: &sim::Model, length_m: f64, i: usize, v: &[f64]) -> f64 {
+    let g = Vector3::from(sim::statics::DEFAULT_GRAVITY).norm();
+    let phi = true_moments(full, length_m, i);
+    g * v.iter().zip(&phi).map(|(a, b)| a * b).sum::<f64>()
+}
+
+/// What a lumped recovery measured in one run.
+struct LumpedRun {
+    /// `z²` of every determined extension parameter.
+    z2: Vec<f64>,
+    /// Held-out RMS (m) of the fit without masses and of the fit with them.
+    rms_without: f64,
+    rms_with: f64,
+}
+
+/// One run of a lumped recovery: `effects` simulated on the iiwa 7 (`poses` poses, two thirds for
+/// training), fitted with `spec` on the iiwa 7 with its masses and stripped of them; each
+/// determined extension parameter of the fit without masses is compared with `truth` (the
+/// parameter and the fit's lumped bases) within 4σ, the report must say `says`, and the held-out
+/// RMS of the two fits must agree within 5 %.
+fn lumped_recovery(
+    seed: u64,
+    poses: usize,
+    effects: &str,
+    spec: &str,
+    payload: bool,
+    says: &str,
+    truth: &dyn Fn(
+        &calib::model::extensions::ExtensionParam,
+        &calib::model::extensions::lumped_gravity::LumpedGravity,
+    ) -> f64,
+) -> LumpedRun {
+    let full = robots::load_builtin("iiwa7").unwrap();
+    let text = sim::urdf_text::without_inertials(robots::builtin_urdf("iiwa7").unwrap());
+    let bare = sim::urdf::load_str(&text, "iiwa7 without masses", &Default::default()).unwrap();
+    assert!(bare.require_inertials().is_err());
+    let dir = std::env::temp_dir().join(format!("robocal_ext_bare_{}_{seed}", std::process::id()));
+    let t = simulate_poses(effects, seed, poses, &dir);
+    let n_rows = t.len();
+    let train = Dataset::new(
+        &t,
+        (0..n_rows * 2 / 3).collect(),
+        "sim",
+        calib::part::Part::Training,
+    );
+    let test = Dataset::new(
+        &t,
+        (n_rows * 2 / 3..n_rows).collect(),
+        "sim",
+        calib::part::Part::Test,
+    );
+    let spec = ModelSpec::parse(spec).unwrap();
+    let options = CalibrationOptions::default();
+    let request = FitRequest::new(&spec, &options);
+    let with_masses = fit(&full, &train, &request).unwrap();
+    let lumped = fit(&bare, &train, &request).unwrap();
+    assert!(
+        lumped.report.health.is_clean(),
+        "seed {seed}: {}",
+        lumped.report.health
+    );
+    let settings = lumped.extensions.as_ref().unwrap();
+    let basis = settings.lumped_gravity.as_ref().expect("the lumped model");
+    assert_eq!(basis.payload_compliance, payload);
+    assert!(
+        lumped.report.warnings.iter().any(|w| w.contains(says)),
+        "the report says what is identified: {:?}",
+        lumped.report.warnings
+    );
+    let sub = &lumped.subspace;
+    let mut z2 = Vec::new();
+    for (e, p) in lumped.layout.extensions.iter().enumerate() {
+        let kk = lumped.layout.extension(e);
+        let null_share = sub
+            .v
+            .row(kk)
+            .columns(sub.rank, sub.n_params() - sub.rank)
+            .norm();
+        if null_share > 0.1 {
+            continue;
+        }
+        let sigma = lumped.covariance[(kk, kk)].sqrt();
+        let want = truth(p, basis);
+        let z = (lumped.params.extension[e] - want) / sigma;
+        assert!(
+            z.abs() < 4.0,
+            "seed {seed}: {} = {:.4e} ± {sigma:.1e}, truth {want:.4e} (z = {z:.2})",
+            p.name(),
+            lumped.params.extension[e],
+        );
+        z2.push(z * z);
+    }
+    let rms = |cal: &calib::fit::Calibration, model: &sim::Model| -> f64 {
+        let (_, after, _) = calib::validate::held_out_errors(model, cal, &test, &options).unwrap();
+        (after.iter().map(|e| e.norm_squared()).sum::<f64>() / after.len() as f64).sqrt()
+    };
+    let run = LumpedRun {
+        rms_without: rms(&lumped, &bare),
+        rms_with: rms(&with_masses, &full),
+        z2,
+    };
+    println!(
+        "seed {seed}: {} parameters determined, largest |z| {:.2}; held-out RMS {:.2} µm without \
+         masses, {:.2} µm with; rank {} without masses, {} with",
+        run.z2.len(),
+        run.z2.iter().fold(0.0_f64, |a, b| a.max(b.sqrt())),
+        run.rms_without * 1e6,
+        run.rms_with * 1e6,
+        lumped.subspace.rank,
+        with_masses.subspace.rank
+    );
+    assert!(
+        (run.rms_without / run.rms_with - 1.0).abs() <= 0.05,
+        "seed {seed}: held-out RMS {:.2} µm without masses, {:.2} µm with",
+        run.rms_without * 1e6,
+        run.rms_with * 1e6
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+    run
+}
+
+/// The mean of the `z²` of several runs, checked to be that of standard normal errors: for n ≈ 90
+/// of them its standard deviation is √(2/n) ≈ 0.15 (more with the products' correlations).
+fn assert_mean_z2(runs: &[LumpedRun]) {
+    let z2: Vec<f64> = runs.iter().flat_map(|r| r.z2.iter().copied()).collect();
+    let mean = z2.iter().sum::<f64>() / z2.len() as f64;
+    println!("mean z² {mean:.2} over {} parameters", z2.len());
+    assert!(
+        (0.5..1.6).contains(&mean),
+        "mean z² = {mean:.2} over {} parameters",
+        z2.len()
+    );
+}
+
 /// A robot without masses (the iiwa 7's URDF stripped of its inertials) with compliance at drawn
 /// joints and stiffnesses: the lumped products `βᵢₖ = cᵢ |g| vᵢₖ · φᵢ` (the true compliance times
 /// the true mass moments `φ = (m L, m c)` of the bodies beyond the joint, combined as the fit's
@@ -632,11 +779,8 @@ const PAYLOAD_COM_M: [f64; 3] = [0.01, -0.02, 0.08];
 #[test]
 fn compliance_of_a_robot_without_masses_is_recovered_as_lumped_products() {
     let full = robots::load_builtin("iiwa7").unwrap();
-    let text = sim::urdf_text::without_inertials(robots::builtin_urdf("iiwa7").unwrap());
-    let bare = sim::urdf::load_str(&text, "iiwa7 without masses", &Default::default()).unwrap();
-    assert!(bare.require_inertials().is_err());
     let g = Vector3::from(sim::statics::DEFAULT_GRAVITY);
-    let mut z2 = Vec::new();
+    let mut runs = Vec::new();
     for (seed, payload) in [(21u64, false), (22, true)] {
         let mut rng = StdRng::seed_from_u64(seed ^ 0x1a3b);
         // Compliance at two of joints 2, 3, 4 and 6, stiffness 5e3-2e4 N m/rad.
@@ -661,129 +805,148 @@ fn compliance_of_a_robot_without_masses_is_recovered_as_lumped_products() {
                 "[campaign.payload]\nchoice_kg = [0.0, 3.5, 7.0]\ncom_m = {PAYLOAD_COM_M:?}\n"
             ));
         }
-        let dir =
-            std::env::temp_dir().join(format!("robocal_ext_bare_{}_{seed}", std::process::id()));
-        let t = simulate_poses(&effects, seed, 600, &dir);
-        let n_rows = t.len();
-        let train = Dataset::new(
-            &t,
-            (0..n_rows * 2 / 3).collect(),
-            "sim",
-            calib::part::Part::Training,
-        );
-        let test = Dataset::new(
-            &t,
-            (n_rows * 2 / 3..n_rows).collect(),
-            "sim",
-            calib::part::Part::Test,
-        );
-        let spec = ModelSpec::parse("kinematic+joint_compliance").unwrap();
-        let options = CalibrationOptions::default();
-        let request = FitRequest::new(&spec, &options);
-        let with_masses = fit(&full, &train, &request).unwrap();
-        let lumped = fit(&bare, &train, &request).unwrap();
-        assert!(
-            lumped.report.health.is_clean(),
-            "seed {seed}: {}",
-            lumped.report.health
-        );
-        let settings = lumped.extensions.as_ref().unwrap();
-        let basis = settings.lumped_gravity.as_ref().expect("the lumped model");
-        assert_eq!(basis.payload_compliance, payload);
-        assert!(
-            lumped
-                .report
-                .warnings
-                .iter()
-                .any(|w| w.contains("not the stiffnesses")),
-            "the report says what is identified: {:?}",
-            lumped.report.warnings
-        );
         // The truth in the estimator's parameters.
-        let truth = |p: &calib::model::extensions::ExtensionParam| -> f64 {
+        let truth = |p: &calib::model::extensions::ExtensionParam,
+                     basis: &calib::model::extensions::lumped_gravity::LumpedGravity|
+         -> f64 {
             let i = p.term.joint().unwrap();
             let com_axis = calib::model::extensions::joint_compliance::PAYLOAD_COM_QUANTITIES
                 .iter()
                 .position(|q| *q == p.quantity);
-            match p.pattern {
-                None => match com_axis {
-                    Some(a) => compliance[i] * g.norm() * PAYLOAD_COM_M[a],
-                    None => compliance[i],
-                },
-                Some(k) => {
-                    let phi: Vec<f64> = full.bodies()[i..]
-                        .iter()
-                        .flat_map(|b| {
-                            let s = b.com * b.mass;
-                            [b.mass * basis.length_m, s.x, s.y, s.z]
-                        })
-                        .collect();
-                    let v = &basis.combinations[i][k - 1];
-                    compliance[i] * g.norm() * v.iter().zip(&phi).map(|(a, b)| a * b).sum::<f64>()
+            match (p.pattern, com_axis) {
+                (None, Some(a)) => compliance[i] * g.norm() * PAYLOAD_COM_M[a],
+                (None, None) => compliance[i],
+                (Some(k), _) => {
+                    compliance[i]
+                        * combined_moment(&full, basis.length_m, i, &basis.combinations[i][k - 1])
                 }
             }
         };
-        let sub = &lumped.subspace;
-        let mut checked = 0;
-        for (e, p) in lumped.layout.extensions.iter().enumerate() {
-            let kk = lumped.layout.extension(e);
-            let null_share = sub
-                .v
-                .row(kk)
-                .columns(sub.rank, sub.n_params() - sub.rank)
-                .norm();
-            if null_share > 0.1 {
-                continue;
-            }
-            let sigma = lumped.covariance[(kk, kk)].sqrt();
-            let z = (lumped.params.extension[e] - truth(p)) / sigma;
-            assert!(
-                z.abs() < 4.0,
-                "seed {seed}: {} = {:.4e} ± {sigma:.1e}, truth {:.4e} (z = {z:.2})",
-                p.name(),
-                lumped.params.extension[e],
-                truth(p)
-            );
-            checked += 1;
-            z2.push(z * z);
-        }
-        assert!(
-            checked >= 8,
-            "seed {seed}: only {checked} parameters determined"
-        );
-        let rms = |cal: &calib::fit::Calibration, model: &sim::Model| -> f64 {
-            let (_, after, _) =
-                calib::validate::held_out_errors(model, cal, &test, &options).unwrap();
-            (after.iter().map(|e| e.norm_squared()).sum::<f64>() / after.len() as f64).sqrt()
-        };
-        let (r_full, r_lumped) = (rms(&with_masses, &full), rms(&lumped, &bare));
-        println!(
-            "seed {seed}: {checked} parameters determined, largest |z| {:.2}; held-out RMS {:.2} µm \
-             without masses, {:.2} µm with",
-            z2.iter()
-                .rev()
-                .take(checked)
-                .fold(0.0_f64, |a, b| a.max(b.sqrt())),
-            r_lumped * 1e6,
-            r_full * 1e6
+        let run = lumped_recovery(
+            seed,
+            600,
+            &effects,
+            "kinematic+joint_compliance",
+            payload,
+            "not the stiffnesses",
+            &truth,
         );
         assert!(
-            (r_lumped / r_full - 1.0).abs() <= 0.05,
-            "seed {seed}: held-out RMS {:.2} µm without masses, {:.2} µm with",
-            r_lumped * 1e6,
-            r_full * 1e6
+            run.z2.len() >= 8,
+            "seed {seed}: only {} determined",
+            run.z2.len()
         );
-        let _ = std::fs::remove_dir_all(&dir);
+        runs.push(run);
     }
-    let mean = z2.iter().sum::<f64>() / z2.len() as f64;
-    println!("mean z² {mean:.2} over {} parameters", z2.len());
-    // For n ≈ 90 standard normal z, mean z² has standard deviation √(2/n) ≈ 0.15 (more with the
-    // products' correlations).
-    assert!(
-        (0.5..1.6).contains(&mean),
-        "mean z² = {mean:.2} over {} parameters",
-        z2.len()
-    );
+    assert_mean_z2(&runs);
+}
+
+/// Poses of the lumped deflection test (two thirds for training). Without masses every bending axis
+/// has up to a dozen products where the robot with masses has one compliance: at seed 31 the fit
+/// has rank `p₁` = 130 against `p₀` = 44. Their own estimation noise raises the held-out RMS by
+/// about `√((1 + p₁/N) / (1 + p₀/N)) − 1` (`N` training coordinates): 3.4 % at 400 training poses
+/// (measured 5.1 %), which is the price of not knowing the masses, not a fault of the model. At
+/// 600 training poses it is 2.3 % (seed 31) and 3.6 % (seed 32, rank 183 against 47), and the 5 %
+/// of the issue measures the model again.
+const POSES_FOR_LUMPED_DEFLECTION: usize = 900;
+
+/// Link deflection of a robot without masses: bending at drawn axes of joints 2 to 6 (1-5e-6
+/// rad/(N m)) with compliance at joints 2 and 4, fitted with compliance and deflection on the
+/// iiwa 7 stripped of its inertials. The lumped bending products `βₐₖ = c_a |g| vₐₖ · φ` are
+/// recovered within 4σ (judged as a family, as above), and the held-out error equals that of the
+/// fit with the true masses within 5 %; with payload masses that change over the data, each
+/// bending compliance and its products with the payload's centre of mass too.
+///
+/// Measured at these seeds: 52 and 84 parameters determined, the largest |z| 2.20 and 2.55, mean
+/// z² 0.89 over 136; held-out RMS 25.10 µm without the masses against 24.23 µm with them, and
+/// 24.33 against 23.88 µm with payloads.
+#[test]
+fn link_deflection_of_a_robot_without_masses_is_recovered_as_lumped_products() {
+    use calib::model::extensions::{Term, link_deflection};
+    let full = robots::load_builtin("iiwa7").unwrap();
+    let g = Vector3::from(sim::statics::DEFAULT_GRAVITY);
+    let mut runs = Vec::new();
+    for (seed, payload) in [(31u64, false), (32, true)] {
+        let mut rng = StdRng::seed_from_u64(seed ^ 0x5d1f);
+        // Bending compliance (joint frame axes u, v) at each joint: of the modelled axes of joints
+        // 2-6, each drawn present with probability one half, 1-5e-6 rad/(N m).
+        let mut bend = [[0.0f64; 2]; 7];
+        let mut drawn = Vec::new();
+        for (i, row) in bend.iter_mut().enumerate().take(6).skip(1) {
+            let axes = link_deflection::bending_axes(&full.joints()[i].axis).unwrap();
+            for about in link_deflection::modelled_axes(full.joints(), i, &g) {
+                if rng.random_bool(0.5) {
+                    let slot = axes.iter().position(|a| *a == about).unwrap();
+                    row[slot] = rng.random_range(1e-6..5e-6);
+                    drawn.push((i, about));
+                }
+            }
+        }
+        let k: Vec<f64> = (0..2).map(|_| rng.random_range(5e3..2e4)).collect();
+        let rows: Vec<String> = bend
+            .iter()
+            .map(|r| format!("[{:e}, {:e}]", r[0], r[1]))
+            .collect();
+        let mut effects = format!(
+            "[effects.deflection]\ncompliance_rad_per_nm = [{}]\n\
+             [effects.compliance]\nstiffness_nm_per_rad = [inf, {:e}, inf, {:e}, inf, inf, inf]\n",
+            rows.join(", "),
+            k[0],
+            k[1]
+        );
+        if payload {
+            effects.push_str(&format!(
+                "[campaign.payload]\nchoice_kg = [0.0, 3.5, 7.0]\ncom_m = {PAYLOAD_COM_M:?}\n"
+            ));
+        }
+        let compliance = |i: usize| match i {
+            1 => 1.0 / k[0],
+            3 => 1.0 / k[1],
+            _ => 0.0,
+        };
+        let truth = |p: &calib::model::extensions::ExtensionParam,
+                     basis: &calib::model::extensions::lumped_gravity::LumpedGravity|
+         -> f64 {
+            let (c, i, combos) = match p.term {
+                Term::Bend { joint, about } => {
+                    let axes = link_deflection::bending_axes(&full.joints()[joint].axis).unwrap();
+                    let slot = axes.iter().position(|a| *a == about).unwrap();
+                    let combos = &basis.bend_basis(joint, about).unwrap().combinations;
+                    (bend[joint][slot], joint, combos)
+                }
+                _ => {
+                    let i = p.term.joint().unwrap();
+                    (compliance(i), i, &basis.combinations[i])
+                }
+            };
+            let com_axis = calib::model::extensions::joint_compliance::PAYLOAD_COM_QUANTITIES
+                .iter()
+                .chain(&link_deflection::PAYLOAD_COM_QUANTITIES)
+                .position(|q| *q == p.quantity)
+                .map(|a| a % 3);
+            match (p.pattern, com_axis) {
+                (None, Some(a)) => c * g.norm() * PAYLOAD_COM_M[a],
+                (None, None) => c,
+                (Some(k), _) => c * combined_moment(&full, basis.length_m, i, &combos[k - 1]),
+            }
+        };
+        let run = lumped_recovery(
+            seed,
+            POSES_FOR_LUMPED_DEFLECTION,
+            &effects,
+            "kinematic+joint_compliance+link_deflection",
+            payload,
+            "not the compliances",
+            &truth,
+        );
+        assert!(
+            !drawn.is_empty() && run.z2.len() >= 8,
+            "seed {seed}: drawn {drawn:?}, {} determined",
+            run.z2.len()
+        );
+        runs.push(run);
+    }
+    assert_mean_z2(&runs);
 }
 
 /// A campaign simulated with `effects` (TOML) on top of drawn geometric errors, `poses` poses.

@@ -106,15 +106,11 @@ impl CauseModel for JointCompliance {
         rows: &[usize],
         _source: &str,
     ) -> Result<()> {
-        if model.require_inertials().is_err() {
-            let payload_varies = table.payload.as_ref().is_some_and(|p| {
-                let first = rows.first().map_or(0.0, |&r| p[r]);
-                rows.iter().any(|&r| p[r] != first)
-            });
+        if model.require_inertials().is_err() && settings.lumped_gravity.is_none() {
             settings.lumped_gravity = Some(LumpedGravity::for_model(
                 model,
                 &Vector3::from(settings.gravity_base),
-                payload_varies,
+                lumped_gravity::payload_varies(table, rows),
             ));
         }
         Ok(())

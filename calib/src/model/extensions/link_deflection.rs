@@ -46,15 +46,33 @@
 //! (10⁻⁸ rad) left out. A joint whose bending moment does not vary over the data (the last joint
 //! without payload) cannot be identified; the solver says so and leaves its compliances at zero.
 //!
+//! # A robot without masses
+//! Without inertials the moments are unknown, but linear in the unknown mass moments, as the
+//! holding torques are ([`super::lumped_gravity`]): about axis `a` of joint `i` the bend is
+//! `Σₖ βₐₖ Gₐₖ(q)` with known dimensionless patterns `Gₐₖ` ([`LumpedGravity::bend_patterns`]) and the
+//! lumped products `βₐₖ = c_a bₐₖ` (rad) of the bending compliance with the combinations `bₐₖ` (N m)
+//! of the moments that the bending moment depends on: the parameters
+//! `joint i bending compliance × mass moment k about a`. Payload masses that change over the data
+//! add the bending compliance itself, multiplying the known moment of the payload's mass at the
+//! flange origin, and its products `c_a |g| r` (rad/kg) with the payload's unknown centre of mass
+//! `r` (flange frame), as for joint compliance. The same axes are modelled as with masses.
+//!
 //! # Plausibility bounds
 //! `0 ≤ c ≤` [`MAX_RAD_PER_NM`] (1e-3 rad/(N m), a bending stiffness of at least 1e3 N m/rad). A
 //! negative compliance is impossible: no link bends against its load. Cross-roller output bearings of
 //! harmonic drives have moment stiffnesses of 1e4–1e6 N m/rad (Harmonic Drive CSF/CSG catalogue) and
 //! aluminium link tubes more; bending a hundred times softer than the softest of them (and softer than
 //! most joints about their own axes) is no link's: it stands in for another error.
+//!
+//! Without masses a product has no sign of its own; its bound is the bend: `|βₐₖ| ≤`
+//! [`MAX_SAG_RAD`] (0.01 rad, a centimetre at a metre: the softest plausible bending compliance
+//! under a 10 N m moment, more than any link shows), and `|c_a |g| r| ≤`
+//! [`MAX_PAYLOAD_RAD_PER_KG`] (the largest compliance with a centre of mass a metre away).
 
 use super::axis_name;
+use super::lumped_gravity::{self, LumpedGravity};
 use super::{Cause, CauseModel, ExtensionParam, ExtensionSettings, PlotAxis, RowInputs, Term};
+use crate::error::Result;
 use crate::units::Unit;
 use nalgebra::{Point3, Vector3};
 use sim::Model;
@@ -67,6 +85,32 @@ pub const SCALE_RAD_PER_NM: f64 = 3e-6;
 
 /// Largest plausible bending compliance (rad/(N m)): stiffness 1e3 N m/rad (module docs).
 pub const MAX_RAD_PER_NM: f64 = 1e-3;
+
+/// Largest plausible lumped product of a robot without masses (rad): a bend of 0.01 rad under
+/// gravity (module docs).
+pub const MAX_SAG_RAD: f64 = 1e-2;
+
+/// Expected lumped product (rad): a bending compliance of 3e-6 rad/(N m) times 30 N m.
+pub const SCALE_PRODUCT_RAD: f64 = 1e-4;
+
+/// Largest plausible product of a bending compliance with gravity and a payload's centre of mass
+/// (rad/kg): [`MAX_RAD_PER_NM`] × 9.81 m/s² × 1 m, rounded up.
+pub const MAX_PAYLOAD_RAD_PER_KG: f64 = 1e-2;
+
+/// Expected product of a bending compliance with gravity and a payload's centre of mass (rad/kg):
+/// 3e-6 rad/(N m) × 9.81 m/s² × 0.1 m.
+pub const SCALE_PAYLOAD_RAD_PER_KG: f64 = 3e-6;
+
+/// What a lumped product is called: `joint 2 bending compliance × mass moment 1 about x`.
+pub const PRODUCT_QUANTITY: &str = "bending compliance × mass moment";
+
+/// What the products of a bending compliance with gravity and the payload's centre of mass (flange
+/// frame) are called, axis by axis (rad/kg; module docs).
+pub const PAYLOAD_COM_QUANTITIES: [&str; 3] = [
+    "bending compliance × payload centre of mass x",
+    "bending compliance × payload centre of mass y",
+    "bending compliance × payload centre of mass z",
+];
 
 /// Link deflection: two bending compliances per joint whose axis lies along a coordinate axis of its
 /// frame.
@@ -138,10 +182,10 @@ impl CauseModel for LinkDeflection {
         Cause::LinkDeflection
     }
 
+    /// With the robot's masses it identifies the bending compliances, without them the lumped
+    /// products; a robot none of whose joints turns about a coordinate axis of its frame has no
+    /// bending axes.
     fn usable(&self, model: &Model, _table: &MeasurementTable) -> std::result::Result<(), String> {
-        model
-            .require_inertials()
-            .map_err(|e| format!("the gravity moments it needs cannot be computed: {e}"))?;
         if model
             .joints()
             .iter()
@@ -152,12 +196,44 @@ impl CauseModel for LinkDeflection {
         Ok(())
     }
 
+    /// Without the robot's masses: the combinations of mass moments each bending moment depends on
+    /// ([`LumpedGravity::with_bending`]), beside joint compliance's if it is in the model.
+    fn configure(
+        &self,
+        settings: &mut ExtensionSettings,
+        model: &Model,
+        table: &MeasurementTable,
+        rows: &[usize],
+        _source: &str,
+    ) -> Result<()> {
+        if model.require_inertials().is_ok() {
+            return Ok(());
+        }
+        let g = Vector3::from(settings.gravity_base);
+        let axes: Vec<(usize, usize)> = (0..model.nq())
+            .flat_map(|i| {
+                modelled_axes(model.joints(), i, &g)
+                    .into_iter()
+                    .map(move |a| (i, a))
+            })
+            .collect();
+        let base = settings.lumped_gravity.take().unwrap_or_else(|| {
+            LumpedGravity::for_model(model, &g, lumped_gravity::payload_varies(table, rows))
+        });
+        settings.lumped_gravity = Some(base.with_bending(model, &g, &axes));
+        Ok(())
+    }
+
     fn needs_gravity_torque(&self, _settings: &ExtensionSettings) -> bool {
         false
     }
 
-    fn needs_gravity_moment(&self) -> bool {
-        true
+    fn needs_frames(&self, settings: &ExtensionSettings) -> bool {
+        settings.lumped_gravity.is_some()
+    }
+
+    fn needs_gravity_moment(&self, settings: &ExtensionSettings) -> bool {
+        settings.lumped_gravity.is_none()
     }
 
     /// The moments are evaluated where the links are (with joint compliance in the model) and the
@@ -168,30 +244,145 @@ impl CauseModel for LinkDeflection {
 
     fn params(&self, model: &Model, settings: &ExtensionSettings) -> Vec<ExtensionParam> {
         let g = Vector3::from(settings.gravity_base);
-        (0..model.nq())
-            .flat_map(|i| {
-                modelled_axes(model.joints(), i, &g)
-                    .into_iter()
-                    .map(move |about| ExtensionParam {
-                        cause: Cause::LinkDeflection,
-                        term: Term::Bend { joint: i, about },
-                        quantity: "bending compliance",
-                        unit: Unit::RadianPerNewtonMetre,
-                        scale: SCALE_RAD_PER_NM,
-                        pattern: None,
-                    })
-            })
-            .collect()
+        let lumped = settings.lumped_gravity.as_ref();
+        let mut out = Vec::new();
+        for i in 0..model.nq() {
+            for about in modelled_axes(model.joints(), i, &g) {
+                let term = Term::Bend { joint: i, about };
+                let compliance = ExtensionParam {
+                    cause: Cause::LinkDeflection,
+                    term,
+                    quantity: "bending compliance",
+                    unit: Unit::RadianPerNewtonMetre,
+                    scale: SCALE_RAD_PER_NM,
+                    pattern: None,
+                };
+                let Some(lumped) = lumped else {
+                    out.push(compliance);
+                    continue;
+                };
+                let count = lumped
+                    .bend_basis(i, about)
+                    .map_or(0, |b| b.combinations.len());
+                if count == 0 {
+                    continue;
+                }
+                if lumped.payload_compliance {
+                    out.push(compliance);
+                    out.extend(
+                        PAYLOAD_COM_QUANTITIES
+                            .iter()
+                            .map(|&quantity| ExtensionParam {
+                                cause: Cause::LinkDeflection,
+                                term,
+                                quantity,
+                                unit: Unit::RadianPerKilogram,
+                                scale: SCALE_PAYLOAD_RAD_PER_KG,
+                                pattern: None,
+                            }),
+                    );
+                }
+                out.extend((1..=count).map(|k| ExtensionParam {
+                    cause: Cause::LinkDeflection,
+                    term,
+                    quantity: PRODUCT_QUANTITY,
+                    unit: Unit::Radian,
+                    scale: SCALE_PRODUCT_RAD,
+                    pattern: Some(k),
+                }));
+            }
+        }
+        out
     }
 
-    /// The components `u · mᵢ`, `v · mᵢ` (N m) of each bending joint's moment, joint frame.
+    fn notes(
+        &self,
+        settings: &ExtensionSettings,
+        model: &Model,
+        _table: &MeasurementTable,
+        _rows: &[usize],
+    ) -> Vec<String> {
+        let Some(lumped) = &settings.lumped_gravity else {
+            return Vec::new();
+        };
+        let counts: Vec<String> = lumped
+            .bending
+            .iter()
+            .filter(|b| {
+                !b.combinations.is_empty()
+                    && settings.acts_at(
+                        Cause::LinkDeflection,
+                        Term::Bend {
+                            joint: b.joint,
+                            about: b.about,
+                        },
+                    )
+            })
+            .map(|b| {
+                format!(
+                    "joint {} about {}: {}",
+                    b.joint + 1,
+                    axis_name(b.about),
+                    b.combinations.len()
+                )
+            })
+            .collect();
+        let payload = if lumped.payload_compliance {
+            "; the payload masses, known and changing over the data, add each bending compliance \
+             itself (rad/(N m)) where they separate it from the moments"
+        } else {
+            ""
+        };
+        vec![format!(
+            "robot without masses (no inertial data for {}): link deflection identifies the products \
+             of each bending compliance with the combinations of mass moments its bending moment \
+             depends on (`joint i {PRODUCT_QUANTITY} k about a`, rad; {}), not the compliances{payload}",
+            model.massless_links().join(", "),
+            counts.join(", ")
+        )]
+    }
+
+    /// The components `u · mᵢ`, `v · mᵢ` (N m) of each bending joint's moment, joint frame; without
+    /// masses the patterns `Gₐₖ` (and the payload's moment regressors) from the row's joint frames.
     fn regressors(&self, settings: &ExtensionSettings, row: &RowInputs<'_>, out: &mut [f64]) {
         let g = Vector3::from(settings.gravity_base);
-        let mut k = 0;
-        for (i, m) in row.moment.iter().enumerate() {
+        let Some(lumped) = &settings.lumped_gravity else {
+            let mut k = 0;
+            for (i, m) in row.moment.iter().enumerate() {
+                for about in modelled_axes(row.joints, i, &g) {
+                    out[k] = m[about];
+                    k += 1;
+                }
+            }
+            return;
+        };
+        let Some(frames) = row.frames else {
+            out.fill(0.0);
+            return;
+        };
+        let mut col = 0;
+        for i in 0..row.joints.len() {
             for about in modelled_axes(row.joints, i, &g) {
-                out[k] = m[about];
-                k += 1;
+                let Some(basis) = lumped.bend_basis(i, about) else {
+                    continue;
+                };
+                let count = basis.combinations.len();
+                if count == 0 {
+                    continue;
+                }
+                if lumped.payload_compliance {
+                    let w = frames.joint_poses[i].rotation * Vector3::ith(about, 1.0);
+                    out[col..col + 4].copy_from_slice(&LumpedGravity::payload_moment_regressors(
+                        frames,
+                        &g,
+                        row.payload_kg,
+                        &w,
+                        i,
+                    ));
+                    col += 4;
+                }
+                lumped.bend_patterns(frames, &g, basis, &mut out[col..col + count]);
+                col += count;
             }
         }
     }
@@ -200,15 +391,30 @@ impl CauseModel for LinkDeflection {
         format!("the bending moment across {joints}")
     }
 
-    fn remark(&self, _unit: Unit, value: f64) -> String {
-        if value > 0.0 {
+    fn remark(&self, unit: Unit, value: f64) -> String {
+        if unit != Unit::RadianPerNewtonMetre {
+            String::new() // a lumped product: no stiffness of its own
+        } else if value > 0.0 {
             format!(" (stiffness {:.3e} N m/rad)", 1.0 / value)
         } else {
             " (negative: no elastic link bends against its load)".to_string()
         }
     }
 
-    fn implausible(&self, _param: &ExtensionParam, value: f64) -> Option<String> {
+    fn implausible(&self, param: &ExtensionParam, value: f64) -> Option<String> {
+        if param.unit == Unit::RadianPerKilogram {
+            return (value.abs() > MAX_PAYLOAD_RAD_PER_KG).then(|| {
+                "a bending compliance times gravity times the payload's centre of mass above \
+                 0.01 rad/kg: the softest link with a centre of mass a metre from the flange"
+                    .to_string()
+            });
+        }
+        if param.pattern.is_some() {
+            return (value.abs() > MAX_SAG_RAD).then(|| {
+                "a bend above 0.01 rad under gravity: no link and bearing bend that much"
+                    .to_string()
+            });
+        }
         super::outside_zero_to(
             value,
             MAX_RAD_PER_NM,

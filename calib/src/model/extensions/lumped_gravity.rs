@@ -73,6 +73,26 @@ pub struct LumpedGravity {
     /// Whether each joint's compliance is a parameter of its own, multiplying the known torque of
     /// the payload (the table has payload masses).
     pub payload_compliance: bool,
+    /// The bending axes of link deflection without masses, each with the combinations of the
+    /// moments beyond its joint that its bending moment depends on ([`LumpedGravity::with_bending`]);
+    /// empty without link deflection.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub bending: Vec<BendBasis>,
+}
+
+/// The combinations `vₐₖ` of the mass moments beyond joint `joint` that the gravity moment about
+/// axis `about` of its frame depends on: `Mₐ(q) = Σₖ Gₐₖ(q) bₐₖ` with the patterns
+/// `Gₐₖ = Yₐ(q) vₐₖ / |g|` (dimensionless) of [`moment_coefficients`] and `bₐₖ = |g| vₐₖ · φ`
+/// (N m), as for the holding torques.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct BendBasis {
+    /// 0-based joint.
+    pub joint: usize,
+    /// Axis of the joint frame: 0 = x, 1 = y, 2 = z.
+    pub about: usize,
+    /// The combinations, largest singular value first; `4 (n − joint)` coefficients each, ordered
+    /// as in [`LumpedGravity::combinations`].
+    pub combinations: Vec<Vec<f64>>,
 }
 
 impl LumpedGravity {
@@ -81,33 +101,125 @@ impl LumpedGravity {
     pub fn for_model(model: &Model, gravity: &Vector3<f64>, payload_compliance: bool) -> Self {
         let n = model.nq();
         let length_m = length_scale(model);
-        let mut rng = StdRng::seed_from_u64(SAMPLE_SEED);
-        let mut data = sim::Data::new(model);
-        let mut q = vec![0.0; n];
         let mut rows: Vec<DMatrix<f64>> = (0..n)
             .map(|i| DMatrix::zeros(SAMPLES, MOMENTS_PER_BODY * (n - i)))
             .collect();
         let mut coef = vec![0.0; MOMENTS_PER_BODY * n];
-        for s in 0..SAMPLES {
-            for (v, j) in q.iter_mut().zip(model.joints()) {
-                let (lo, hi) = sample_range(j);
-                *v = rng.random_range(lo..=hi);
-            }
-            sim::kinematics::forward_kinematics(model, &mut data, &q);
+        for_each_sample(model, |s, data| {
             for (i, m) in rows.iter_mut().enumerate() {
                 let out = &mut coef[..MOMENTS_PER_BODY * (n - i)];
-                torque_coefficients(model.joints(), &data, gravity, length_m, i, out);
+                torque_coefficients(model.joints(), data, gravity, length_m, i, out);
                 for (c, v) in out.iter().enumerate() {
                     m[(s, c)] = *v;
                 }
             }
-        }
+        });
         let combinations = rows.into_iter().map(row_space).collect();
         LumpedGravity {
             length_m,
             combinations,
             payload_compliance,
+            bending: Vec::new(),
         }
+    }
+
+    /// These bases with those of the gravity moments about the bending axes `axes` (0-based joint,
+    /// axis of its frame), drawn at the same configurations; an axis already present is kept.
+    pub fn with_bending(
+        mut self,
+        model: &Model,
+        gravity: &Vector3<f64>,
+        axes: &[(usize, usize)],
+    ) -> Self {
+        let n = model.nq();
+        let new: Vec<(usize, usize)> = axes
+            .iter()
+            .copied()
+            .filter(|&(i, a)| {
+                i < n && a < 3 && !self.bending.iter().any(|b| (b.joint, b.about) == (i, a))
+            })
+            .collect();
+        let mut rows: Vec<DMatrix<f64>> = new
+            .iter()
+            .map(|&(i, _)| DMatrix::zeros(SAMPLES, MOMENTS_PER_BODY * (n - i)))
+            .collect();
+        let length_m = self.length_m;
+        for_each_sample(model, |s, data| {
+            for (m, &(i, about)) in rows.iter_mut().zip(&new) {
+                let w = data.joint_poses[i].rotation * Vector3::ith(about, 1.0);
+                for j in i..n {
+                    let b = moment_coefficients(data, gravity, length_m, &w, i, j);
+                    for (c, v) in b.iter().enumerate() {
+                        m[(s, MOMENTS_PER_BODY * (j - i) + c)] = *v;
+                    }
+                }
+            }
+        });
+        self.bending
+            .extend(new.iter().zip(rows).map(|(&(joint, about), m)| BendBasis {
+                joint,
+                about,
+                combinations: row_space(m),
+            }));
+        self
+    }
+
+    /// The basis of the bending of joint `joint` (0-based) about axis `about` of its frame, if any.
+    pub fn bend_basis(&self, joint: usize, about: usize) -> Option<&BendBasis> {
+        self.bending
+            .iter()
+            .find(|b| b.joint == joint && b.about == about)
+    }
+
+    /// The patterns `Gₐₖ` (dimensionless) of the gravity moment about `basis`'s axis at the joint
+    /// frames in `frames`, into `out` (one per combination).
+    pub fn bend_patterns(
+        &self,
+        frames: &sim::Data,
+        gravity: &Vector3<f64>,
+        basis: &BendBasis,
+        out: &mut [f64],
+    ) {
+        out.fill(0.0);
+        let i = basis.joint;
+        let w = frames.joint_poses[i].rotation * Vector3::ith(basis.about, 1.0);
+        for j in i..frames.joint_poses.len() {
+            let b = moment_coefficients(frames, gravity, self.length_m, &w, i, j);
+            let at = MOMENTS_PER_BODY * (j - i);
+            for (o, v) in out.iter_mut().zip(&basis.combinations) {
+                *o += v[at..at + MOMENTS_PER_BODY]
+                    .iter()
+                    .zip(&b)
+                    .map(|(a, c)| a * c)
+                    .sum::<f64>();
+            }
+        }
+        let g = gravity.norm().max(f64::MIN_POSITIVE);
+        out.iter_mut().for_each(|o| *o /= g);
+    }
+
+    /// The regressors of a payload of `mass_kg` in the gravity moment about the line through joint
+    /// `i`'s origin along the unit vector `w` (base frame), at the frames in `frames`: its moment
+    /// with the mass at the flange origin (N m), then per axis of the flange frame its moment per
+    /// unit of `|g| r` (kg; `r` the unknown centre of mass, flange frame, m):
+    /// `m (c − oᵢ) · u = m (p_flange − oᵢ) · u + Σₐ (|g| rₐ) m (R_flangeᵀ u)ₐ / |g|`, `u = g × w`.
+    pub fn payload_moment_regressors(
+        frames: &sim::Data,
+        gravity: &Vector3<f64>,
+        mass_kg: f64,
+        w: &Vector3<f64>,
+        i: usize,
+    ) -> [f64; 4] {
+        let u = gravity.cross(w);
+        let o = frames.joint_poses[i].translation.vector;
+        let local = frames.flange.rotation.inverse_transform_vector(&u);
+        let g = gravity.norm().max(f64::MIN_POSITIVE);
+        [
+            mass_kg * (frames.flange.translation.vector - o).dot(&u),
+            mass_kg * local.x / g,
+            mass_kg * local.y / g,
+            mass_kg * local.z / g,
+        ]
     }
 
     /// The number of products at 0-based joint `i`.
@@ -190,7 +302,8 @@ pub fn torque_coefficients(
 }
 
 /// Body `j`'s four coefficients (`m L, sx, sy, sz`; N m per kg m) in joint `i`'s holding torque
-/// (`j ≥ i`), at the joint frames in `frames`.
+/// (`j ≥ i`), at the joint frames in `frames`: minus its moment about the joint's axis for a
+/// rotational joint ([`moment_coefficients`]), minus its weight along the axis for a prismatic one.
 fn body_coefficients(
     joints: &[sim::Joint],
     frames: &sim::Data,
@@ -202,17 +315,58 @@ fn body_coefficients(
     let t_i = &frames.joint_poses[i];
     let w = t_i.rotation * joints[i].axis;
     if joints[i].kind.is_rotational() {
-        let u = gravity.cross(&w);
-        let t = &frames.joint_poses[j];
-        let local = t.rotation.inverse_transform_vector(&u);
-        [
-            -(t.translation.vector - t_i.translation.vector).dot(&u) / length_m,
-            -local.x,
-            -local.y,
-            -local.z,
-        ]
+        moment_coefficients(frames, gravity, length_m, &w, i, j).map(|c| -c)
     } else {
         [-w.dot(gravity) / length_m, 0.0, 0.0, 0.0]
+    }
+}
+
+/// Body `j`'s four coefficients (`m L, sx, sy, sz`; N m per kg m) in the gravity moment about the
+/// line through joint `i`'s origin along the unit vector `w` (base frame), at the joint frames in
+/// `frames`: `[(pⱼ − oᵢ) · u / L, Rⱼᵀ u]` with `u = g × w`, since the moment of a weight `m g` at
+/// `c` about that line is `((c − oᵢ) × m g) · w = m (c − oᵢ) · (g × w)`.
+pub fn moment_coefficients(
+    frames: &sim::Data,
+    gravity: &Vector3<f64>,
+    length_m: f64,
+    w: &Vector3<f64>,
+    i: usize,
+    j: usize,
+) -> [f64; MOMENTS_PER_BODY] {
+    let u = gravity.cross(w);
+    let t_i = &frames.joint_poses[i];
+    let t = &frames.joint_poses[j];
+    let local = t.rotation.inverse_transform_vector(&u);
+    [
+        (t.translation.vector - t_i.translation.vector).dot(&u) / length_m,
+        local.x,
+        local.y,
+        local.z,
+    ]
+}
+
+/// Whether the payload masses of the training rows `rows` of `table` differ: then a compliance
+/// multiplies a known torque that changes over the data, and is a parameter of its own.
+pub fn payload_varies(table: &sim::measurement_table::MeasurementTable, rows: &[usize]) -> bool {
+    table.payload.as_ref().is_some_and(|p| {
+        let first = rows.first().map_or(0.0, |&r| p[r]);
+        rows.iter().any(|&r| p[r] != first)
+    })
+}
+
+/// Calls `f(s, frames)` at each of the [`SAMPLES`] configurations drawn (seeded, within the joint
+/// limits) for the bases, with the joint frames there.
+fn for_each_sample(model: &Model, mut f: impl FnMut(usize, &sim::Data)) {
+    let mut rng = StdRng::seed_from_u64(SAMPLE_SEED);
+    let mut data = sim::Data::new(model);
+    let mut q = vec![0.0; model.nq()];
+    for s in 0..SAMPLES {
+        for (v, j) in q.iter_mut().zip(model.joints()) {
+            let (lo, hi) = sample_range(j);
+            *v = rng.random_range(lo..=hi);
+        }
+        sim::kinematics::forward_kinematics(model, &mut data, &q);
+        f(s, &data);
     }
 }
 
@@ -331,6 +485,71 @@ mod tests {
                     "joint {}: {tau} against {truth}",
                     i + 1
                 );
+            }
+        }
+    }
+
+    /// The same for the bending moments: on the iiwa 7 with its masses, the bending bases of every
+    /// axis across every joint, times the true moments, give the gravity moments of
+    /// [`super::super::link_deflection::gravity_moments`] (an independent sum over the bodies) at
+    /// configurations the bases were not drawn from.
+    #[test]
+    fn bending_patterns_times_true_moments_are_the_gravity_moments() {
+        let model = sim::robots::load_builtin("iiwa7").unwrap();
+        let g = Vector3::from(sim::statics::DEFAULT_GRAVITY);
+        let n = model.nq();
+        let axes: Vec<(usize, usize)> = (0..n).flat_map(|i| (0..3).map(move |a| (i, a))).collect();
+        let lumped = LumpedGravity::for_model(&model, &g, false).with_bending(&model, &g, &axes);
+        assert_eq!(lumped.bending.len(), 3 * n);
+        // Adding axes already there changes nothing.
+        let again = lumped.clone().with_bending(&model, &g, &axes[..4]);
+        assert_eq!(again, lumped);
+        let mut data = sim::Data::new(&model);
+        let mut moment = vec![Vector3::zeros(); n];
+        let mut rng = StdRng::seed_from_u64(6);
+        for _ in 0..20 {
+            let q: Vec<f64> = (0..n).map(|_| rng.random_range(-2.0..2.0)).collect();
+            sim::kinematics::forward_kinematics(&model, &mut data, &q);
+            super::super::link_deflection::gravity_moments(&model, &data, &g, None, &mut moment);
+            for basis in &lumped.bending {
+                let mut pat = vec![0.0; basis.combinations.len()];
+                lumped.bend_patterns(&data, &g, basis, &mut pat);
+                let phi = moments(&model, lumped.length_m, basis.joint);
+                let m: f64 = basis
+                    .combinations
+                    .iter()
+                    .zip(&pat)
+                    .map(|(v, p)| {
+                        p * g.norm() * v.iter().zip(&phi).map(|(a, b)| a * b).sum::<f64>()
+                    })
+                    .sum();
+                let truth = moment[basis.joint][basis.about];
+                assert!(
+                    (m - truth).abs() < 1e-9 * (1.0 + truth.abs()),
+                    "joint {} about {}: {m} against {truth}",
+                    basis.joint + 1,
+                    basis.about
+                );
+            }
+            // A payload's share: its regressors times (1, |g| r) are what it adds to the moments.
+            let pl = sim::statics::Payload {
+                mass: 2.3,
+                com: [0.02, -0.01, 0.07],
+            };
+            let mut with = vec![Vector3::zeros(); n];
+            super::super::link_deflection::gravity_moments(&model, &data, &g, Some(&pl), &mut with);
+            for i in 0..n {
+                for about in 0..3 {
+                    let w = data.joint_poses[i].rotation * Vector3::ith(about, 1.0);
+                    let r = LumpedGravity::payload_moment_regressors(&data, &g, pl.mass, &w, i);
+                    let share = r[0] + (0..3).map(|a| r[1 + a] * g.norm() * pl.com[a]).sum::<f64>();
+                    let truth = with[i][about] - moment[i][about];
+                    assert!(
+                        (share - truth).abs() < 1e-9 * (1.0 + truth.abs()),
+                        "payload at joint {} about {about}: {share} against {truth}",
+                        i + 1
+                    );
+                }
             }
         }
     }

@@ -97,7 +97,7 @@ pub trait CauseModel: Sync {
 
     /// Whether the regressors read the gravity moment each joint transmits
     /// ([`RowInputs::moment`], N m; link deflection). Default: no.
-    fn needs_gravity_moment(&self) -> bool {
+    fn needs_gravity_moment(&self, _settings: &ExtensionSettings) -> bool {
         false
     }
 
@@ -325,14 +325,20 @@ impl ExtensionParam {
                 Some(k) => format!("joint {} {} {k}", joint + 1, self.quantity),
                 None => format!("joint {} {}", joint + 1, self.quantity),
             },
-            Term::Bend { joint, about } => {
-                format!(
+            Term::Bend { joint, about } => match self.pattern {
+                Some(k) => format!(
+                    "joint {} {} {k} about {}",
+                    joint + 1,
+                    self.quantity,
+                    axis_name(about)
+                ),
+                None => format!(
                     "joint {} {} about {}",
                     joint + 1,
                     self.quantity,
                     axis_name(about)
-                )
-            }
+                ),
+            },
             Term::Growth => self.quantity.to_string(),
         }
     }

@@ -64,7 +64,7 @@ pub struct ExtensionSettings {
     pub joints: BTreeMap<Cause, Vec<usize>>,
     /// The gravity torques as combinations of unknown mass moments, for a robot without inertials
     /// ([`super::lumped_gravity`]): joint compliance then identifies the products of each joint's
-    /// compliance with them. `None` for a robot with its masses.
+    /// compliance with them, link deflection those of each bending compliance. `None` for a robot with its masses.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub lumped_gravity: Option<super::lumped_gravity::LumpedGravity>,
 }
@@ -145,7 +145,9 @@ impl ExtensionSettings {
 
     /// Whether any cause's regressors read the gravity moments the joints transmit.
     pub fn needs_gravity_moment(&self) -> bool {
-        self.causes.iter().any(|c| c.model().needs_gravity_moment())
+        self.causes
+            .iter()
+            .any(|c| c.model().needs_gravity_moment(self))
     }
 
     /// Whether any cause's regressors depend on the link angles (refits at the equilibrium).

@@ -121,6 +121,16 @@ pub(super) fn finding_plots(
         let g = regressor(e);
         match p.term {
             Term::Bend { joint, about } if joints.contains(&(joint + 1)) => {
+                // Every parameter of this bending axis (a robot without masses has several lumped
+                // products per axis); drawn once, at the axis's first.
+                let same: Vec<usize> = (0..layout.extensions.len())
+                    .filter(|&k| {
+                        layout.extensions[k].cause == cause && layout.extensions[k].term == p.term
+                    })
+                    .collect();
+                if same.first() != Some(&e) {
+                    continue;
+                }
                 // The residual as the rotation about this bending axis that would explain it (µrad).
                 let local = Vector3::ith(about, 1.0);
                 let resid: Vec<f64> = (0..n_test)
@@ -141,7 +151,37 @@ pub(super) fn finding_plots(
                         }
                     })
                     .collect();
-                let axis = cause.model().plot_axis(p.term);
+                // One compliance: against the bending moment, with the compliance as the slope.
+                // Several products: against the identified bend (µrad), with slope one.
+                let (x_label, x, slope) = if let [only] = same[..] {
+                    let axis = cause.model().plot_axis(p.term);
+                    let x: Vec<f64> = g.iter().map(|v| axis.sign * v).collect();
+                    (
+                        axis.label,
+                        x,
+                        axis.sign * after.cal.params.extension[only] * 1e6,
+                    )
+                } else {
+                    let bend: Vec<f64> = (0..n_test)
+                        .map(|r| {
+                            same.iter()
+                                .map(|&k| {
+                                    after.cal.params.extension[k] * after.test_regs.row(r)[k] * 1e6
+                                })
+                                .sum()
+                        })
+                        .collect();
+                    (
+                        format!(
+                            "identified bend of joint {} about {} (µrad)",
+                            joint + 1,
+                            crate::model::extensions::axis_name(about)
+                        ),
+                        bend,
+                        1.0,
+                    )
+                };
+                let before: Vec<f64> = resid.iter().zip(&x).map(|(r, x)| r + slope * x).collect();
                 out.push(report::RegressorPlot {
                     file: format!(
                         "{}_joint{}_{}",
@@ -155,20 +195,16 @@ pub(super) fn finding_plots(
                         joint + 1,
                         crate::model::extensions::axis_name(about)
                     ),
-                    x_label: axis.label,
+                    x_label,
                     y_label: format!(
                         "residual as bending of joint {} about {} (µrad)",
                         joint + 1,
                         crate::model::extensions::axis_name(about)
                     ),
-                    x: g.iter().map(|v| axis.sign * v).collect(),
-                    before: resid
-                        .iter()
-                        .zip(&g)
-                        .map(|(r, g)| r + value * g * 1e6)
-                        .collect(),
+                    x,
+                    before,
                     after: resid,
-                    slope: axis.sign * value * 1e6,
+                    slope,
                     curve: Vec::new(),
                 });
             }
