@@ -536,8 +536,21 @@ fn score_diagnose_records_hidden_and_named_causes() {
     let mut lines = power.lines();
     let header: Vec<&str> = lines.next().unwrap().split(',').collect();
     let col = |name: &str| header.iter().position(|h| *h == name).unwrap();
+    // Every column numeric but `payloads`, empty without --payloads.
     let cells: Vec<Vec<f64>> = lines
-        .map(|l| l.split(',').map(|x| x.parse().unwrap()).collect())
+        .map(|l| {
+            l.split(',')
+                .enumerate()
+                .map(|(k, x)| {
+                    if k == col("payloads") {
+                        assert_eq!(x, "", "{power}");
+                        f64::NAN
+                    } else {
+                        x.parse().unwrap()
+                    }
+                })
+                .collect()
+        })
         .collect();
     assert_eq!(cells.len(), 2, "{power}");
     let z = 1.959_963_984_540_054_f64;
@@ -596,5 +609,124 @@ fn score_diagnose_records_hidden_and_named_causes() {
     assert!(strings(&plain, "hidden").iter().all(String::is_empty));
     assert!(strings(&plain, "named").iter().all(String::is_empty));
     assert!(wide(&plain, "detected").iter().all(|d| *d == 0.0));
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// `--payloads 0,0/3.5/7` on the compliance scenario: two cells, payload-set-major after the
+/// magnitude (cell 0 carries nothing, cell 1 draws 0, 3.5 or 7 kg per pose), the `payloads` column
+/// names each run's set, and the set reaches the truth: the payloads sag the elastic joints, so the
+/// injected displacement grows, and they vary joint 2's torque more, so its compliance's predicted
+/// σ shrinks (both medians over the runs). `--only-cell 1` reproduces that cell's runs alone, and
+/// bad sets are refused naming `--payloads`.
+#[test]
+fn payload_sets_are_an_axis_of_the_grid() {
+    let seed = seed();
+    eprintln!("seed {seed}");
+    let dir = scratch_dir("robocal_sweep_models", "payloads");
+    let s = seed.to_string();
+    let sc = scenario("iiwa7_compliance.toml");
+    let args = |out: &Path, extra: &[&str]| -> Vec<String> {
+        let mut a: Vec<String> = [
+            "sweep",
+            "--scenario",
+            &sc,
+            "--noise",
+            "1",
+            "--poses",
+            "40",
+            "--reps",
+            "6",
+            "--seed",
+            &s,
+            "--model",
+            "kinematic+joint_compliance",
+            "--payloads",
+            "0,0/3.5/7",
+            "--out",
+            out.to_str().unwrap(),
+        ]
+        .iter()
+        .map(|x| x.to_string())
+        .collect();
+        a.extend(extra.iter().map(|x| x.to_string()));
+        a
+    };
+    let out = dir.join("p.parquet");
+    let a = args(&out, &[]);
+    robocal_ok(&a.iter().map(String::as_str).collect::<Vec<_>>());
+    let cell = wide(&out, "cell");
+    let sets = strings(&out, "payloads");
+    assert_eq!(cell.len(), 12);
+    for (c, p) in cell.iter().zip(&sets) {
+        assert_eq!(p, if *c == 0.0 { "0" } else { "0/3.5/7" }, "seed {seed}");
+    }
+    let median = |v: &mut Vec<f64>| {
+        v.sort_by(f64::total_cmp);
+        0.5 * (v[2] + v[3])
+    };
+    let injected = wide(&out, "injected_rms_m");
+    let of_cell = |v: &[f64], k: f64| -> Vec<f64> {
+        v.iter()
+            .zip(&cell)
+            .filter(|(_, c)| **c == k)
+            .map(|(x, _)| *x)
+            .collect()
+    };
+    let (mut bare, mut loaded) = (of_cell(&injected, 0.0), of_cell(&injected, 1.0));
+    let (bare, loaded) = (median(&mut bare), median(&mut loaded));
+    assert!(
+        loaded > bare,
+        "seed {seed}: injected RMS {loaded:e} m with payloads, {bare:e} m without"
+    );
+    let p = params(&dir.join("p.params.parquet"));
+    let sigma_j2 = |k: f64| -> f64 {
+        let mut v: Vec<f64> = p
+            .iter()
+            .filter(|x| x.param == "joint 2 compliance" && cell[x.run as usize] == k)
+            .map(|x| x.sigma)
+            .collect();
+        median(&mut v)
+    };
+    assert!(
+        sigma_j2(1.0) < sigma_j2(0.0),
+        "seed {seed}: joint 2 compliance σ {:e} with payloads, {:e} without",
+        sigma_j2(1.0),
+        sigma_j2(0.0)
+    );
+    // One cell alone: the same runs, the same figures.
+    let one = dir.join("one.parquet");
+    let a = args(&one, &["--only-cell", "1"]);
+    robocal_ok(&a.iter().map(String::as_str).collect::<Vec<_>>());
+    assert_eq!(
+        wide(&one, "test_error_rms_m"),
+        of_cell(&wide(&out, "test_error_rms_m"), 1.0),
+        "seed {seed}"
+    );
+    assert_eq!(strings(&one, "payloads"), vec!["0/3.5/7"; 6]);
+    for (bad, expect) in [
+        ("0,0", "set 2 ('0'): repeats an earlier set"),
+        ("3/3", "set 1 ('3/3'): 3 kg appears twice"),
+        ("-1", "set 1 ('-1'): '-1' is not a mass"),
+        ("0,7/x", "set 2 ('7/x'): 'x' is not a mass"),
+        ("2000", "'2000' is not a mass in kg between 0 and 1000"),
+    ] {
+        let x = dir.join("x.parquet");
+        let a: Vec<String> = args(&x, &[])
+            .into_iter()
+            .map(|v| if v == "0,0/3.5/7" { bad.to_string() } else { v })
+            .collect();
+        let o = assert_cmd::Command::new(env!("CARGO_BIN_EXE_robocal"))
+            .args(&a)
+            .output()
+            .unwrap();
+        let e = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{bad}: {e}");
+        assert!(
+            e.contains(&format!("--payloads {bad}: ")) && e.contains(expect),
+            "{bad}: {e}"
+        );
+        assert_eq!(e.trim().lines().count(), 1, "{bad}: {e}");
+        assert!(!x.exists());
+    }
     let _ = std::fs::remove_dir_all(&dir);
 }

@@ -28,7 +28,7 @@ pub struct Args {
     /// is the part not held out (--test-fraction).
     #[arg(long, value_name = "LIST", allow_hyphen_values = true)]
     poses: String,
-    /// Runs (repetitions) per cell (magnitude × noise level × pose count).
+    /// Runs (repetitions) per cell (magnitude × payload set × noise level × pose count).
     #[arg(long, value_name = "N", allow_hyphen_values = true)]
     reps: String,
     /// Factors on the scenario's injected effects, comma-separated (each ≥ 0: 1 = the scenario as
@@ -39,6 +39,11 @@ pub struct Args {
     /// others stay as the scenario writes them.
     #[arg(long, value_name = "CAUSE")]
     magnitude_of: Option<String>,
+    /// Payload sets, comma-separated, the masses of a set separated by `/` (kg): a run draws every
+    /// pose's payload from its set (`0/3.5/7`: one of them per pose; `7`: every pose), at the
+    /// scenario's centre of mass. `0,7,0/3.5/7` sweeps three sets. Default: the scenario's payloads.
+    #[arg(long, value_name = "SETS", allow_hyphen_values = true)]
+    payloads: Option<String>,
     /// Output Parquet file, one row per run; the plot goes beside it as FILE.svg and the extension
     /// parameters' errors as FILE.params.parquet (one row per run and parameter); with
     /// --score diagnose the power table as FILE.power.csv and the plot shows power curves.
@@ -143,6 +148,47 @@ pub(crate) fn parse_magnitude(text: Option<&str>) -> Result<Vec<f64>, CliError> 
             s.parse::<f64>().ok().filter(|v| v.is_finite() && *v >= 0.0)
         }),
     }
+}
+
+/// `--payloads`: sets separated by commas, masses within a set by `/`; each mass finite, ≥ 0 and at
+/// most [`sim::measurement_table::MAX_PAYLOAD_KG`] (what a measurement table accepts); no set twice,
+/// no mass twice within a set.
+pub(crate) fn parse_payloads(text: &str) -> Result<Vec<Vec<f64>>, CliError> {
+    const MAX_PAYLOAD_KG: f64 = sim::measurement_table::MAX_PAYLOAD_KG;
+    let mut sets: Vec<Vec<f64>> = Vec::new();
+    for (i, item) in text.split(',').enumerate() {
+        let item = item.trim();
+        let bad = |p: &str| {
+            input(
+                "--payloads",
+                text,
+                &format!("set {} ('{item}'): {p}", i + 1),
+            )
+        };
+        let mut set: Vec<f64> = Vec::new();
+        for m in item.split('/') {
+            let v = m
+                .trim()
+                .parse::<f64>()
+                .ok()
+                .filter(|v| v.is_finite() && (0.0..=MAX_PAYLOAD_KG).contains(v))
+                .ok_or_else(|| {
+                    bad(&format!(
+                        "'{}' is not a mass in kg between 0 and {MAX_PAYLOAD_KG}",
+                        m.trim()
+                    ))
+                })?;
+            if set.contains(&v) {
+                return Err(bad(&format!("{v} kg appears twice")));
+            }
+            set.push(v);
+        }
+        if sets.contains(&set) {
+            return Err(bad("repeats an earlier set"));
+        }
+        sets.push(set);
+    }
+    Ok(sets)
 }
 
 /// `--poses`: integers ≥ 1.
@@ -302,6 +348,8 @@ pub fn run(args: Args) -> CliResult {
         .filter(|v| *v >= 1)
         .ok_or_else(|| input("--reps", &args.reps, "must be a whole number ≥ 1"))?;
     let magnitude = parse_magnitude(args.magnitude.as_deref())?;
+    let payloads = args.payloads.as_deref().map(parse_payloads).transpose()?;
+    let payload_sets = payloads.as_ref().map_or(1, Vec::len);
     let magnitude_of = match &args.magnitude_of {
         None => None,
         Some(_) if args.magnitude.is_none() => {
@@ -345,7 +393,7 @@ pub fn run(args: Args) -> CliResult {
         }
         (Some(s), None) => parse_shard(s)?,
         (None, Some(c)) => {
-            let cells = magnitude.len() * noise.len() * poses.len();
+            let cells = magnitude.len() * payload_sets * noise.len() * poses.len();
             if c >= cells {
                 return Err(input(
                     "--only-cell",
@@ -359,7 +407,8 @@ pub fn run(args: Args) -> CliResult {
     };
     let runs = magnitude
         .len()
-        .checked_mul(noise.len())
+        .checked_mul(payload_sets)
+        .and_then(|c| c.checked_mul(noise.len()))
         .and_then(|c| c.checked_mul(poses.len()))
         .and_then(|c| c.checked_mul(reps))
         .filter(|r| *r <= 100_000_000)
@@ -443,6 +492,7 @@ pub fn run(args: Args) -> CliResult {
         scenario_text: scenario.text.clone(),
         magnitude,
         magnitude_of: magnitude_of.map(|e| e.name().to_string()),
+        payloads,
         noise_scale: noise,
         poses,
         reps,
@@ -494,9 +544,10 @@ pub fn run(args: Args) -> CliResult {
         params.extend(r.params);
     }
     eprintln!(
-        "sweep of {}: {} magnitude(s) × {} noise level(s) × {} pose count(s) × {} reps; {} run(s) in {:.1} s on {} thread(s) ({} model, {} poses)",
+        "sweep of {}: {} magnitude(s) × {} payload set(s) × {} noise level(s) × {} pose count(s) × {} reps; {} run(s) in {:.1} s on {} thread(s) ({} model, {} poses)",
         spec.scenario_file,
         spec.magnitude.len(),
+        spec.payload_sets(),
         spec.noise_scale.len(),
         spec.poses.len(),
         spec.reps,
@@ -565,7 +616,12 @@ pub fn run_merge(mut args: MergeArgs) -> CliResult {
                 })?;
                 if s.runs != s.cells * s.reps
                     || s.magnitude.is_empty()
-                    || s.cells != s.magnitude.len() * s.noise_scale.len() * s.poses.len()
+                    || s.payloads.as_ref().is_some_and(Vec::is_empty)
+                    || s.cells
+                        != s.magnitude.len()
+                            * s.payload_sets()
+                            * s.noise_scale.len()
+                            * s.poses.len()
                 {
                     return Err(CliError::Input(format!(
                         "{name}: inconsistent sweep description (cells {}, reps {}, runs {})",

@@ -50,6 +50,8 @@ pub struct PowerCell {
     pub noise_scale: f64,
     /// Poses per run.
     pub poses: usize,
+    /// The payload set's masses, `/`-separated (kg), empty for the scenario's payloads.
+    pub payloads: String,
     /// Runs of the cell.
     pub runs: usize,
     /// Runs where diagnose named exactly the hidden causes (`detected`).
@@ -70,13 +72,15 @@ pub struct PowerCell {
     pub false_alarm_upper: f64,
 }
 
-/// One power curve: a noise level and a pose count, its cells in magnitude order.
+/// One power curve: a noise level, a pose count and a payload set, its cells in magnitude order.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct PowerCurve {
     /// Tracker noise multiplier.
     pub noise_scale: f64,
     /// Poses per run.
     pub poses: usize,
+    /// The payload set's masses, `/`-separated (kg), empty for the scenario's payloads.
+    pub payloads: String,
     /// The smallest magnitude above 0 whose detection rate is at least [`TARGET_RATE`] and stays so
     /// at every larger magnitude of the sweep; `None` when the largest does not reach it.
     pub magnitude_90: Option<f64>,
@@ -84,12 +88,30 @@ pub struct PowerCurve {
     pub false_alarms_at_0: Option<(usize, usize)>,
 }
 
+impl PowerCurve {
+    /// Whether `cell` lies on this curve (its noise level, pose count and payload set).
+    pub fn holds(&self, cell: &PowerCell) -> bool {
+        cell.noise_scale == self.noise_scale
+            && cell.poses == self.poses
+            && cell.payloads == self.payloads
+    }
+
+    /// `noise ×N, P poses` (and `, payloads 0/7 kg` with a payload set).
+    pub fn label(&self) -> String {
+        let mut s = format!("noise ×{}, {} poses", self.noise_scale, self.poses);
+        if !self.payloads.is_empty() {
+            s.push_str(&format!(", payloads {} kg", self.payloads));
+        }
+        s
+    }
+}
+
 /// The power study of a `--score diagnose` sweep: every cell and every curve.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct Power {
     /// One row per cell, in cell order.
     pub cells: Vec<PowerCell>,
-    /// One curve per noise level and pose count.
+    /// One curve per noise level, pose count and payload set.
     pub curves: Vec<PowerCurve>,
     /// Pooled over the curves: false alarms at magnitude 0 and runs there (`None` without a
     /// magnitude 0).
@@ -115,6 +137,7 @@ pub fn power(cells: &[CellSummary]) -> Option<Power> {
                 magnitude: c.magnitude,
                 noise_scale: c.noise_scale,
                 poses: c.poses,
+                payloads: c.payloads.clone(),
                 runs: c.runs,
                 detected: d,
                 detection_rate: rate(d),
@@ -127,18 +150,19 @@ pub fn power(cells: &[CellSummary]) -> Option<Power> {
             })
         })
         .collect::<Option<_>>()?;
-    let mut keys: Vec<(f64, usize)> = Vec::new();
+    let mut keys: Vec<(f64, usize, &str)> = Vec::new();
     for c in &rows {
-        if !keys.contains(&(c.noise_scale, c.poses)) {
-            keys.push((c.noise_scale, c.poses));
+        let key = (c.noise_scale, c.poses, c.payloads.as_str());
+        if !keys.contains(&key) {
+            keys.push(key);
         }
     }
     let curves: Vec<PowerCurve> = keys
         .iter()
-        .map(|&(noise, poses)| {
+        .map(|&(noise, poses, payloads)| {
             let mut mine: Vec<&PowerCell> = rows
                 .iter()
-                .filter(|c| c.noise_scale == noise && c.poses == poses)
+                .filter(|c| c.noise_scale == noise && c.poses == poses && c.payloads == payloads)
                 .collect();
             mine.sort_by(|a, b| a.magnitude.total_cmp(&b.magnitude));
             // From the largest magnitude down, as long as the rate holds.
@@ -160,6 +184,7 @@ pub fn power(cells: &[CellSummary]) -> Option<Power> {
             PowerCurve {
                 noise_scale: noise,
                 poses,
+                payloads: payloads.to_string(),
                 magnitude_90,
                 false_alarms_at_0,
             }
@@ -180,7 +205,7 @@ pub fn power(cells: &[CellSummary]) -> Option<Power> {
 }
 
 /// The header of `FILE.power.csv`.
-pub const CSV_HEADER: &str = "magnitude,noise_scale,poses,runs,detected,detection_rate,detection_lower_95,detection_upper_95,false_alarms,false_alarm_rate,false_alarm_lower_95,false_alarm_upper_95";
+pub const CSV_HEADER: &str = "magnitude,noise_scale,poses,payloads,runs,detected,detection_rate,detection_lower_95,detection_upper_95,false_alarms,false_alarm_rate,false_alarm_lower_95,false_alarm_upper_95";
 
 /// `FILE.power.csv`: [`CSV_HEADER`] and one row per cell (rates as fractions, shortest round-trip
 /// decimal).
@@ -189,10 +214,11 @@ pub fn csv(power: &Power) -> String {
     s.push('\n');
     for c in &power.cells {
         s.push_str(&format!(
-            "{},{},{},{},{},{},{},{},{},{},{},{}\n",
+            "{},{},{},{},{},{},{},{},{},{},{},{},{}\n",
             c.magnitude,
             c.noise_scale,
             c.poses,
+            c.payloads,
             c.runs,
             c.detected,
             c.detection_rate,
@@ -212,9 +238,10 @@ pub fn csv(power: &Power) -> String {
 pub fn summary_text(power: &Power) -> String {
     let mut s = String::from("detection power (95 % Wilson intervals in FILE.power.csv):\n");
     for c in &power.curves {
-        let swept = power.cells.iter().any(|cell| {
-            cell.noise_scale == c.noise_scale && cell.poses == c.poses && cell.magnitude > 0.0
-        });
+        let swept = power
+            .cells
+            .iter()
+            .any(|cell| c.holds(cell) && cell.magnitude > 0.0);
         let m90 = match c.magnitude_90 {
             Some(m) => format!("detected in ≥ 90 % of runs from magnitude {m}"),
             None if swept => {
@@ -222,10 +249,7 @@ pub fn summary_text(power: &Power) -> String {
             }
             None => "no magnitude above 0 swept".to_string(),
         };
-        s.push_str(&format!(
-            "  noise ×{}, {} poses: {m90}",
-            c.noise_scale, c.poses
-        ));
+        s.push_str(&format!("  {}: {m90}", c.label()));
         if let Some((f, n)) = c.false_alarms_at_0 {
             s.push_str(&format!("; false alarms at magnitude 0: {f} of {n}"));
         }
@@ -249,13 +273,9 @@ pub fn plot_svg(scenario: &str, power: &Power) -> String {
     use plot::{Plot, Series, Style};
     let mut series = Vec::new();
     for curve in &power.curves {
-        let mut mine: Vec<&PowerCell> = power
-            .cells
-            .iter()
-            .filter(|c| c.noise_scale == curve.noise_scale && c.poses == curve.poses)
-            .collect();
+        let mut mine: Vec<&PowerCell> = power.cells.iter().filter(|c| curve.holds(c)).collect();
         mine.sort_by(|a, b| a.magnitude.total_cmp(&b.magnitude));
-        let label = format!("noise ×{}, {} poses", curve.noise_scale, curve.poses);
+        let label = curve.label();
         series.push(Series {
             label: label.clone(),
             points: mine
@@ -319,6 +339,7 @@ mod tests {
         CellSummary {
             cell: 0,
             magnitude,
+            payloads: String::new(),
             noise_scale: 1.0,
             poses,
             runs,
@@ -363,7 +384,7 @@ mod tests {
             csv.lines()
                 .nth(2)
                 .unwrap()
-                .starts_with("0.1,1,100,20,18,0.9,")
+                .starts_with("0.1,1,100,,20,18,0.9,")
         );
         let mut plain = cells[0].clone();
         plain.detected = None;

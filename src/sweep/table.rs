@@ -136,11 +136,12 @@ macro_rules! sweep_columns {
 
 sweep_columns! {
     run: i64 = "run index, 0-based: cell · reps + rep",
-    cell: i64 = "cell index, 0-based: (magnitude index · (number of noise levels) + noise index) · (number of pose counts) + pose-count index",
+    cell: i64 = "cell index, 0-based: ((magnitude index · (number of payload sets) + payload-set index) · (number of noise levels) + noise index) · (number of pose counts) + pose-count index (one payload set, index 0, without --payloads)",
     rep: i64 = "repetition within the cell, 0-based",
     noise_scale: f64 = "tracker noise multiplier (the value of --noise, as in `robocal generate --noise`)",
     poses: i64 = "poses generated for the run (as `robocal generate --poses`)",
     magnitude: f64 = "factor on the injected effects (the value of --magnitude; 1 = the scenario as written, 0 = absent)",
+    payloads: String = "the run's payload set (--payloads): its masses in kg, `/`-separated (`0/3.5/7`: each pose carries one of them, drawn; `7`: every pose); empty for the scenario's own payloads",
     seed: u64 = "seed of the run's dataset and split (`robocal generate --seed`, `robocal calibrate --seed`)",
     train_poses: i64 = "poses the calibration used",
     test_poses: i64 = "poses held out for scoring",
@@ -297,6 +298,7 @@ mod tests {
             rep: run % 3,
             noise_scale: 0.5,
             poses: 40,
+            payloads: String::new(),
             magnitude: 1.0,
             seed: u64::MAX - run as u64,
             train_poses: 28,
