@@ -99,6 +99,14 @@ echo "== the calibrated URDF: XML diff and MuJoCo forward kinematics against rob
 echo "== UR's kinematics file (--ur-kinematics): ur_description's ur.urdf.xacro expanded with it, against robocal predict" >&2
 "$py" scripts/check_ur_kinematics.py "$robocal"
 
+echo "== the worked stiffness study (scripts/study_stiffness.py), a seeded subset: it runs and writes its table" >&2
+study=target/study-smoke
+rm -rf "$study"
+"$py" scripts/study_stiffness.py --robocal "$robocal" --payloads 0,7 --poses 25,50 --reps 2 --out "$study" > /dev/null
+# Header and 2 payload sets × 2 pose counts × 7 joints.
+[ "$(wc -l < "$study/stiffness_study.csv")" -eq 29 ] && grep -q "<svg" "$study/stiffness_study.svg" \
+  || { echo "study_stiffness.py wrote no complete table" >&2; exit 1; }
+
 if [ -z "${ROBOCAL_SKIP_SLURM:-}" ]; then
   echo "== a sweep as a Slurm job array on a one-node cluster, merged: the bytes of one machine" >&2
   ROBOCAL="$robocal" ./scripts/slurm_check.sh

@@ -730,3 +730,48 @@ fn payload_sets_are_an_axis_of_the_grid() {
     }
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// A pose count too small for the fitted model's parameters is refused before any run, naming
+/// `--poses` and counting the cause parameters: 16 poses leave 11 for calibration, 33 coordinates
+/// for the iiwa 7's 31 kinematic combinations and 7 compliances. The kinematic model alone runs
+/// there.
+#[test]
+fn too_few_poses_for_the_causes_parameters_are_refused() {
+    let dir = scratch_dir("robocal_sweep_models", "few");
+    let out = dir.join("x.parquet");
+    let sc = scenario("iiwa7_compliance.toml");
+    let run = |model: &str| {
+        assert_cmd::Command::new(env!("CARGO_BIN_EXE_robocal"))
+            .args([
+                "sweep",
+                "--scenario",
+                &sc,
+                "--noise",
+                "1",
+                "--poses",
+                "25,16",
+                "--reps",
+                "1",
+                "--model",
+                model,
+                "--out",
+                out.to_str().unwrap(),
+            ])
+            .output()
+            .unwrap()
+    };
+    let o = run("kinematic+joint_compliance");
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{e}");
+    assert!(
+        e.contains("--poses 25,16: 16 poses leave 11 for calibration")
+            && e.contains("31 identifiable kinematic combinations and 7 cause parameters")
+            && e.contains("at least 13 calibration poses"),
+        "{e}"
+    );
+    assert_eq!(e.trim().lines().count(), 1, "{e}");
+    assert!(!out.exists());
+    let o = run("kinematic");
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let _ = std::fs::remove_dir_all(&dir);
+}

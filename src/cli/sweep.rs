@@ -191,6 +191,28 @@ pub(crate) fn parse_payloads(text: &str) -> Result<Vec<Vec<f64>>, CliError> {
     Ok(sets)
 }
 
+/// The number of cause parameters `spec` fits on `res`'s data (its campaign simulated once, every
+/// pose for training), as each run configures them.
+fn extension_param_count(
+    res: &sim::scenario::Resolved,
+    spec: &calib::model::spec::ModelSpec,
+) -> Result<usize, CliError> {
+    let plan = sim::generate::plan_of(res)?;
+    let truth = sim::effects::Truth::new(&res.model, &res.effects)?;
+    let run = sim::generate::simulate(&truth, &res.tracker, &res.gravity, &plan, res.seed, None)?;
+    let table = sim::generate::measurement_table(&plan, &run, &res.tracker);
+    let rows: Vec<usize> = (0..table.len()).collect();
+    let settings = calib::model::extensions::ExtensionSettings::for_data(
+        &res.model,
+        &spec.causes,
+        &spec.joints,
+        &table,
+        &rows,
+        "the sweep's first run",
+    )?;
+    Ok(settings.params(&res.model).len())
+}
+
 /// `--poses`: integers ≥ 1.
 pub(crate) fn parse_poses(text: &str) -> Result<Vec<usize>, CliError> {
     let poses = parse_list("--poses", text, "a whole number ≥ 1", |s| {
@@ -463,18 +485,42 @@ pub fn run(args: Args) -> CliResult {
     let orientation = probe.tracker.six_dof();
     let rank = calib::fit::generic_rank(&probe.model, orientation, &options);
     let dim = if orientation { 6 } else { 3 };
-    let needed = (rank + 1).div_ceil(dim);
+    // An extended model fits its causes' parameters beside the kinematic ones: with fewer training
+    // coordinates than parameters the fit is underdetermined and its σ mean nothing (at 11 training
+    // poses, 33 coordinates for the iiwa 7's 31 + 7 compliance parameters, z² reached 10¹²).
+    let extension = match &model_spec {
+        Some(m) if !m.causes.is_empty() => {
+            let mut res = probe.clone();
+            if let Some(sets) = &payloads {
+                res.campaign = sw::with_payloads(&res, &sets[0])?;
+            }
+            extension_param_count(&res, m)?
+        }
+        _ => 0,
+    };
+    let needed = (rank + extension + 1).div_ceil(dim);
     for &n in &poses {
         let (n_train, n_test) = sw::split_counts(n, args.test_fraction);
         if n_train < needed {
+            let what = if extension > 0 {
+                format!(
+                    "the model {} of '{}' has {rank} identifiable kinematic combinations and \
+                     {extension} cause parameters",
+                    model_spec.as_ref().map_or_else(String::new, |m| m.name()),
+                    probe.model.name()
+                )
+            } else {
+                format!(
+                    "the kinematic model of '{}' has {rank} identifiable combinations",
+                    probe.model.name()
+                )
+            };
             return Err(input(
                 "--poses",
                 &args.poses,
                 &format!(
-                    "{n} poses leave {n_train} for calibration after holding out {n_test}, but the kinematic \
-                     model of '{}' has {rank} identifiable combinations: at least {needed} calibration \
-                     poses are needed",
-                    probe.model.name()
+                    "{n} poses leave {n_train} for calibration after holding out {n_test}, but {what}: \
+                     at least {needed} calibration poses are needed"
                 ),
             ));
         }

@@ -494,9 +494,10 @@ fn run_inner(ctx: &Context<'_>, id: &RunId) -> Result<RunResult, CliError> {
             options.learned_kinds = Vec::new();
             let d = calib::select::diagnose::diagnose(model, &table, "sweep run", &options)
                 .map_err(CliError::from)?;
-            let h = detection::hidden(&res.effects, model.nq());
-            let (detected, false_alarm) = detection::judge(&h, &d.model, model.nq());
-            (h.name(), d.model.name(), detected, false_alarm)
+            let h = detection::hidden(&res.effects, model.joints(), &res.gravity);
+            let n = detection::Named::of(&d);
+            let (detected, false_alarm) = detection::judge(&h, &n, model.nq());
+            (h.required.name(), n.name(), detected, false_alarm)
         }
     };
     let rows_n = simulation.rows.len().max(1) as f64;

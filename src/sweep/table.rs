@@ -176,7 +176,7 @@ sweep_columns! {
     params_link_deflection: i64 = "link_deflection parameters in the fitted model (0: not in it)",
     param_z2_mean_link_deflection: f64 = "mean z² of the link_deflection parameters with a z (1 expected; NaN without any)",
     hidden: String = "--score diagnose: the causes the run injected, at their joints, as a model name (`kinematic+gear_backlash@2,4`; `kinematic`: none); empty without --score diagnose",
-    named: String = "--score diagnose: the model diagnose adopted on the run's data (its causes at their joints); empty without --score diagnose",
+    named: String = "--score diagnose: diagnose's findings on the run's data, each cause at the joints it names, all listed (`kinematic+link_deflection@2,4`; a cause without `@`: named with no joint significant on its own); empty without --score diagnose",
     detected: bool = "--score diagnose: diagnose named every hidden cause and none at a joint where it is not hidden (hidden joints may be left out); false without --score diagnose",
     false_alarm: bool = "--score diagnose: diagnose named a cause that is not hidden, or one at a joint where it is not hidden; false without --score diagnose",
 }
