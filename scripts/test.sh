@@ -107,6 +107,14 @@ rm -rf "$study"
 [ "$(wc -l < "$study/stiffness_study.csv")" -eq 29 ] && grep -q "<svg" "$study/stiffness_study.svg" \
   || { echo "study_stiffness.py wrote no complete table" >&2; exit 1; }
 
+echo "== the growth figure of the streamed commands (scripts/streaming_growth.py), on small tables" >&2
+growth=target/growth-smoke
+rm -rf "$growth"
+TMPDIR="$growth/tmp" "$py" scripts/streaming_growth.py --robocal "$robocal" --rows 2000,4000 --out "$growth" > /dev/null
+# Header and 2 commands × 2 sizes.
+[ "$(wc -l < "$growth/streaming_growth.csv")" -eq 5 ] && grep -q "<svg" "$growth/streaming_growth.svg" \
+  || { echo "streaming_growth.py wrote no complete table" >&2; exit 1; }
+
 if [ -z "${ROBOCAL_SKIP_SLURM:-}" ]; then
   echo "== a sweep as a Slurm job array on a one-node cluster, merged: the bytes of one machine" >&2
   ROBOCAL="$robocal" ./scripts/slurm_check.sh
