@@ -480,9 +480,25 @@ fn recovered_z2(effects: &str, spec: &str, seed: u64, truth: &dyn Fn(&str) -> f6
         "seed {seed}: {}",
         cal.report.health
     );
+    let z2 = determined_z2(&cal, seed, &|p| truth(&p.name()));
+    assert!(
+        z2.len() >= 6,
+        "seed {seed}: only {} parameters determined",
+        z2.len()
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+    z2
+}
+
+/// The z² of every extension parameter of `cal` determined on its own (less than 0.1 of its unit
+/// vector in the null space), against `truth`; each must lie within 4 of its standard deviations.
+fn determined_z2(
+    cal: &calib::fit::Calibration,
+    seed: u64,
+    truth: &dyn Fn(&calib::model::extensions::ExtensionParam) -> f64,
+) -> Vec<f64> {
     let sub = &cal.subspace;
     let mut z2 = Vec::new();
-    let mut checked = 0;
     for (e, p) in cal.layout.extensions.iter().enumerate() {
         let kk = cal.layout.extension(e);
         let null_share = sub
@@ -494,22 +510,16 @@ fn recovered_z2(effects: &str, spec: &str, seed: u64, truth: &dyn Fn(&str) -> f6
             continue;
         }
         let sigma = cal.covariance[(kk, kk)].sqrt();
-        let z = (cal.params.extension[e] - truth(&p.name())) / sigma;
+        let want = truth(p);
+        let z = (cal.params.extension[e] - want) / sigma;
         assert!(
             z.abs() < 4.0,
-            "seed {seed}: {} = {:.4e} ± {sigma:.1e}, truth {:.4e} (z = {z:.2})",
+            "seed {seed}: {} = {:.4e} ± {sigma:.1e}, truth {want:.4e} (z = {z:.2})",
             p.name(),
             cal.params.extension[e],
-            truth(&p.name())
         );
-        checked += 1;
         z2.push(z * z);
     }
-    assert!(
-        checked >= 6,
-        "seed {seed}: only {checked} parameters determined"
-    );
-    let _ = std::fs::remove_dir_all(&dir);
     z2
 }
 
@@ -698,29 +708,7 @@ fn lumped_recovery(
         "the report says what is identified: {:?}",
         lumped.report.warnings
     );
-    let sub = &lumped.subspace;
-    let mut z2 = Vec::new();
-    for (e, p) in lumped.layout.extensions.iter().enumerate() {
-        let kk = lumped.layout.extension(e);
-        let null_share = sub
-            .v
-            .row(kk)
-            .columns(sub.rank, sub.n_params() - sub.rank)
-            .norm();
-        if null_share > 0.1 {
-            continue;
-        }
-        let sigma = lumped.covariance[(kk, kk)].sqrt();
-        let want = truth(p, basis);
-        let z = (lumped.params.extension[e] - want) / sigma;
-        assert!(
-            z.abs() < 4.0,
-            "seed {seed}: {} = {:.4e} ± {sigma:.1e}, truth {want:.4e} (z = {z:.2})",
-            p.name(),
-            lumped.params.extension[e],
-        );
-        z2.push(z * z);
-    }
+    let z2 = determined_z2(&lumped, seed, &|p| truth(p, basis));
     let rms = |cal: &calib::fit::Calibration, model: &sim::Model| -> f64 {
         let (_, after, _) = calib::validate::held_out_errors(model, cal, &test, &options).unwrap();
         (after.iter().map(|e| e.norm_squared()).sum::<f64>() / after.len() as f64).sqrt()

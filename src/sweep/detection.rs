@@ -202,6 +202,17 @@ pub fn judge(hidden: &Hidden, named: &Named, nq: usize) -> (bool, bool) {
 mod tests {
     use super::*;
 
+    /// Effects of link deflection alone, with bending compliances `c` (rad/(N m), per joint about
+    /// its frame's two bending axes).
+    fn bending(c: [[f64; 2]; 7]) -> Effects {
+        Effects {
+            deflection: Some(
+                sim::effects::link_deflection::LinkDeflection::new(c.to_vec()).unwrap(),
+            ),
+            ..Effects::default()
+        }
+    }
+
     /// Every cause of `spec` at its joints (all of them when it is not limited), as named.
     fn of_spec(spec: &ModelSpec, nq: usize) -> Named {
         Named {
@@ -263,21 +274,15 @@ mod tests {
         let iiwa = sim::robots::load_builtin("iiwa7").unwrap();
         let g = Vector3::from(sim::statics::DEFAULT_GRAVITY);
         let c = 3e-6;
-        let e = Effects {
-            deflection: Some(
-                sim::effects::link_deflection::LinkDeflection::new(vec![
-                    [0.0, 0.0],
-                    [c, c],
-                    [0.0, 0.0],
-                    [c, c],
-                    [0.0, 0.0],
-                    [c, c],
-                    [0.0, 0.0],
-                ])
-                .unwrap(),
-            ),
-            ..Effects::default()
-        };
+        let e = bending([
+            [0.0, 0.0],
+            [c, c],
+            [0.0, 0.0],
+            [c, c],
+            [0.0, 0.0],
+            [c, c],
+            [0.0, 0.0],
+        ]);
         let h = hidden(&e, iiwa.joints(), &g);
         assert_eq!(h.required.name(), "kinematic+link_deflection@2,4,6");
         assert_eq!(
@@ -285,40 +290,28 @@ mod tests {
             "kinematic+joint_compliance@3,5+link_deflection@2,4,6"
         );
         // Joint 2 about x alone: deflection only.
-        let e = Effects {
-            deflection: Some(
-                sim::effects::link_deflection::LinkDeflection::new(vec![
-                    [0.0, 0.0],
-                    [c, 0.0],
-                    [0.0, 0.0],
-                    [0.0, 0.0],
-                    [0.0, 0.0],
-                    [0.0, 0.0],
-                    [0.0, 0.0],
-                ])
-                .unwrap(),
-            ),
-            ..Effects::default()
-        };
+        let e = bending([
+            [0.0, 0.0],
+            [c, 0.0],
+            [0.0, 0.0],
+            [0.0, 0.0],
+            [0.0, 0.0],
+            [0.0, 0.0],
+            [0.0, 0.0],
+        ]);
         let h = hidden(&e, iiwa.joints(), &g);
         assert_eq!(h.required, h.allowed);
         assert_eq!(h.required.name(), "kinematic+link_deflection@2");
         // Joint 2 about z alone: that is joint 3's compliance, required as such.
-        let e = Effects {
-            deflection: Some(
-                sim::effects::link_deflection::LinkDeflection::new(vec![
-                    [0.0, 0.0],
-                    [0.0, c],
-                    [0.0, 0.0],
-                    [0.0, 0.0],
-                    [0.0, 0.0],
-                    [0.0, 0.0],
-                    [0.0, 0.0],
-                ])
-                .unwrap(),
-            ),
-            ..Effects::default()
-        };
+        let e = bending([
+            [0.0, 0.0],
+            [0.0, c],
+            [0.0, 0.0],
+            [0.0, 0.0],
+            [0.0, 0.0],
+            [0.0, 0.0],
+            [0.0, 0.0],
+        ]);
         let h = hidden(&e, iiwa.joints(), &g);
         assert_eq!(h.required, h.allowed);
         assert_eq!(h.required.name(), "kinematic+joint_compliance@3");

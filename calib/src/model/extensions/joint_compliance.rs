@@ -196,25 +196,28 @@ impl CauseModel for JointCompliance {
             }
             if lumped.payload_compliance {
                 // The payload's torque with its mass at the flange origin, then the share of its
-                // centre of mass: `−cᵢ τ = cᵢ m (p − oᵢ)·uᵢ + Σₐ (cᵢ |g| rₐ) m (R_flangeᵀ uᵢ)ₐ / |g|`.
-                out[col] = -LumpedGravity::payload_torque_at(
-                    row.joints,
-                    frames,
-                    &g,
-                    row.payload_kg,
-                    &[0.0; 3],
-                    i,
-                );
-                col += 1;
+                // centre of mass: `−cᵢ τ = cᵢ m (p − oᵢ)·uᵢ + Σₐ (cᵢ |g| rₐ) m (R_flangeᵀ uᵢ)ₐ / |g|`,
+                // the payload's moment about the joint's axis.
                 if row.joints[i].kind.is_rotational() {
-                    let t = &frames.joint_poses[i];
-                    let u = g.cross(&(t.rotation * row.joints[i].axis));
-                    let local = frames.flange.rotation.inverse_transform_vector(&u);
-                    let gn = g.norm().max(f64::MIN_POSITIVE);
-                    for a in 0..3 {
-                        out[col + a] = row.payload_kg * local[a] / gn;
-                    }
-                    col += 3;
+                    let w = frames.joint_poses[i].rotation * row.joints[i].axis;
+                    out[col..col + 4].copy_from_slice(&LumpedGravity::payload_moment_regressors(
+                        frames,
+                        &g,
+                        row.payload_kg,
+                        &w,
+                        i,
+                    ));
+                    col += 4;
+                } else {
+                    out[col] = -LumpedGravity::payload_torque_at(
+                        row.joints,
+                        frames,
+                        &g,
+                        row.payload_kg,
+                        &[0.0; 3],
+                        i,
+                    );
+                    col += 1;
                 }
             }
             let products = &mut out[col..col + count];

@@ -242,55 +242,57 @@ impl CauseModel for LinkDeflection {
         true
     }
 
+    /// With masses, one compliance per modelled axis; without, per stored bending basis (the
+    /// modelled axes, in their order, [`LinkDeflection::configure`]) its products, after the
+    /// compliance and its payload products when the payload separates them.
     fn params(&self, model: &Model, settings: &ExtensionSettings) -> Vec<ExtensionParam> {
-        let g = Vector3::from(settings.gravity_base);
-        let lumped = settings.lumped_gravity.as_ref();
+        let compliance = |term| ExtensionParam {
+            cause: Cause::LinkDeflection,
+            term,
+            quantity: "bending compliance",
+            unit: Unit::RadianPerNewtonMetre,
+            scale: SCALE_RAD_PER_NM,
+            pattern: None,
+        };
+        let Some(lumped) = &settings.lumped_gravity else {
+            let g = Vector3::from(settings.gravity_base);
+            return (0..model.nq())
+                .flat_map(|i| {
+                    modelled_axes(model.joints(), i, &g)
+                        .into_iter()
+                        .map(move |about| compliance(Term::Bend { joint: i, about }))
+                })
+                .collect();
+        };
         let mut out = Vec::new();
-        for i in 0..model.nq() {
-            for about in modelled_axes(model.joints(), i, &g) {
-                let term = Term::Bend { joint: i, about };
-                let compliance = ExtensionParam {
-                    cause: Cause::LinkDeflection,
-                    term,
-                    quantity: "bending compliance",
-                    unit: Unit::RadianPerNewtonMetre,
-                    scale: SCALE_RAD_PER_NM,
-                    pattern: None,
-                };
-                let Some(lumped) = lumped else {
-                    out.push(compliance);
-                    continue;
-                };
-                let count = lumped
-                    .bend_basis(i, about)
-                    .map_or(0, |b| b.combinations.len());
-                if count == 0 {
-                    continue;
-                }
-                if lumped.payload_compliance {
-                    out.push(compliance);
-                    out.extend(
-                        PAYLOAD_COM_QUANTITIES
-                            .iter()
-                            .map(|&quantity| ExtensionParam {
-                                cause: Cause::LinkDeflection,
-                                term,
-                                quantity,
-                                unit: Unit::RadianPerKilogram,
-                                scale: SCALE_PAYLOAD_RAD_PER_KG,
-                                pattern: None,
-                            }),
-                    );
-                }
-                out.extend((1..=count).map(|k| ExtensionParam {
-                    cause: Cause::LinkDeflection,
-                    term,
-                    quantity: PRODUCT_QUANTITY,
-                    unit: Unit::Radian,
-                    scale: SCALE_PRODUCT_RAD,
-                    pattern: Some(k),
-                }));
+        for basis in lumped.bending.iter().filter(|b| !b.combinations.is_empty()) {
+            let term = Term::Bend {
+                joint: basis.joint,
+                about: basis.about,
+            };
+            if lumped.payload_compliance {
+                out.push(compliance(term));
+                out.extend(
+                    PAYLOAD_COM_QUANTITIES
+                        .iter()
+                        .map(|&quantity| ExtensionParam {
+                            cause: Cause::LinkDeflection,
+                            term,
+                            quantity,
+                            unit: Unit::RadianPerKilogram,
+                            scale: SCALE_PAYLOAD_RAD_PER_KG,
+                            pattern: None,
+                        }),
+                );
             }
+            out.extend((1..=basis.combinations.len()).map(|k| ExtensionParam {
+                cause: Cause::LinkDeflection,
+                term,
+                quantity: PRODUCT_QUANTITY,
+                unit: Unit::Radian,
+                scale: SCALE_PRODUCT_RAD,
+                pattern: Some(k),
+            }));
         }
         out
     }
@@ -361,29 +363,22 @@ impl CauseModel for LinkDeflection {
             return;
         };
         let mut col = 0;
-        for i in 0..row.joints.len() {
-            for about in modelled_axes(row.joints, i, &g) {
-                let Some(basis) = lumped.bend_basis(i, about) else {
-                    continue;
-                };
-                let count = basis.combinations.len();
-                if count == 0 {
-                    continue;
-                }
-                if lumped.payload_compliance {
-                    let w = frames.joint_poses[i].rotation * Vector3::ith(about, 1.0);
-                    out[col..col + 4].copy_from_slice(&LumpedGravity::payload_moment_regressors(
-                        frames,
-                        &g,
-                        row.payload_kg,
-                        &w,
-                        i,
-                    ));
-                    col += 4;
-                }
-                lumped.bend_patterns(frames, &g, basis, &mut out[col..col + count]);
-                col += count;
+        for basis in lumped.bending.iter().filter(|b| !b.combinations.is_empty()) {
+            let count = basis.combinations.len();
+            if lumped.payload_compliance {
+                let i = basis.joint;
+                let w = frames.joint_poses[i].rotation * Vector3::ith(basis.about, 1.0);
+                out[col..col + 4].copy_from_slice(&LumpedGravity::payload_moment_regressors(
+                    frames,
+                    &g,
+                    row.payload_kg,
+                    &w,
+                    i,
+                ));
+                col += 4;
             }
+            lumped.bend_patterns(frames, &g, basis, &mut out[col..col + count]);
+            col += count;
         }
     }
 
