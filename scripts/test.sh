@@ -107,6 +107,16 @@ rm -rf "$study"
 [ "$(wc -l < "$study/stiffness_study.csv")" -eq 29 ] && grep -q "<svg" "$study/stiffness_study.svg" \
   || { echo "study_stiffness.py wrote no complete table" >&2; exit 1; }
 
+echo "== planned against random poses for compliance (scripts/study_planning.py), a seeded subset" >&2
+planning=target/planning-smoke
+rm -rf "$planning"
+"$py" scripts/study_planning.py --robocal "$robocal" --poses 40 --reps 2 --out "$planning" > /dev/null
+# Header and, for both selections, the determined stiffnesses (joints 2 to 6 of the iiwa 7).
+[ "$(grep -c '^planned,40,' "$planning/planned_vs_random.csv")" -eq 5 ] \
+  && [ "$(grep -c '^random,40,' "$planning/planned_vs_random.csv")" -eq 5 ] \
+  && grep -q "<svg" "$planning/planned_vs_random.svg" \
+  || { echo "study_planning.py wrote no complete table" >&2; exit 1; }
+
 echo "== the growth figure of the streamed commands (scripts/streaming_growth.py), on small tables" >&2
 growth=target/growth-smoke
 rm -rf "$growth"

@@ -21,6 +21,7 @@ Long work releases the GIL, and Ctrl-C interrupts it (``KeyboardInterrupt``). Se
 
 from __future__ import annotations
 
+import io
 import json
 import os
 import tempfile
@@ -47,6 +48,7 @@ __all__ = [
     "generate",
     "load_model",
     "options",
+    "plan_poses",
     "read_table",
     "register",
 ]
@@ -72,7 +74,7 @@ def _check_options(command: str, given: dict[str, Any]) -> None:
 
 def options(command: str) -> list[str]:
     """The keyword options of ``command`` (``"calibrate"``, ``"compensate"``, ``"diagnose"``,
-    ``"generate"``, ``"register"``): the command line's value flags, ``--test-fraction`` as ``test_fraction``."""
+    ``"generate"``, ``"plan_poses"``, ``"register"``): the command line's value flags, ``--test-fraction`` as ``test_fraction``."""
     return list(_robocal.options(command))
 
 
@@ -333,6 +335,59 @@ def calibrate(
     if failure is not None:
         raise RuntimeFailure(failure, report)
     return Model(native, report)
+
+
+def plan_poses(
+    robot: str | os.PathLike[str] | Robot = "iiwa7",
+    *,
+    select: int,
+    candidates: DataLike | None = None,
+    **options: Any,
+) -> "pd.DataFrame":
+    """The poses (and payloads) to measure, as ``robocal plan-poses``: ``select`` of them, chosen for
+    the model's parameters among drawn candidates or ``candidates`` (the robot's own reachable poses:
+    a DataFrame, dict of arrays or ``.csv``/``.parquet`` path with ``pose, q1..qN``; ``x, y, z`` and
+    the context columns ``payload``, ``temp``, ``t``, ``dir1..dirN`` optional).
+
+    Args:
+        robot: a built-in robot name, a URDF path or a :class:`Robot`.
+        select: how many poses.
+        candidates: the robot's own poses to choose from, or ``None`` for ``candidates=2000`` drawn.
+        **options: the other ``plan-poses`` flags: ``model="kinematic+joint_compliance"``,
+            ``criterion="d"|"a"|"e"``, ``candidates`` (a count, when drawn), ``payloads=[0, 3.5, 7]``
+            (kg, one chosen per pose), ``payload_com=(0, 0, 0.08)`` (flange frame, m), ``seed``,
+            ``target_offset=(x, y, z)``, ``noise`` and ``noise_per_m`` (m), ``tracker=(x, y, z)``
+            (base frame, m) with ``tracker_range=(min, max)`` and ``line_of_sight`` (clearance, m),
+            ``floor`` (m), ``joint_margin`` (rad); :func:`options` lists them.
+
+    Returns:
+        A DataFrame ``pose, q1..qN`` (and ``payload`` when chosen or given, and the candidates'
+        context columns) to measure in that order, also a pose file for ``generate``. Its
+        ``attrs["plan"]`` is the ``plan-poses --json`` document's ``plan``: the criterion against
+        random subsets, the predicted held-out error (``position_sigma_m``,
+        ``predicted_heldout_rms_m``), every parameter's predicted ``sigma`` beside ``random_sigma``,
+        and what each constraint ``rejected``.
+
+    Raises:
+        BadInput: unusable candidates or options (the message names the flag, the column or row).
+    """
+    import pandas as pd
+
+    if isinstance(candidates, int):
+        raise BadInput(
+            f"candidates={candidates}: give the number of drawn candidates as candidates_count=..."
+        )
+    count = options.pop("candidates_count", None)
+    if count is not None:
+        options["candidates"] = count
+    options = {"select": select, **options}
+    _check_options("plan_poses", options)
+    rob = _robot(robot)
+    table = None if candidates is None else to_table(candidates, configurations=True)
+    text, document = _robocal.plan_poses(rob, table, flags(options))
+    frame = pd.read_csv(io.StringIO(text))
+    frame.attrs["plan"] = json.loads(document)["plan"]
+    return frame
 
 
 def diagnose(

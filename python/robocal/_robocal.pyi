@@ -112,7 +112,12 @@ def register(model: CalibratedModel, data: Table, args: list[str]) -> tuple[Cali
 def generate(scenario: str, out: str, args: list[str]) -> str:
     """``robocal generate --scenario SCENARIO --out OUT --json`` with value flags ``args``."""
 
+def plan_poses(robot: Robot, candidates: Table | None, args: list[str]) -> tuple[str, str]:
+    """``robocal plan-poses --json`` with value flags ``args``: (the pose file's CSV text, the JSON
+    document)."""
+
 def options(command: str) -> list[str]:
-    """The keyword options (value flags) of ``calibrate``, ``diagnose``, ``generate`` or ``register``."""
+    """The keyword options (value flags) of ``calibrate``, ``compensate``, ``diagnose``,
+    ``generate``, ``plan_poses`` or ``register``."""
 
 def builtin_robots() -> list[str]: ...

@@ -25,7 +25,7 @@ use pyo3::prelude::*;
 use pyo3::types::PyType;
 use robocal::cli::{
     calibrate as cal_cli, compensate as comp_cli, diagnose as diag_cli, flags, generate as gen_cli,
-    predict, register as reg_cli,
+    plan_poses as plan_cli, predict, register as reg_cli,
 };
 use robocal::error::CliError;
 use sim::measurement_table::{self, Column, ColumnValues, MeasurementTable};
@@ -897,8 +897,34 @@ fn generate(py: Python<'_>, scenario: &str, out: &str, args: Vec<String>) -> PyR
     })
 }
 
-/// The keyword options a command accepts (`calibrate`, `diagnose`, `generate`, `register`): its
-/// value flags.
+/// Plans measurement poses as `robocal plan-poses`: `args` are its value flags, `candidates` the
+/// robot's own poses (a table of configurations) or `None` for drawn ones. Returns `(the pose file's
+/// CSV text, the plan-poses --json document as text)`.
+#[pyfunction]
+#[pyo3(signature = (robot, candidates, args))]
+fn plan_poses(
+    py: Python<'_>,
+    robot: &Robot,
+    candidates: Option<&Table>,
+    args: Vec<String>,
+) -> PyResult<(String, String)> {
+    let options: plan_cli::Options = quick(py, flags::parse("plan_poses", &args))?;
+    work(py, || {
+        let model = &robot.robot.model;
+        let plan = plan_cli::plan_poses(
+            model,
+            candidates.map(|t| (&t.table, t.source.as_str())),
+            &options,
+            false,
+        )?;
+        let source = candidates.map(|t| t.source.as_str());
+        let json = plan_cli::json(model, &options, source, None, &plan).to_string();
+        Ok((plan.to_csv(), json))
+    })
+}
+
+/// The keyword options a command accepts (`calibrate`, `diagnose`, `generate`, `register`,
+/// `compensate`, `plan_poses`): its value flags.
 #[pyfunction]
 fn options(py: Python<'_>, command: &str) -> PyResult<Vec<String>> {
     match command {
@@ -907,10 +933,12 @@ fn options(py: Python<'_>, command: &str) -> PyResult<Vec<String>> {
         "generate" => Ok(flags::keywords::<gen_cli::Options>("generate")),
         "register" => Ok(flags::keywords::<reg_cli::Options>("register")),
         "compensate" => Ok(flags::keywords::<comp_cli::Options>("compensate")),
+        "plan_poses" => Ok(flags::keywords::<plan_cli::Options>("plan_poses")),
         other => Err(raise(
             py,
             CliError::Input(format!(
-                "'{other}': not one of calibrate, compensate, diagnose, generate, register"
+                "'{other}': not one of calibrate, compensate, diagnose, generate, plan_poses, \
+                 register"
             )),
         )),
     }
@@ -933,6 +961,7 @@ fn _robocal(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(diagnose, m)?)?;
     m.add_function(wrap_pyfunction!(register, m)?)?;
     m.add_function(wrap_pyfunction!(generate, m)?)?;
+    m.add_function(wrap_pyfunction!(plan_poses, m)?)?;
     m.add_function(wrap_pyfunction!(options, m)?)?;
     m.add_function(wrap_pyfunction!(builtin_robots, m)?)?;
     m.add("VERSION", sim::generate::VERSION)?;

@@ -15,7 +15,7 @@ pub mod generate;
 mod info;
 pub mod model_words;
 mod paths;
-mod plan_poses;
+pub mod plan_poses;
 pub mod predict;
 pub mod register;
 mod robot_arg;

@@ -57,7 +57,8 @@ pub struct Args {
     /// run on its training poses).
     #[arg(long, value_name = "MODEL", default_value = "kinematic")]
     model: String,
-    /// Pose selection: `random` (the scenario's campaign) or `planned` (D-optimal choice among
+    /// Pose selection: `random` (the scenario's campaign) or `planned` (D-optimal choice, for the
+    /// fitted model's parameters and with the payload of each pose among the campaign's masses, of
     /// --candidates poses drawn by the scenario's campaign).
     #[arg(long, value_name = "random|planned", value_enum, default_value_t = Selection::Random)]
     selection: Selection,

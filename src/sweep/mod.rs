@@ -64,7 +64,8 @@ pub const FORMAT_VERSION: u32 = 3;
 pub enum Selection {
     /// The scenario's own campaign (random poses for the shipped scenarios).
     Random,
-    /// D-optimal selection (`calib::fit::plan`) from random candidate configurations.
+    /// D-optimal selection (`calib::fit::plan`) for the fitted model from random candidate
+    /// configurations, each with one of the campaign's payload masses.
     Planned,
 }
 
@@ -322,16 +323,20 @@ pub fn split_counts(n: usize, f: f64) -> (usize, usize) {
     (n - t, t)
 }
 
-/// The poses of a planned run: `train` configurations chosen D-optimally among `candidates` drawn by
-/// the scenario's own campaign (so they obey its reachability rules), followed by `test` held-out
-/// configurations, the first candidates not chosen (random poses: the score is over the workspace,
-/// not over the planner's favourite poses). The campaign is re-planned on exactly that list, so poses
+/// The poses of a planned run: `train` configurations chosen by `calib::fit::plan` (D-optimal for
+/// the fitted model `model`, the kinematic one for `auto`) among `candidates` drawn by the scenario's
+/// own campaign (so they obey its reachability rules), each with one of the campaign's payload masses
+/// when it has several (the plan chooses, as `plan-poses --payloads` does), followed by `test`
+/// held-out configurations, the first candidates not chosen (random poses: the score is over the
+/// workspace, not over the planner's favourite poses), whose payloads are drawn from the campaign's
+/// masses with the run's seed. The campaign is re-planned on exactly that list, so poses
 /// `0 … train − 1` are the training poses.
 fn planned_plan(
     res: &sim::scenario::Resolved,
     (train, test): (usize, usize),
     candidates: usize,
     options: &CalibrationOptions,
+    model: Option<&ModelSpec>,
 ) -> Result<sim::campaign::Plan, CliError> {
     let mut cand_res = res.clone();
     cand_res.campaign = res
@@ -345,25 +350,54 @@ fn planned_plan(
     let configs: Vec<Vec<f64>> = (0..cand.n_poses)
         .map(|k| cand.q_row(k * cand.repeats).to_vec())
         .collect();
+    let masses: Vec<f64> = match res.campaign.payload() {
+        sim::campaign::PayloadRule::Fixed(m) => vec![*m],
+        sim::campaign::PayloadRule::Choice(v) | sim::campaign::PayloadRule::PerPose(v) => {
+            let mut v = v.clone();
+            v.sort_by(f64::total_cmp);
+            v.dedup();
+            v
+        }
+    };
     let mut po = calib::fit::plan::PlanOptions::new(configs.len(), train, res.seed);
     po.target_offset = *res.tracker.p_flange();
     po.calibration = *options;
+    po.noise = options.noise;
     po.random_sets = 0;
-    let chosen =
-        calib::fit::plan::select_from(&res.model, &configs, &po).map_err(CliError::from)?;
-    let mut list: Vec<Vec<f64>> = chosen.iter().map(|&c| configs[c].clone()).collect();
+    po.model = model.cloned().unwrap_or_default();
+    po.payloads_kg = masses.clone();
+    po.payload_com_m = res.campaign.payload_com_m().into();
+    let candidates = calib::fit::plan::Candidates::from_configurations(
+        &res.model,
+        &configs,
+        "the scenario's candidates",
+    );
+    let planned = calib::fit::plan::plan(&res.model, &candidates, &po).map_err(CliError::from)?;
+    let chosen: Vec<usize> = planned.source_poses.iter().map(|&p| p as usize).collect();
+    let mut list: Vec<Vec<f64>> = planned.selected.clone();
     list.extend(
         (0..configs.len())
             .filter(|c| !chosen.contains(c))
             .take(test)
             .map(|c| configs[c].clone()),
     );
+    let mut payloads = planned
+        .payload_kg
+        .clone()
+        .unwrap_or_else(|| vec![masses[0]; train]);
+    use rand::{RngExt, SeedableRng};
+    let mut rng = rand::rngs::StdRng::seed_from_u64(splitmix64(res.seed ^ 0x7e57));
+    payloads.extend((0..test).map(|_| masses[rng.random_range(0..masses.len())]));
     let spec = res
         .campaign
         .to_builder()
         .label(&res.scenario.label)
         .poses(Some(train + test))
         .sampling(sim::campaign::Sampling::List { q: list })
+        .payload(
+            sim::campaign::PayloadRule::PerPose(payloads),
+            res.campaign.payload_com_m(),
+        )
         .build()
         .map_err(CliError::from)?;
     sim::campaign::plan(&res.model, &spec, res.seed, &res.scenario.label).map_err(CliError::from)
@@ -415,6 +449,7 @@ fn run_inner(ctx: &Context<'_>, id: &RunId) -> Result<RunResult, CliError> {
             split_counts(id.poses, spec.test_fraction),
             spec.candidates.unwrap_or(10 * id.poses),
             &ctx.options,
+            ctx.model.as_ref(),
         )?,
     };
     let truth = sim::effects::Truth::new(&res.model, &res.effects).map_err(CliError::from)?;

@@ -295,6 +295,7 @@ impl<'a> Planner<'a> {
                         let mut rng = rng_for(self.seed, STREAM_PAYLOAD, k as u64);
                         v[rng.random_range(0..v.len())]
                     }
+                    PayloadRule::PerPose(v) => v[e % v.len()],
                 };
             }
             let t0 = match file.and_then(|c| c.t_s.as_ref()) {
@@ -467,6 +468,31 @@ mod tests {
     use super::*;
     use crate::campaign::Sampling;
     use crate::robots;
+
+    /// A planner's masses (`PayloadRule::PerPose`) go to the poses in order, cycled with the list,
+    /// and every repeat of a pose carries its pose's mass.
+    #[test]
+    fn per_pose_payloads_follow_the_pose_list() {
+        let m = robots::load_builtin("iiwa7").unwrap();
+        let a = vec![0.1, 0.5, 0.0, -1.0, 0.0, 0.7, 0.2];
+        let b = vec![-0.3, 0.8, 0.4, -1.4, 0.1, 0.5, -0.6];
+        let spec = CampaignSpec::random(4)
+            .to_builder()
+            .repeats(2)
+            .sampling(Sampling::List { q: vec![a, b] })
+            .payload(PayloadRule::PerPose(vec![7.0, 3.5]), [0.0, 0.0, 0.08])
+            .build()
+            .unwrap();
+        let p = plan(&m, &spec, 3, "test").unwrap();
+        assert_eq!(p.payload_kg, [7.0, 7.0, 3.5, 3.5, 7.0, 7.0, 3.5, 3.5]);
+        let e = spec
+            .to_builder()
+            .payload(PayloadRule::PerPose(vec![]), [0.0; 3])
+            .build()
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("empty list"), "{e}");
+    }
 
     #[test]
     fn a_given_pose_list_is_cycled_and_checked() {

@@ -75,6 +75,9 @@ pub enum PayloadRule {
     Fixed(f64),
     /// Per pose, one of these masses (kg) with equal probability.
     Choice(Vec<f64>),
+    /// Per pose in order, the mass chosen for it (kg), e.g. by a pose planner; with a pose list of
+    /// another length, entry `k` of the cycled list carries mass `k mod len`.
+    PerPose(Vec<f64>),
 }
 
 /// Everything that decides the rows of a campaign. Made with [`CampaignSpec::random`] (the defaults)
@@ -204,7 +207,7 @@ pub(super) fn check_model_free(spec: &CampaignSpec, file: &str) -> Result<()> {
         .map_err(|e| err(file, "campaign.temperature", e.to_string()))?;
     let masses: &[f64] = match &spec.payload {
         PayloadRule::Fixed(m) => std::slice::from_ref(m),
-        PayloadRule::Choice(v) => v,
+        PayloadRule::Choice(v) | PayloadRule::PerPose(v) => v,
     };
     if masses.is_empty() {
         return Err(err(file, "campaign.payload.choice_kg", "empty list".into()));
