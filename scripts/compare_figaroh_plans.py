@@ -8,9 +8,13 @@ combinations, so that the information of a selection S is the sum over S of A_k^
 poses (greedy D-optimal, then exchanges). The same information matrices X_k = A_k^T A_k then go to
 FIGAROH 1.0's own selection algorithms, as its `BaseOptimalCalibration` calls them:
 
-- `SOCPOptimizer`: the convex relaxation, max det(sum w_k X_k)^(1/r) over weights w >= 0, sum w <= 1
-  (picos + cvxopt), then the K largest weights;
-- `Detmax`: its exchange heuristic from a random start (numpy's global seed set by --seed).
+- `SOCPOptimizer` (with --socp): the convex relaxation, max det(sum w_k X_k)^(1/r) over weights
+  w >= 0, sum w <= 1 (picos + cvxopt), then the K largest weights; its dense KKT solves grow about as
+  n^3 (120 candidates of dimension 36 did not finish in 900 s on the 2-core machine);
+- `Detmax`: its exchange heuristic from a random start (Python's `random`, seeded with --seed). FIGAROH
+  1.0's `Detmax.main_algo` keeps its set in a local variable (`self.cur_set` stays empty, although
+  its docstring says otherwise); the set is read from its last criterion evaluation, which is the
+  final set's.
 
 Each selection is valued by the same measures: log det of its information, and the predicted sigma of
 every determined stiffness parameter, which `robocal plan-poses` reports when given the selection as
@@ -19,7 +23,8 @@ What is compared is the selection algorithm on one model; FIGAROH's own regresso
 not used.
 
 Writes --out (default docs/figures/planned_vs_figaroh.csv): K, method, finished (0 when the method
-did not finish within its time), log_det, seconds, then the sigma of each stiffness and its ratio to
+did not finish within its time, or chose a set that does not determine what the candidates do),
+log_det, seconds, then the sigma of each stiffness and its ratio to
 robocal's.
 
 Needs numpy, picos and figaroh (not in scripts/requirements.txt: FIGAROH pulls Pinocchio):
@@ -33,6 +38,7 @@ import csv
 import io
 import json
 import os
+import random
 import signal
 import subprocess
 import sys
@@ -45,10 +51,14 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 
 def plan(robocal, common, extra):
+    """`robocal plan-poses … --json`'s plan, or its one-line error (a selection that determines
+    fewer combinations than the candidates do is refused)."""
     cmd = [robocal, "plan-poses", *common, *extra, "--json"]
     print(" ".join(cmd[1:]), file=sys.stderr)
-    out = subprocess.run(cmd, check=True, capture_output=True, text=True).stdout
-    return json.loads(out)["plan"]
+    out = subprocess.run(cmd, capture_output=True, text=True)
+    if out.returncode != 0:
+        return out.stderr.strip()
+    return json.loads(out.stdout)["plan"]
 
 
 def stiffness_sigmas(p):
@@ -71,6 +81,8 @@ def read_information(path):
 
 
 def log_det(blocks, chosen):
+    if not chosen:
+        return float("nan")
     m = sum(blocks[c].T @ blocks[c] for c in chosen)
     sign, v = np.linalg.slogdet(m)
     return v if sign > 0 else float("-inf")
@@ -91,8 +103,10 @@ def main():
     ap.add_argument("--select", default="30,60")
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--no-detmax", action="store_true", help="skip FIGAROH's DetMax")
-    ap.add_argument("--socp-timeout", type=int, default=1200,
-                    help="seconds FIGAROH's SOCP may take (its cvxopt solve grows about as n^3)")
+    ap.add_argument("--socp", action="store_true",
+                    help="also FIGAROH's SOCP (slow: 120 candidates of dimension 36 did not finish in "
+                         "900 s on the 2-core machine)")
+    ap.add_argument("--socp-timeout", type=int, default=1200, help="seconds the SOCP may take")
     a = ap.parse_args()
     try:
         from figaroh.optimal.base_optimal_calibration import Detmax, SOCPOptimizer
@@ -113,7 +127,7 @@ def main():
             n = len(blocks)
             pool = {c: blocks[c].T @ blocks[c] for c in range(n)}
             selections = {"robocal": (ours["candidate_indices"], ours_s)}
-            if socp is None:
+            if a.socp and socp is None:
                 print(f"FIGAROH SOCP on {n} candidates of dimension {blocks.shape[2]} "
                       f"(at most {a.socp_timeout} s)", file=sys.stderr)
                 t0 = time.perf_counter()
@@ -127,17 +141,22 @@ def main():
                 finally:
                     signal.alarm(0)
                 print(f"  {socp[1]:.0f} s", file=sys.stderr)
-            if socp[0] is not None:
+            if socp is not None and socp[0] is not None:
                 selections["figaroh_socp"] = (socp[0][:k], socp[1])
-            else:
+            elif socp is not None:
                 rows.append((k, "figaroh_socp", float("nan"), socp[1], {}, None))
             if not a.no_detmax:
                 print(f"FIGAROH DetMax, {k} of {n}", file=sys.stderr)
-                np.random.seed(a.seed)
+                class Recorded(Detmax):
+                    def get_critD(self, chosen):
+                        self.last = list(chosen)
+                        return super().get_critD(chosen)
+
+                random.seed(a.seed)
                 t0 = time.perf_counter()
-                d = Detmax(pool, k)
+                d = Recorded(pool, k)
                 d.main_algo()
-                selections["figaroh_detmax"] = (list(d.cur_set), time.perf_counter() - t0)
+                selections["figaroh_detmax"] = (d.last, time.perf_counter() - t0)
                 print(f"  {selections['figaroh_detmax'][1]:.1f} s", file=sys.stderr)
             base = stiffness_sigmas(ours)
             for method, (chosen, seconds) in selections.items():
@@ -145,8 +164,11 @@ def main():
                 sel = os.path.join(tmp, f"{method}_{k}.csv")
                 write_selection(sel, configs, payloads, chosen)
                 valued = plan(a.robocal, common, ["--candidates-file", sel, "--select", str(k)])
-                sig = stiffness_sigmas(valued)
-                rows.append((k, method, log_det(blocks, chosen), seconds, sig, base))
+                if isinstance(valued, str):
+                    print(f"  {method}: {valued}", file=sys.stderr)
+                    rows.append((k, method, log_det(blocks, chosen), seconds, {}, None))
+                    continue
+                rows.append((k, method, log_det(blocks, chosen), seconds, stiffness_sigmas(valued), base))
     os.makedirs(os.path.dirname(a.out), exist_ok=True)
     names = sorted(next(r[5] for r in rows if r[5]))
     out = io.StringIO()
@@ -154,7 +176,7 @@ def main():
         f"sigma_{n.split()[1]},ratio_{n.split()[1]}" for n in names) + "\n")
     for k, method, ld, sec, sig, base in rows:
         if base is None:
-            out.write(f"{k},{method},0,nan,{sec:.0f}," + ",".join("nan,nan" for _ in names) + "\n")
+            out.write(f"{k},{method},0,{ld:.3f},{sec:.2f}," + ",".join("nan,nan" for _ in names) + "\n")
             continue
         out.write(f"{k},{method},1,{ld:.3f},{sec:.2f}," + ",".join(
             f"{sig.get(n, float('nan')):.4g},{sig.get(n, float('nan')) / base[n]:.3f}" for n in names) + "\n")
