@@ -307,9 +307,16 @@ fn bad_plan_flags_are_one_line_errors() {
             vec!["--tracker", "0,0,50", "--tracker-range", "1,2"],
             "no candidate",
         ),
+        (
+            vec!["--candidates", "40000", "--payloads", "0,3.5,7"],
+            "40000 configurations × 3 payloads are more than the 100000 candidates",
+        ),
     ];
     for (extra, expected) in cases {
-        let mut args = vec!["plan-poses", "--robot", "iiwa7", "--candidates", "200"];
+        let mut args = vec!["plan-poses", "--robot", "iiwa7"];
+        if !extra.contains(&"--candidates") {
+            args.extend(["--candidates", "200"]);
+        }
         if !extra.contains(&"--select") {
             args.extend(["--select", "20"]);
         }

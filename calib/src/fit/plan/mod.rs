@@ -32,6 +32,12 @@ use rand::{RngExt, SeedableRng};
 use sim::Model;
 use sim::measurement_table::{MeasurementTable, OptionalColumns};
 
+/// Most candidate rows (configurations × payloads, after the constraints) a plan takes: the
+/// candidates' Jacobian rows and blocks take about 2.5 kB a row for the iiwa 7 with compliance
+/// (250 MB at this limit). More are refused with the count; a random subset of the robot's poses
+/// serves as well (the design picks a few dozen of them).
+pub const MAX_CANDIDATE_ROWS: usize = 100_000;
+
 /// Settings of [`plan`] and [`plan_poses`].
 #[derive(Clone, Debug, PartialEq)]
 pub struct PlanOptions {
@@ -466,6 +472,24 @@ pub fn plan(model: &Model, candidates: &Candidates, options: &PlanOptions) -> Re
                 "no candidate of {} keeps the constraints ({})",
                 candidates.source,
                 broken.join(", ")
+            ),
+        ));
+    }
+    let rows = kept.len() * options.payloads_kg.len().max(1);
+    if rows > MAX_CANDIDATE_ROWS {
+        return Err(bad(
+            "candidates",
+            rows.to_string(),
+            format!(
+                "{} configurations{} are more than the {MAX_CANDIDATE_ROWS} candidates a plan takes: \
+                 draw fewer (--candidates), or give a random subset of {}",
+                kept.len(),
+                if options.payloads_kg.len() > 1 {
+                    format!(" × {} payloads", options.payloads_kg.len())
+                } else {
+                    String::new()
+                },
+                candidates.source
             ),
         ));
     }
