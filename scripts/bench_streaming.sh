@@ -4,7 +4,10 @@
 # Jacobian above 2^24 entries), on POSES poses of iiwa7_clean (default 1,000,000; 10,000,000 needs
 # about 4 GB of disk for the generated files). The model predicted with is calibrated on 2,000 other
 # poses. Prints one line per command: wall seconds and peak resident memory (GNU time's %M).
-# Usage: [ROBOCAL_BIN=…] scripts/bench_streaming.sh [POSES] [calibrate]
+# With `calibrate` (or `register`, or `calibrate,register`) as the second argument, also
+# `calibrate --folds 0` and `register` of the file as a new campaign of the model (both streamed
+# above 262,144 rows).
+# Usage: [ROBOCAL_BIN=…] scripts/bench_streaming.sh [POSES] [calibrate|register|calibrate,register]
 set -euo pipefail
 cd "$(dirname "$0")/.."
 poses="${1:-1000000}"
@@ -31,7 +34,10 @@ measure() { # label, args...
   echo "bench_streaming: $label, $poses rows: wall ${t%% *} s, peak $(( ${t##* } / 1024 )) MB"
 }
 measure predict predict --model "$out/model.json" --data "$out/big/measurements.parquet" --out "$out/predicted.csv"
-if [ "$with_calibrate" = calibrate ]; then
+if [[ ",$with_calibrate," == *",calibrate,"* ]]; then
   measure "calibrate --folds 0" calibrate --data "$out/big/measurements.parquet" --out "$out/m.json" --folds 0
 fi
-rm -f "$out/predicted.csv" "$out/m.json"
+if [[ ",$with_calibrate," == *",register,"* ]]; then
+  measure "register" register --model "$out/model.json" --data "$out/big/measurements.parquet" --out "$out/r.json"
+fi
+rm -f "$out/predicted.csv" "$out/m.json" "$out/r.json"

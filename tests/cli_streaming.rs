@@ -188,3 +188,117 @@ fn calibrate_streamed_and_in_memory_agree_and_refuse_what_streams_cannot_do() {
     assert_eq!(code, Some(2), "{err}");
     assert!(err.contains("--chunk-rows 0"), "{err}");
 }
+
+/// `register --stream always` reads the new campaign in pieces and gives the in-memory registration
+/// (`--stream never`) within the solver's tolerance: the same tracker pose to 10⁻¹⁰ m and rad (its
+/// σ here is micrometres), the same row and pose counts, residual and standard deviations to 10⁻⁶;
+/// the JSON says how it streamed. A bad row deep in the file is named by its file-wide row.
+#[test]
+fn register_streamed_and_in_memory_agree() {
+    let d = scratch_dir("robocal_cli_stream", "register");
+    let scenario = repo().join("scenarios/iiwa7_kinematic.toml");
+    let (first, moved) = (d.join("a"), d.join("b"));
+    robocal_ok(&[
+        "generate",
+        "--scenario",
+        &s(&scenario),
+        "--out",
+        &s(&first),
+        "--seed",
+        "5",
+        "--poses",
+        "200",
+    ]);
+    // The same robot (seed 5 draws the same errors) seen by a tracker moved across the cell.
+    let text = std::fs::read_to_string(&scenario).unwrap();
+    let moved_text = text.replace("xyz_m = [2.5, 1.0, -0.2]", "xyz_m = [-1.8, 2.2, 0.3]");
+    assert_ne!(moved_text, text, "the scenario's tracker placement changed");
+    let moved_scenario = d.join("moved.toml");
+    std::fs::write(&moved_scenario, moved_text).unwrap();
+    robocal_ok(&[
+        "generate",
+        "--scenario",
+        &s(&moved_scenario),
+        "--out",
+        &s(&moved),
+        "--seed",
+        "5",
+        "--poses",
+        "20000",
+    ]);
+    let model = d.join("model.json");
+    robocal_ok(&[
+        "calibrate",
+        "--data",
+        &s(&first.join("measurements.parquet")),
+        "--out",
+        &s(&model),
+        "--folds",
+        "0",
+    ]);
+    let data = moved.join("measurements.parquet");
+    let run = |mode: &str| -> serde_json::Value {
+        let out = d.join(format!("reg_{mode}.json"));
+        let (json, _) = robocal_ok(&[
+            "register",
+            "--model",
+            &s(&model),
+            "--data",
+            &s(&data),
+            "--out",
+            &s(&out),
+            "--stream",
+            mode,
+            "--chunk-rows",
+            "3000",
+            "--json",
+        ]);
+        serde_json::from_str(&json).unwrap()
+    };
+    let (memory, streamed) = (run("never"), run("always"));
+    assert!(memory.get("stream").is_none());
+    assert_eq!(streamed["stream"]["rows"], 20000);
+    assert_eq!(streamed["stream"]["chunk_rows"], 3000);
+    let (m, st) = (&memory["report"], &streamed["report"]);
+    for k in ["n_rows", "n_poses", "campaign"] {
+        assert_eq!(m[k], st[k], "{k}");
+    }
+    let f = |v: &serde_json::Value| v.as_f64().unwrap();
+    for i in 0..3 {
+        assert!((f(&m["translation_m"][i]) - f(&st["translation_m"][i])).abs() < 1e-10);
+        for j in 0..3 {
+            assert!((f(&m["rotation"][i][j]) - f(&st["rotation"][i][j])).abs() < 1e-10);
+        }
+        let (a, b) = (
+            f(&m["sigma_translation_m"][i]),
+            f(&st["sigma_translation_m"][i]),
+        );
+        assert!((a - b).abs() <= 1e-6 * a, "σ {a:e} against {b:e}");
+    }
+    let (a, b) = (f(&m["residual"]["rms_m"]), f(&st["residual"]["rms_m"]));
+    assert!(
+        (a - b).abs() <= 1e-6 * a,
+        "residual RMS {a:e} against {b:e}"
+    );
+    // A bad row deep in the file: named by its file-wide row.
+    let mut table = mt::read(&data).unwrap();
+    table.q[17_500 * table.n_joints + 1] = 9.0;
+    let bad = d.join("bad.csv");
+    std::fs::write(&bad, mt::write_csv_string(&table).unwrap()).unwrap();
+    let (code, err) = common::robocal_status(&[
+        "register",
+        "--model",
+        &s(&model),
+        "--data",
+        &s(&bad),
+        "--out",
+        &s(&d.join("x.json")),
+        "--stream",
+        "always",
+        "--chunk-rows",
+        "3000",
+    ]);
+    assert_eq!(code, Some(2), "{err}");
+    assert!(err.contains("row 17501") && err.contains("q2"), "{err}");
+    let _ = std::fs::remove_dir_all(&d);
+}

@@ -239,3 +239,106 @@ fn a_bad_row_deep_in_the_stream_is_named_by_its_row_of_the_table() {
     .to_string();
     assert!(err.contains("row 4322") && err.contains("sigma"), "{err}");
 }
+
+/// The streamed registration ([`calib::fit::stream::register::register_streamed`]) of a moved
+/// tracker's 50,000 rows, read in pieces of 4,096 rows and started from a sample of 2,048, against
+/// the in-memory registration of the whole table: the same registration within the solver's
+/// stopping rule (at most 10⁻³ of a standard deviation apart in every parameter; the two stop by the
+/// same predicted decrease), the same covariance to 10⁻⁶ (the Gram matrix's Cholesky factor against
+/// the QR of every row), the same statistics to rounding, and two passes after the scan.
+#[test]
+fn the_streamed_registration_is_the_in_memory_one() {
+    use calib::fit::register::{RegisterOptions, register};
+    use calib::fit::stream::register::register_streamed;
+    let seed = common::run_seed("stream register");
+    let model = robots::load_builtin("ur5").unwrap();
+    let mut rng = common::rng(seed);
+    let truth = Truth::random(&model, false, &mut rng);
+    let qa = random_configs(&model, 80, &mut rng);
+    let train = common::table(&model, &truth, &qa, 0.0, 0.0, &mut rng);
+    let cal = fit(
+        &model,
+        &Dataset::all(&train, "a"),
+        &FitRequest::kinematic(&CalibrationOptions::default()),
+    )
+    .unwrap();
+    let moved = moved_tracker(&truth, &mut rng);
+    let qb = random_configs(&model, 50_000, &mut rng);
+    let new = common::table(&model, &moved, &qb, NOISE_M, 0.0, &mut rng);
+    let options = RegisterOptions::default();
+    let memory = register(
+        &model,
+        &cal.params,
+        None,
+        None,
+        Some(1e-5),
+        &new,
+        "b",
+        &options,
+    )
+    .unwrap();
+    let source = TableSource::new(&new, "b", 4_096);
+    let stream = StreamOptions {
+        sample_rows: 2_048,
+        seed: 3,
+        ..StreamOptions::default()
+    };
+    let streamed = register_streamed(
+        &model,
+        &cal.params,
+        None,
+        None,
+        Some(1e-5),
+        &source,
+        &options,
+        &stream,
+        &mut |_| {},
+    )
+    .unwrap();
+    eprintln!(
+        "seed {seed}: {} passes, sample {} of {} rows",
+        streamed.passes, streamed.sample_rows, streamed.rows
+    );
+    assert_eq!(streamed.rows, 50_000);
+    assert_eq!(streamed.passes, 2, "seed {seed}");
+    let (m, s) = (&memory, &streamed.registration);
+    assert_eq!(m.indices, s.indices);
+    assert_eq!(m.report.campaign, s.report.campaign);
+    assert_eq!(m.report.n_rows, s.report.n_rows);
+    assert_eq!(m.report.n_poses, s.report.n_poses);
+    // Parameter differences in units of their standard deviations.
+    let layout = calib::model::params::ParamLayout::for_params(&model, &m.params, Vec::new());
+    let diff = s.params.difference(&layout, &m.params);
+    for (i, &k) in m.indices.iter().enumerate() {
+        let sigma = m.covariance[(i, i)].sqrt();
+        let z = diff[k] / sigma;
+        assert!(z.abs() < 1e-3, "seed {seed}: parameter {k}: {z:e} σ apart");
+    }
+    for i in 0..m.indices.len() {
+        for j in 0..m.indices.len() {
+            let (a, b) = (m.covariance[(i, j)], s.covariance[(i, j)]);
+            let scale = (m.covariance[(i, i)] * m.covariance[(j, j)]).sqrt();
+            assert!(
+                (a - b).abs() <= 1e-6 * scale,
+                "seed {seed}: covariance ({i}, {j}): {a:e} against {b:e}"
+            );
+        }
+    }
+    let (rm, rs) = (&m.report.residual, &s.report.residual);
+    for (a, b, what) in [
+        (rm.rms_m, rs.rms_m, "rms"),
+        (rm.mean_m, rs.mean_m, "mean"),
+        (rm.max_m, rs.max_m, "max"),
+        (
+            m.report.variance_factor,
+            s.report.variance_factor,
+            "variance factor",
+        ),
+    ] {
+        assert!(
+            (a - b).abs() <= 1e-6 * a.abs(),
+            "seed {seed}: {what}: {a:e} against {b:e}"
+        );
+    }
+    assert_eq!(rm.max_row, rs.max_row);
+}

@@ -231,10 +231,15 @@ class Model:
         )
         return to_frame(columns)
 
-    def register(self, data: DataLike, **options: Any) -> "Model":
+    def register(self, data: DataLike, stream: str = "auto", chunk_rows: int = 65536,
+                 **options: Any) -> "Model":
         """A new measurement campaign (the tracker was moved), as ``robocal register``: the
         tracker-to-base transform (and with ``target=True`` the target offset) fitted to ``data``,
         every robot parameter kept. ``campaign=ID`` refits a campaign the model knows instead.
+
+        Given a ``.csv``/``.parquet`` path, the file is read in pieces as ``register --stream``
+        reads it (``stream="auto"``: above 262,144 rows; ``"always"``; ``"never"``), in bounded
+        memory, and ``report["stream"]`` says so; a DataFrame stays in memory.
 
         Returns:
             The model with the campaign registered (its default campaign); ``report`` is the
@@ -242,6 +247,17 @@ class Model:
             the tracker pose's σ and a warning when the robot seems to have changed.
         """
         _check_options("register", options)
+        if isinstance(data, (str, os.PathLike)):
+            streamed = _robocal.register_file(self._native, os.fspath(data), flags(options), stream,
+                                              chunk_rows)
+            if streamed is not None:
+                native, report = streamed
+                return Model(native, json.loads(report))
+        elif stream == "always":
+            raise BadInput("stream='always' reads a .csv or .parquet file in pieces, but data is not "
+                           "a file path: a DataFrame is in memory already")
+        elif stream not in ("auto", "never"):
+            raise BadInput(f"stream='{stream}': one of 'auto', 'always' or 'never'")
         native, report = _robocal.register(self._native, to_table(data), flags(options))
         return Model(native, json.loads(report))
 

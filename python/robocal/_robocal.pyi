@@ -112,6 +112,10 @@ def register(model: CalibratedModel, data: Table, args: list[str]) -> tuple[Cali
 def generate(scenario: str, out: str, args: list[str]) -> str:
     """``robocal generate --scenario SCENARIO --out OUT --json`` with value flags ``args``."""
 
+def register_file(model: CalibratedModel, path: str, args: list[str], stream: str,
+                  chunk_rows: int) -> tuple[CalibratedModel, str] | None:
+    """``robocal register --data PATH --stream STREAM --json`` when that streams, else None."""
+
 def plan_poses(robot: Robot, candidates: Table | None, args: list[str]) -> tuple[str, str]:
     """``robocal plan-poses --json`` with value flags ``args``: (the pose file's CSV text, the JSON
     document)."""

@@ -866,6 +866,58 @@ fn register(
     Ok((CalibratedModel { file }, report))
 }
 
+/// Registers the campaign of the file `path` as `robocal register --data PATH --stream STREAM
+/// --chunk-rows N` when that reads it in pieces (`args`: the value flags). Returns `(model with the
+/// campaign registered, the register --json document as text)`, or `None` when the table is to be
+/// held in memory (`never`, or `auto` with a file of at most 262,144 rows), for the caller to read
+/// it; the robot checks' warnings are issued as `DataWarning`s.
+#[pyfunction]
+#[pyo3(signature = (model, path, args, stream, chunk_rows))]
+fn register_file(
+    py: Python<'_>,
+    model: &CalibratedModel,
+    path: String,
+    args: Vec<String>,
+    stream: &str,
+    chunk_rows: usize,
+) -> PyResult<Option<(CalibratedModel, String)>> {
+    use robocal::cli::calibrate_stream::StreamMode;
+    let options: reg_cli::Options = quick(py, flags::parse("register", &args))?;
+    let mode = match stream {
+        "auto" => StreamMode::Auto,
+        "always" => StreamMode::Always,
+        "never" => StreamMode::Never,
+        other => {
+            return Err(raise(
+                py,
+                CliError::Input(format!(
+                    "stream='{other}': one of 'auto', 'always' or 'never'"
+                )),
+            ));
+        }
+    };
+    let path = std::path::PathBuf::from(path);
+    let done = work(py, || {
+        let (stream, _) = cal_cli::decide_stream(mode, &path, None)?;
+        if !stream {
+            return Ok(None);
+        }
+        Ok(Some(reg_cli::register_streamed(
+            &model.file,
+            &path,
+            &options,
+            chunk_rows,
+        )?))
+    })?;
+    let Some((file, report, warnings, info)) = done else {
+        return Ok(None);
+    };
+    warn(py, &warnings, 2)?;
+    let mut doc = reg_cli::json(None, &path.display().to_string(), None, &report);
+    doc["stream"] = info;
+    Ok(Some((CalibratedModel { file }, doc.to_string())))
+}
+
 /// Diagnoses as `robocal diagnose`: `args` are its value flags. Returns the diagnose JSON text.
 #[pyfunction]
 fn diagnose(py: Python<'_>, robot: &Robot, data: &Table, args: Vec<String>) -> PyResult<String> {
@@ -960,6 +1012,7 @@ fn _robocal(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(calibrate_file, m)?)?;
     m.add_function(wrap_pyfunction!(diagnose, m)?)?;
     m.add_function(wrap_pyfunction!(register, m)?)?;
+    m.add_function(wrap_pyfunction!(register_file, m)?)?;
     m.add_function(wrap_pyfunction!(generate, m)?)?;
     m.add_function(wrap_pyfunction!(plan_poses, m)?)?;
     m.add_function(wrap_pyfunction!(options, m)?)?;

@@ -1,6 +1,8 @@
 //! `robocal register`: a new measurement campaign (the tracker was moved) for a calibrated model.
 
 use super::calibrate::Named;
+use super::calibrate::decide_stream;
+use super::calibrate_stream::{CheckedFile, StreamMode, check_chunk_rows};
 use super::paths::Inputs;
 use super::shared::{CliError, CliResult, print_json, read_table};
 use calib::fit::register::{RegisterOptions, RegistrationReport, register as register_campaign};
@@ -25,6 +27,13 @@ pub struct Args {
     out: PathBuf,
     #[command(flatten)]
     options: Options,
+    /// Read the data in pieces, in bounded memory: `auto` streams a table of more than 262,144
+    /// rows (positions only), `always` any table, `never` none.
+    #[arg(long, value_name = "auto|always|never", value_enum, default_value_t = StreamMode::Auto)]
+    stream: StreamMode,
+    /// Rows read at a time when streaming.
+    #[arg(long, value_name = "N", default_value_t = sim::measurement_table::DEFAULT_CHUNK_ROWS)]
+    chunk_rows: usize,
     /// Print one JSON document on stdout instead of text on stderr.
     #[arg(long)]
     json: bool,
@@ -51,15 +60,8 @@ pub fn register(
     options: &Options,
 ) -> Result<(CalibratedModel, RegistrationReport), CliError> {
     let predictor = Predictor::from_file(file)?;
-    let model_rms = file
-        .fit
-        .as_ref()
-        .map(|f| f.held_out_rms_m.unwrap_or(f.train_rms_m));
-    let options = RegisterOptions {
-        target: options.target,
-        campaign: options.campaign,
-        ..RegisterOptions::default()
-    };
+    let model_rms = model_rms(file);
+    let options = register_options(options);
     let reg = register_campaign(
         &predictor.model,
         &predictor.params,
@@ -71,6 +73,66 @@ pub fn register(
         &options,
     )?;
     Ok((file.registered(&predictor.model, &reg), reg.report))
+}
+
+/// The model's own RMS error: held-out when the file has it, else on its calibration rows (m).
+fn model_rms(file: &CalibratedModel) -> Option<f64> {
+    file.fit
+        .as_ref()
+        .map(|f| f.held_out_rms_m.unwrap_or(f.train_rms_m))
+}
+
+fn register_options(options: &Options) -> RegisterOptions {
+    RegisterOptions {
+        target: options.target,
+        campaign: options.campaign,
+        ..RegisterOptions::default()
+    }
+}
+
+/// Registers the campaign of the file `path`, read in pieces of `chunk_rows` rows and checked
+/// against the robot on the first pass ([`calib::fit::stream::register`]): the model with the
+/// campaign, the report, the robot checks' warnings and the JSON `stream` object.
+pub fn register_streamed(
+    file: &CalibratedModel,
+    path: &Path,
+    options: &Options,
+    chunk_rows: usize,
+) -> Result<
+    (
+        CalibratedModel,
+        RegistrationReport,
+        Vec<String>,
+        serde_json::Value,
+    ),
+    CliError,
+> {
+    check_chunk_rows(chunk_rows)?;
+    let predictor = Predictor::from_file(file)?;
+    let source = CheckedFile::new(path, chunk_rows, &predictor.model);
+    let streamed = calib::fit::stream::register::register_streamed(
+        &predictor.model,
+        &predictor.params,
+        predictor.extensions.as_ref(),
+        predictor.learned.as_ref(),
+        model_rms(file),
+        &source,
+        &register_options(options),
+        &calib::fit::stream::StreamOptions::default(),
+        &mut |_| {},
+    )?;
+    let info = json!({
+        "rows": streamed.rows,
+        "passes": streamed.passes,
+        "chunk_rows": chunk_rows,
+        "sample_rows": streamed.sample_rows,
+    });
+    Ok((
+        file.registered(&predictor.model, &streamed.registration),
+        streamed.registration.report,
+        source.warnings(),
+        info,
+    ))
 }
 
 /// The `register --json` document: `model` and `out` name the files read and written (null when
@@ -96,18 +158,41 @@ pub fn run(args: Args) -> CliResult {
     inputs.check("--out", &args.out)?;
     let file = CalibratedModel::load(&args.model)?;
     let robot = Predictor::from_file(&file)?.model;
-    let table = read_table(&args.data, &robot)?;
+    check_chunk_rows(args.chunk_rows)?;
     let name = args.data.display().to_string();
-    let data = Named {
-        table: &table,
-        name: &name,
+    let (stream, _) = decide_stream(args.stream, &args.data, None)?;
+    let (out, report, info) = if stream {
+        let (out, report, warnings, info) =
+            register_streamed(&file, &args.data, &args.options, args.chunk_rows)?;
+        for w in warnings {
+            eprintln!("warning: {w}");
+        }
+        (out, report, Some(info))
+    } else {
+        let table = read_table(&args.data, &robot)?;
+        let data = Named {
+            table: &table,
+            name: &name,
+        };
+        let (out, report) = register(&file, data, &args.options)?;
+        (out, report, None)
     };
-    let (out, report) = register(&file, data, &args.options)?;
     sim::io::write_atomic(&args.out, out.to_json().as_bytes())?;
     if args.json {
-        print_json(&json(Some(&args.model), &name, Some(&args.out), &report))
+        let mut doc = json(Some(&args.model), &name, Some(&args.out), &report);
+        if let Some(info) = info {
+            doc["stream"] = info;
+        }
+        print_json(&doc)
     } else {
         eprint!("{}", report.text());
+        if let Some(info) = info {
+            eprintln!(
+                "streamed: {} rows in {} passes of pieces of up to {} rows, starting from the \
+                 registration of a seeded sample of {} rows",
+                info["rows"], info["passes"], info["chunk_rows"], info["sample_rows"]
+            );
+        }
         eprintln!("wrote {}", args.out.display());
         Ok(())
     }

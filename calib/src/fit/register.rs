@@ -405,8 +405,73 @@ pub fn register(
     }
     let (report, sub) = solve.expect("at least one round");
     obs.position = measured;
+    let residual = {
+        let errors = Prediction::new(model, &reg)
+            .with_learned(learned)
+            .errors(&obs);
+        stats_of_errors(&errors, &obs)
+    };
+    Ok(finish(
+        Solved {
+            params: reg,
+            campaign: id,
+            index: c,
+            replaced,
+            active,
+            solver: report,
+            subspace: sub,
+            residual,
+            n_poses: obs.n_poses(),
+            n_residuals: n * dim,
+        },
+        model_rms_m,
+        options,
+    ))
+}
+
+/// A registration solved: what [`finish`] turns into its report.
+pub(crate) struct Solved {
+    /// The parameters with the campaign registered.
+    pub params: KinematicParams,
+    /// The campaign id.
+    pub campaign: i64,
+    /// Its index among the parameters' campaigns.
+    pub index: usize,
+    /// Whether an existing registration was replaced.
+    pub replaced: bool,
+    /// The fitted layout indices.
+    pub active: Vec<usize>,
+    /// The solver's outcome.
+    pub solver: MinimizationReport,
+    /// The rank decision at the solution (active parameters).
+    pub subspace: crate::lm::Subspace,
+    /// Position errors of the registered model on the rows.
+    pub residual: ResidualStats,
+    /// Distinct poses.
+    pub n_poses: usize,
+    /// Scalar residuals `m`.
+    pub n_residuals: usize,
+}
+
+/// The report, covariance and warnings of a solved registration (in memory or streamed).
+pub(crate) fn finish(
+    solved: Solved,
+    model_rms_m: Option<f64>,
+    options: &RegisterOptions,
+) -> Registration {
+    let Solved {
+        params: reg,
+        campaign: id,
+        index: c,
+        replaced,
+        active,
+        solver: report,
+        subspace: sub,
+        residual,
+        n_poses,
+        n_residuals: m,
+    } = solved;
     let mut warnings = Vec::new();
-    let m = n * dim;
     let dof = m.saturating_sub(sub.rank);
     let (vf, source) = if dof > 0 {
         (report.cost_final / dof as f64, "residuals (χ²/dof)")
@@ -425,12 +490,6 @@ pub fn register(
         ));
     }
     let cov = sub.covariance(vf);
-    let residual = {
-        let errors = Prediction::new(model, &reg)
-            .with_learned(learned)
-            .errors(&obs);
-        stats_of_errors(&errors, &obs)
-    };
     let ratio = model_rms_m.filter(|m| *m > 0.0).map(|m| residual.rms_m / m);
     if let (Some(r), Some(mr)) = (ratio, model_rms_m) {
         // The variance ratio against 1, as a normal z with the registration's degrees of freedom.
@@ -470,8 +529,8 @@ pub fn register(
     let report = RegistrationReport {
         campaign: id,
         replaced,
-        n_rows: n,
-        n_poses: obs.n_poses(),
+        n_rows: residual.n,
+        n_poses,
         residual,
         model_rms_m,
         ratio,
@@ -486,10 +545,10 @@ pub fn register(
         solver: report,
         warnings,
     };
-    Ok(Registration {
+    Registration {
         params: reg,
         report,
         covariance: cov,
         indices: active,
-    })
+    }
 }

@@ -52,6 +52,7 @@
 
 pub mod lane;
 pub mod pass;
+pub mod register;
 pub mod scan;
 pub mod source;
 
