@@ -4,10 +4,10 @@
 # Jacobian above 2^24 entries), on POSES poses of iiwa7_clean (default 1,000,000; 10,000,000 needs
 # about 4 GB of disk for the generated files). The model predicted with is calibrated on 2,000 other
 # poses. Prints one line per command: wall seconds and peak resident memory (GNU time's %M).
-# With `calibrate` (or `register`, or `calibrate,register`) as the second argument, also
-# `calibrate --folds 0` and `register` of the file as a new campaign of the model (both streamed
-# above 262,144 rows).
-# Usage: [ROBOCAL_BIN=…] scripts/bench_streaming.sh [POSES] [calibrate|register|calibrate,register]
+# With `calibrate` (or `register`, or `validate`, or a comma-separated list of them) as the second
+# argument, also `calibrate --folds 0`, `register` of the file as a new campaign of the model, and
+# `calibrate` with its default validation (5 folds, 5 regions) (all streamed above 262,144 rows).
+# Usage: [ROBOCAL_BIN=…] scripts/bench_streaming.sh [POSES] [calibrate|register|validate|…,…]
 set -euo pipefail
 cd "$(dirname "$0")/.."
 poses="${1:-1000000}"
@@ -39,5 +39,8 @@ if [[ ",$with_calibrate," == *",calibrate,"* ]]; then
 fi
 if [[ ",$with_calibrate," == *",register,"* ]]; then
   measure "register" register --model "$out/model.json" --data "$out/big/measurements.parquet" --out "$out/r.json"
+fi
+if [[ ",$with_calibrate," == *",validate,"* ]]; then
+  measure "calibrate (5 folds, 5 regions)" calibrate --data "$out/big/measurements.parquet" --out "$out/m.json"
 fi
 rm -f "$out/predicted.csv" "$out/m.json" "$out/r.json"

@@ -342,3 +342,106 @@ fn the_streamed_registration_is_the_in_memory_one() {
     }
     assert_eq!(rm.max_row, rs.max_row);
 }
+
+/// The streamed validation ([`calib::validate::stream`]) against the in-memory validation of the
+/// same folds and regions ([`calib::validate::cross_validate_labelled`] with
+/// [`StreamGroups::labels`]): the same held-out statistics, per fold and per region, within what the
+/// solvers' stopping rule leaves between the groups' solutions.
+#[test]
+fn the_streamed_validation_is_the_in_memory_validation_of_the_same_groups() {
+    use calib::validate::stream::{StreamGroups, validate_streamed};
+    let seed = common::run_seed("stream-validation");
+    let model = robots::load_builtin("iiwa7").unwrap();
+    let table = two_campaigns(20_000, &[], seed);
+    let options = CalibrationOptions::default();
+    let source = TableSource::new(&table, "t", 4_096);
+    let stream = StreamOptions {
+        sample_rows: 4_096,
+        seed,
+        ..StreamOptions::default()
+    };
+    let streamed = calibrate(&model, &source, &options, &stream, &mut |_| {}).unwrap();
+    let (folds, regions) = (5, 4);
+    let v = validate_streamed(
+        &model,
+        &source,
+        &options,
+        &streamed,
+        folds,
+        regions,
+        seed,
+        30,
+        &mut |_| {},
+    )
+    .unwrap();
+    eprintln!("streamed validation: {} passes, {:?}", v.passes, v.warnings);
+    let groups = StreamGroups::new(folds, regions, seed, &streamed.sample);
+    let (fold_of, region_of) = groups.labels(&table);
+    let data = Dataset::all(&table, "t");
+    let memory_fit = fit(&model, &data, &FitRequest::kinematic(&options)).unwrap();
+    let m = calib::validate::cross_validate_labelled(
+        &model,
+        &data,
+        &FitRequest::kinematic(&options),
+        (&fold_of, folds),
+        Some((&region_of, regions)),
+        seed,
+        Some(&memory_fit),
+    )
+    .unwrap();
+    let s = &v.validation;
+    let pairs = [
+        ("folds before", &s.before, &m.before),
+        ("folds after", &s.after, &m.after),
+        (
+            "regions before",
+            &s.by_region.as_ref().unwrap().before,
+            &m.by_region.as_ref().unwrap().before,
+        ),
+        (
+            "regions after",
+            &s.by_region.as_ref().unwrap().after,
+            &m.by_region.as_ref().unwrap().after,
+        ),
+    ];
+    // The bound: each group's two solutions (streamed and in memory) stop where the next step
+    // would lower χ² by at most decrease_tol + relative_decrease_tol · χ² (about 5e-6 here), so
+    // they sit within about 2·√5e-6 ≈ 4.5e-3 noise σ of each other in RSS over the group's
+    // 16,000 training rows: a row's prediction moves by about 4.5e-3/√16,000 ≈ 4e-5 σ. Every
+    // statistic of the held-out errors is asserted within 1e-4 σ (σ ≈ 10 µm: 1 nm). Had a group
+    // not been refitted (predicted by the fit on every row), its held-out RMS would be lower by
+    // about σ · p / (2 N) ≈ 15 nm.
+    let allowed = 1e-4 * NOISE_M;
+    let close =
+        |what: &str, a: &calib::validate::HeldOutStats, b: &calib::validate::HeldOutStats| {
+            assert_eq!((a.n_rows, a.n_poses), (b.n_rows, b.n_poses), "{what}");
+            for (stat, x, y) in [
+                ("RMS", a.rms_m, b.rms_m),
+                ("mean", a.mean_m, b.mean_m),
+                ("ISO mean", a.iso_mean_m, b.iso_mean_m),
+                ("max", a.max_m, b.max_m),
+            ] {
+                assert!(
+                    (x - y).abs() <= allowed,
+                    "{what} {stat}: streamed {x} m, in memory {y} m"
+                );
+            }
+        };
+    let mut worst: f64 = 0.0;
+    for (what, a, b) in pairs {
+        close(what, a, b);
+        worst = worst.max((a.rms_m - b.rms_m).abs());
+    }
+    eprintln!("largest RMS difference {worst:.3e} m (allowed {allowed:.1e} m)");
+    let (rs, rm) = (s.by_region.as_ref().unwrap(), m.by_region.as_ref().unwrap());
+    assert_eq!(rs.n_rows_not_predicted, rm.n_rows_not_predicted);
+    for (per_s, per_m) in [(&s.per_fold, &m.per_fold), (&rs.per_region, &rm.per_region)] {
+        assert_eq!(per_s.len(), per_m.len());
+        for (a, b) in per_s.iter().zip(per_m) {
+            assert_eq!((a.fold, a.n_train_poses), (b.fold, b.n_train_poses));
+            close("a group", &a.held_out, &b.held_out);
+        }
+    }
+    assert_eq!(s.folds, m.folds);
+    assert_eq!(s.regions, m.regions);
+}

@@ -310,7 +310,8 @@ def calibrate(
             campaign its own tracker registration.
         stream: for a ``.csv``/``.parquet`` path, whether the file is read in pieces, as
             ``calibrate --stream``: ``"auto"`` (files of more than 262,144 rows when the options allow
-            it: the kinematic model, ``folds=0``, no ``robust``, no test data), ``"always"`` (any
+            it: the kinematic model, no ``robust``, no ``test_fraction``, no test data; folds and
+            regions validate the stream), ``"always"`` (any
             file; options that need the table in memory raise ``BadInput``) or ``"never"``. Memory
             then grows by 8 bytes a row only (10⁷ rows: about 160 MB). A DataFrame is in memory
             already: ``"always"`` with one raises ``BadInput``.

@@ -170,16 +170,20 @@ def test_test_data_and_base_tip_links_as_the_cli(cli, generated, tmp_path):
     assert report_without_outputs(got.report) == report_without_outputs(expected)
 
 
+@pytest.mark.parametrize("folds", [0, 5])
 @pytest.mark.parametrize("stream", ["always", "never"])
-def test_calibrate_of_a_file_streams_as_the_cli(cli, generated, tmp_path, stream):
-    """A path streams as `calibrate --stream` (issue 28): the same report (with its `stream` object)
-    and the same model file, in pieces of 40 rows."""
+def test_calibrate_of_a_file_streams_as_the_cli(cli, generated, tmp_path, stream, folds):
+    """A path streams as `calibrate --stream` (issue 28), with or without the default validation:
+    the same report (with its `stream` object and validation) and the same model file, in pieces of
+    40 rows."""
     data = generated / "measurements.parquet"
     out = tmp_path / "cli.json"
     expected = cli.json(
-        "calibrate", "--data", data, "--out", out, "--folds", "0", "--stream", stream, "--chunk-rows", "40"
+        "calibrate", "--data", data, "--out", out, "--folds", str(folds), "--stream", stream,
+        "--chunk-rows", "40"
     )
-    model = robocal.calibrate(str(data), robot="iiwa7", folds=0, stream=stream, chunk_rows=40)
+    model = robocal.calibrate(str(data), robot="iiwa7", folds=folds, stream=stream, chunk_rows=40)
+    assert ("validation" in model.report and model.report["validation"] is not None) == (folds > 0)
     assert report_without_outputs(model.report) == report_without_outputs(expected)
     assert ("stream" in model.report) == (stream == "always")
     if stream == "always":
@@ -190,11 +194,13 @@ def test_calibrate_of_a_file_streams_as_the_cli(cli, generated, tmp_path, stream
 
 def test_streaming_refuses_what_needs_the_table_in_memory(cli, generated, tmp_path):
     data = generated / "measurements.parquet"
-    code, message = cli.error("calibrate", "--data", data, "--out", tmp_path / "m.json", "--stream", "always")
+    code, message = cli.error(
+        "calibrate", "--data", data, "--out", tmp_path / "m.json", "--test-fraction", "0.3", "--stream", "always"
+    )
     assert code == 2
     with pytest.raises(robocal.BadInput) as e:
-        robocal.calibrate(str(data), robot="iiwa7", stream="always")
-    assert str(e.value) == message and "cross-validation" in message
+        robocal.calibrate(str(data), robot="iiwa7", test_fraction=0.3, stream="always")
+    assert str(e.value) == message and "--test-fraction" in message
     with pytest.raises(robocal.BadInput, match="reads a .csv or .parquet file in pieces"):
         robocal.calibrate(robocal.read_table(data), robot="iiwa7", folds=0, stream="always")
     with pytest.raises(robocal.BadInput, match="one of 'auto', 'always' or 'never'"):

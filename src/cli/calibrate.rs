@@ -46,8 +46,8 @@ pub struct Args {
     ur_kinematics: Option<PathBuf>,
     /// Read the table in pieces instead of holding it in memory (docs/calibrate.md, "Streams"):
     /// `auto` streams a table of more than 262,144 rows when the options allow it (the kinematic
-    /// model, no --robust, --folds 0, no --test-data or --test-fraction); `always` streams any table
-    /// and refuses options that need it in memory; `never` holds it.
+    /// model, no --robust, no --test-data or --test-fraction; folds and regions validate the stream);
+    /// `always` streams any table and refuses options that need it in memory; `never` holds it.
     #[arg(long, value_enum, value_name = "WHEN", default_value_t = StreamMode::Auto)]
     stream: StreamMode,
     /// Rows read at a time when streaming.
@@ -122,7 +122,6 @@ impl Options {
         needs_memory(
             &self.model,
             self.robust.is_some(),
-            self.folds,
             self.test_fraction,
             test_data,
         )
@@ -594,18 +593,40 @@ pub fn calibrate_streamed(
     };
     let streamed =
         calib::fit::stream::calibrate(&robot.model, &source, &fit_options, &settings, progress)?;
-    let (line, json) = describe(&streamed, chunk_rows);
+    let mut warnings = source.warnings();
+    let (validation, split, validation_passes) = match options.plan(None) {
+        (ValidationPlan::Folds { k, seed, regions }, split)
+            if streamed.calibration.report.was_successful() =>
+        {
+            let v = calib::validate::stream::validate_streamed(
+                &robot.model,
+                &source,
+                &fit_options,
+                &streamed,
+                k,
+                regions,
+                seed,
+                settings.max_passes,
+                progress,
+            )?;
+            warnings.extend(v.warnings);
+            (Some(v.validation), split, Some(v.passes))
+        }
+        (ValidationPlan::Folds { .. }, split) => (None, split, None),
+        _ => (None, json!({"kind": "none"}), None),
+    };
+    let (line, json) = describe(&streamed, validation_passes, chunk_rows);
     Ok(Streamed {
         outcome: Outcome {
             model_spec: ModelSpec::kinematic(),
             cal: streamed.calibration,
-            split: json!({"kind": "none"}),
-            validation: None,
+            split,
+            validation,
             auto: None,
         },
         spaced_rows: streamed.spaced_rows,
         line,
         json,
-        warnings: source.warnings(),
+        warnings,
     })
 }

@@ -23,11 +23,11 @@ pub enum StreamMode {
 }
 
 /// Why the options need the table in memory, if they do: the streamed fit takes the kinematic
-/// model without a robust loss and validates nothing.
+/// model without a robust loss, and validates by folds and regions (or not at all), not by a split
+/// or another file.
 pub fn needs_memory(
     model: &str,
     robust: bool,
-    folds: Option<usize>,
     test_fraction: f64,
     test_data: bool,
 ) -> Option<String> {
@@ -41,11 +41,6 @@ pub fn needs_memory(
         Some("--test-data".into())
     } else if test_fraction > 0.0 {
         Some("--test-fraction".into())
-    } else if folds != Some(0) {
-        Some(format!(
-            "cross-validation (--folds {}; --folds 0 validates nothing)",
-            folds.unwrap_or(calib::validate::DEFAULT_FOLDS)
-        ))
     } else {
         None
     }
@@ -112,15 +107,25 @@ impl ChunkSource for CheckedFile<'_> {
     }
 }
 
-/// The one-line account of a streamed fit for the terminal and the JSON `stream` object.
+/// The one-line account of a streamed fit (and its validation's passes, when it ran) for the
+/// terminal and the JSON `stream` object.
 pub fn describe(
     s: &calib::fit::stream::StreamedCalibration,
+    validation_passes: Option<usize>,
     chunk_rows: usize,
 ) -> (String, serde_json::Value) {
+    let validation = match validation_passes {
+        Some(n) => format!(
+            "; validated in {n} more passes (folds by a seeded hash of the pose, regions placed on \
+             the sample's poses)"
+        ),
+        None => String::new(),
+    };
     (
         format!(
             "streamed: {} rows in {} passes of pieces of up to {chunk_rows} rows, starting from the fit \
-             of a seeded sample of {} rows (memory does not grow with the rows but for 8 bytes a row)",
+             of a seeded sample of {} rows (memory does not grow with the rows but for 8 bytes a \
+             row){validation}",
             s.rows, s.passes, s.sample_rows
         ),
         serde_json::json!({
@@ -128,6 +133,7 @@ pub fn describe(
             "passes": s.passes,
             "chunk_rows": chunk_rows,
             "sample_rows": s.sample_rows,
+            "validation_passes": validation_passes,
         }),
     )
 }

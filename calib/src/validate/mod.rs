@@ -24,6 +24,7 @@ pub mod gauss_newton;
 mod groups;
 pub mod regions;
 mod stats;
+pub mod stream;
 
 pub use groups::fold_calibrations;
 use groups::*;
@@ -263,23 +264,94 @@ pub fn cross_validate_with_regions(
     check_groups(data, &keys, regions, "--regions", REGIONS_NEED)?;
     let fold_of = pose_folds(data, k, seed);
     let region_of = region_of_rows(data, regions, seed);
-    let folds = Groups::new(&fold_of, k, Grouping::Folds);
-    let by_region = Groups::new(&region_of, regions, Grouping::Regions);
+    cross_validate_labelled(
+        model,
+        data,
+        request,
+        (&fold_of, k),
+        Some((&region_of, regions)),
+        seed,
+        all,
+    )
+}
+
+/// Cross-validation of `request`'s model on `data` with the folds and regions given as labels, one
+/// per row of `data` (`folds.0[i] < folds.1`, the same for `regions`): each fold, and each region,
+/// predicted by the model fitted on the others, started at `all` (the model on every row) and
+/// sharing one pass over the rows there; then, with several campaigns, leave-one-campaign-out.
+/// [`cross_validate_with_regions`] with its own folds and regions; a streamed validation's groups
+/// ([`stream::StreamGroups::labels`]) give the in-memory validation of the same groups. `seed` is
+/// reported, and seeds the leave-one-campaign-out draw. Errors: a label out of range or a label
+/// count other than the rows', fewer than two groups, or a group whose complement cannot determine
+/// the model.
+pub fn cross_validate_labelled(
+    model: &Model,
+    data: &Dataset<'_>,
+    request: &FitRequest<'_>,
+    folds: (&[usize], usize),
+    regions: Option<(&[usize], usize)>,
+    seed: u64,
+    all: Option<&Calibration>,
+) -> Result<Validation> {
+    let keys = pose_keys(data);
+    let check_labels = |(of, k): (&[usize], usize), flag: &str| -> Result<()> {
+        if of.len() != data.rows.len() || of.iter().any(|&g| g >= k) || k < 2 {
+            return Err(CalibError::BadValue {
+                context: data.name.clone(),
+                field: flag.into(),
+                value: format!("{} labels of {k} groups", of.len()),
+                problem: format!(
+                    "a label below {k} for each of the {} rows, and at least 2 groups",
+                    data.rows.len()
+                ),
+            });
+        }
+        Ok(())
+    };
+    check_labels(folds, "--folds")?;
+    let (fold_of, k) = folds;
+    let fold_groups = Groups::new(fold_of, k, Grouping::Folds);
     let start = all.map(WarmStart::near);
-    let shares = shares_for(model, data, request, &[&folds, &by_region], start.as_ref())?;
-    let share = |j: usize| shares.as_ref().map(|s| s[j].as_slice());
-    // Both groupings' fits at once: ten fits keep two cores busier than two rounds of five.
-    let (pooled_folds, pooled_regions) = crate::cancel::relayed(|relay| {
-        rayon::join(
-            || relay.run(|| pooled(model, data, request, &folds, start, share(0), &keys)),
-            || relay.run(|| pooled(model, data, request, &by_region, start, share(1), &keys)),
-        )
-    });
-    let mut v = folds_validation(pooled_folds?, &keys, k, seed);
-    let r = regions_validation(pooled_regions?, &keys, regions, seed);
-    v.regions = Some(regions);
-    v.new_region = Some(r.final_stats().clone());
-    v.by_region = Some(r);
+    let mut v = match regions {
+        None => {
+            let pooled = pooled_alone(model, data, request, &fold_groups, start, &keys)?;
+            folds_validation(pooled, &keys, k, seed)
+        }
+        Some(regions) => {
+            check_labels(regions, "--regions")?;
+            let (region_of, r) = regions;
+            let by_region = Groups::new(region_of, r, Grouping::Regions);
+            let shares = shares_for(
+                model,
+                data,
+                request,
+                &[&fold_groups, &by_region],
+                start.as_ref(),
+            )?;
+            let share = |j: usize| shares.as_ref().map(|s| s[j].as_slice());
+            // Both groupings' fits at once: ten fits keep two cores busier than two rounds of five.
+            let (pooled_folds, pooled_regions) = crate::cancel::relayed(|relay| {
+                rayon::join(
+                    || {
+                        relay.run(|| {
+                            pooled(model, data, request, &fold_groups, start, share(0), &keys)
+                        })
+                    },
+                    || {
+                        relay.run(|| {
+                            pooled(model, data, request, &by_region, start, share(1), &keys)
+                        })
+                    },
+                )
+            });
+            let mut v = folds_validation(pooled_folds?, &keys, k, seed);
+            let reg = regions_validation(pooled_regions?, &keys, r, seed);
+            v.regions = Some(r);
+            v.new_region = Some(reg.final_stats().clone());
+            v.by_region = Some(reg);
+            v
+        }
+    };
     v.add_transfer(model, data, request, 0, seed, all)?;
     Ok(v)
 }

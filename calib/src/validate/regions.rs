@@ -57,9 +57,29 @@ pub fn kmeans(points: &[f64], dim: usize, k: usize, seed: u64) -> Vec<usize> {
         "k-means input"
     );
     let n = points.len() / dim;
+    if n <= MAX_FIT_POINTS {
+        let mut rng = StdRng::seed_from_u64(seed ^ 0x0072_6567_696f_6e73);
+        return kmeans_with(points, dim, k, &mut rng).1;
+    }
+    nearest_centres(points, dim, &centres(points, dim, k, seed))
+}
+
+/// The centres (row-major, `dim` per centre; fewer than `k` with fewer distinct points) that
+/// [`kmeans`] places for `points` with `seed`: every point of `points` lies nearest the centre of
+/// its region there (for a clustering that converged within [`MAX_ITERATIONS`] rounds). What a
+/// streamed validation keeps to give each row of a file its region ([`nearest_centre`]).
+///
+/// # Panics
+/// As [`kmeans`].
+pub fn centres(points: &[f64], dim: usize, k: usize, seed: u64) -> Vec<f64> {
+    assert!(
+        k > 0 && dim > 0 && points.len().is_multiple_of(dim),
+        "k-means input"
+    );
+    let n = points.len() / dim;
     let mut rng = StdRng::seed_from_u64(seed ^ 0x0072_6567_696f_6e73);
     if n <= MAX_FIT_POINTS {
-        return kmeans_with(points, dim, k, &mut rng).1;
+        return kmeans_with(points, dim, k, &mut rng).0;
     }
     let mut sample: Vec<usize> = (0..n).collect();
     sample.shuffle(&mut rng);
@@ -69,24 +89,27 @@ pub fn kmeans(points: &[f64], dim: usize, k: usize, seed: u64) -> Vec<usize> {
         .iter()
         .flat_map(|&i| points[i * dim..(i + 1) * dim].iter().copied())
         .collect();
-    let (centres, _) = kmeans_with(&fit_points, dim, k, &mut rng);
-    nearest_centres(points, dim, &centres)
+    kmeans_with(&fit_points, dim, k, &mut rng).0
+}
+
+/// The region of `point` (`dim` values): its nearest centre of `centres` (ties to the lower index),
+/// as [`kmeans`] assigns every point.
+pub fn nearest_centre(point: &[f64], centres: &[f64], dim: usize) -> usize {
+    let mut best = (f64::INFINITY, 0);
+    for (c, centre) in centres.chunks(dim).enumerate() {
+        let d = dist2(point, centre);
+        if d < best.0 {
+            best = (d, c);
+        }
+    }
+    best.1
 }
 
 /// Nearest centre (ties to the lower index) of every point.
 fn nearest_centres(points: &[f64], dim: usize, centres: &[f64]) -> Vec<usize> {
     points
         .par_chunks(dim)
-        .map(|p| {
-            let mut best = (f64::INFINITY, 0);
-            for (c, centre) in centres.chunks(dim).enumerate() {
-                let d = dist2(p, centre);
-                if d < best.0 {
-                    best = (d, c);
-                }
-            }
-            best.1
-        })
+        .map(|p| nearest_centre(p, centres, dim))
         .collect()
 }
 

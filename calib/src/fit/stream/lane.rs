@@ -169,6 +169,20 @@ impl Lane {
         }
     }
 
+    /// The Marquardt damping `μ` the next step takes (where the solve's steps have been trusted).
+    pub fn damping(&self) -> f64 {
+        self.mu
+    }
+
+    /// Starts with the damping `mu` instead of [`LmOptions::initial_damping`]: a solve of a part of
+    /// the rows started at the solution of all of them takes the damping that solve ended with.
+    pub fn with_damping(mut self, mu: f64) -> Self {
+        if mu.is_finite() && mu > 0.0 {
+            self.mu = mu;
+        }
+        self
+    }
+
     /// Whether the next pass must compute the `R` factor at the trial point (module docs).
     pub fn wants_factor(&self) -> bool {
         self.phase == Phase::Running && self.refresh

@@ -47,8 +47,9 @@
 //!   repeats of a pose follow each other).
 //! - Outliers are listed from the [`pass::MAX_CANDIDATES`] rows of largest residual (a warning says
 //!   when more rows qualify).
-//! - The kinematic model only, without a robust loss; validation by folds, a split or regions needs
-//!   the table in memory.
+//! - The kinematic model only, without a robust loss. Cross-validation by folds and regions streams
+//!   too ([`crate::validate::stream`]); a split, another file or leave-one-campaign-out need the
+//!   table in memory.
 
 pub mod lane;
 pub mod pass;
@@ -114,6 +115,13 @@ pub struct StreamedCalibration {
     /// The parameters at which the `R` factor behind the covariance and the rank decision was
     /// computed (the solution, or a point one step or a few before it).
     pub factor_at: crate::model::params::KinematicParams,
+    /// The seeded sample of rows the solve started from, in table order (a streamed validation
+    /// places its regions on its poses).
+    pub sample: MeasurementTable,
+    /// The rows excluded as gross errors (0-based rows of the file, ascending).
+    pub excluded_rows: Vec<usize>,
+    /// The Marquardt damping the full fit's solve ended with.
+    pub final_damping: f64,
 }
 
 /// The kinematic calibration of every row of `source` (module docs), with `options` (no robust
@@ -406,6 +414,9 @@ pub fn calibrate(
             .factor_at()
             .cloned()
             .unwrap_or_else(|| after.lin.clone()),
+        sample: scan.sample,
+        excluded_rows,
+        final_damping: after.damping(),
     })
 }
 

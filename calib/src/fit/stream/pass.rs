@@ -15,7 +15,7 @@ use sim::measurement_table::{Chunk, MeasurementTable};
 
 /// The piece's rows prepared for the solver: source rows numbered file-wide, excluded rows (sorted
 /// 0-based rows of the file) at weight 0.
-fn observations(
+pub(crate) fn observations(
     chunk: &Chunk,
     noise: &NoiseModel,
     name: &str,
@@ -64,7 +64,11 @@ fn renumber(context: &str, offset: usize) -> String {
 }
 
 /// Checks that every row's campaign is one `params` registers.
-fn check_campaigns(obs: &Observations, params: &KinematicParams, name: &str) -> Result<()> {
+pub(crate) fn check_campaigns(
+    obs: &Observations,
+    params: &KinematicParams,
+    name: &str,
+) -> Result<()> {
     obs.campaign_indices_or_error(params, name).map(|_| ())
 }
 
