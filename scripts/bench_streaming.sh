@@ -7,7 +7,9 @@
 # With `calibrate` (or `register`, or `validate`, or a comma-separated list of them) as the second
 # argument, also `calibrate --folds 0`, `register` of the file as a new campaign of the model, and
 # `calibrate` with its default validation (5 folds, 5 regions) (all streamed above 262,144 rows).
-# Usage: [ROBOCAL_BIN=…] scripts/bench_streaming.sh [POSES] [calibrate|register|validate|…,…]
+# With `diagnose`: `diagnose` (streamed: a sample of 100,000 rows diagnosed, the rest predicted) on
+# POSES poses of iiwa7_all, generated beside the others.
+# Usage: [ROBOCAL_BIN=…] scripts/bench_streaming.sh [POSES] [calibrate|register|validate|diagnose|…,…]
 set -euo pipefail
 cd "$(dirname "$0")/.."
 poses="${1:-1000000}"
@@ -42,5 +44,11 @@ if [[ ",$with_calibrate," == *",register,"* ]]; then
 fi
 if [[ ",$with_calibrate," == *",validate,"* ]]; then
   measure "calibrate (5 folds, 5 regions)" calibrate --data "$out/big/measurements.parquet" --out "$out/m.json"
+fi
+if [[ ",$with_calibrate," == *",diagnose,"* ]]; then
+  if [ ! -f "$out/all/measurements.parquet" ]; then
+    "$bin" generate --scenario scenarios/iiwa7_all.toml --out "$out/all" --seed 1 --poses "$poses" >/dev/null 2>&1
+  fi
+  measure "diagnose (iiwa7_all)" diagnose --data "$out/all/measurements.parquet"
 fi
 rm -f "$out/predicted.csv" "$out/m.json" "$out/r.json"

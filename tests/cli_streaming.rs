@@ -344,3 +344,88 @@ fn register_streamed_and_in_memory_agree() {
     assert!(err.contains("row 17501") && err.contains("q2"), "{err}");
     let _ = std::fs::remove_dir_all(&d);
 }
+
+/// `diagnose --stream always` diagnoses a seeded sample of whole poses and predicts the rest: the
+/// JSON keeps the diagnose contract and adds `stream` (rows, sample, the rest's statistics); the
+/// text says what came from the sample; a sample below the smallest is refused, exit 2.
+#[test]
+fn diagnose_streams_through_a_sample_and_predicts_the_rest() {
+    let d = scratch_dir("robocal_cli_stream", "diagnose");
+    let gen_dir = d.join("gen");
+    robocal_ok(&[
+        "generate",
+        "--scenario",
+        &s(&repo().join("scenarios/iiwa7_all.toml")),
+        "--out",
+        &s(&gen_dir),
+        "--seed",
+        "5",
+        "--poses",
+        "3000",
+    ]);
+    let data = gen_dir.join("measurements.parquet");
+    let (stdout, _) = robocal_ok(&[
+        "diagnose",
+        "--data",
+        &s(&data),
+        "--stream",
+        "always",
+        "--sample-rows",
+        "1500",
+        "--chunk-rows",
+        "700",
+        "--json",
+    ]);
+    let doc: serde_json::Value = serde_json::from_str(&stdout).unwrap();
+    let st = &doc["stream"];
+    assert_eq!(st["rows"], 3000, "{st}");
+    assert_eq!(st["passes"], 3);
+    let sample = st["sample_rows"].as_u64().unwrap();
+    let rest = &st["rest"];
+    assert_eq!(sample + rest["rows"].as_u64().unwrap(), 3000);
+    // Half the poses, binomial: σ = 27 poses; within 5σ.
+    assert!(sample.abs_diff(1500) <= 137, "{sample} rows sampled");
+    assert_eq!(rest["model"], doc["model"]);
+    // The contract's fields are there, for the sample.
+    for key in ["findings", "steps", "model", "unexplained"] {
+        assert!(doc.get(key).is_some(), "{key}");
+    }
+    assert_eq!(
+        doc["n_train"].as_u64().unwrap() + doc["n_test"].as_u64().unwrap(),
+        sample
+    );
+    let (k, a) = (
+        rest["kinematic"]["rms_m"].as_f64().unwrap(),
+        rest["adopted"]["rms_m"].as_f64().unwrap(),
+    );
+    assert!(
+        a < k,
+        "the adopted model predicts the rest better: {a} against {k}"
+    );
+    let (_, err) = robocal_ok(&[
+        "diagnose",
+        "--data",
+        &s(&data),
+        "--stream",
+        "always",
+        "--sample-rows",
+        "1500",
+    ]);
+    assert!(
+        err.contains("streamed: diagnosed on a seeded sample"),
+        "{err}"
+    );
+    assert!(err.contains("the rest of the stream"), "{err}");
+    let (code, err) = common::robocal_status(&[
+        "diagnose",
+        "--data",
+        &s(&data),
+        "--stream",
+        "always",
+        "--sample-rows",
+        "10",
+    ]);
+    assert_eq!(code, Some(2), "{err}");
+    assert!(err.contains("--sample-rows 10"), "{err}");
+    std::fs::remove_dir_all(&d).unwrap();
+}

@@ -28,7 +28,7 @@ pub mod stream;
 
 pub use groups::fold_calibrations;
 use groups::*;
-pub use stats::{ByCampaign, ByRegion, FoldStats, HeldOutStats, Validation};
+pub use stats::{ByCampaign, ByRegion, FoldStats, HeldOutStats, HeldOutSum, Validation};
 
 use crate::error::{CalibError, Result};
 use crate::fit::problem::KinematicProblem;

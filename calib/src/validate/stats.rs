@@ -70,6 +70,63 @@ impl HeldOutStats {
     }
 }
 
+/// [`HeldOutStats`] summed row by row, poses as runs of consecutive rows with one key.
+#[derive(Clone, Debug, Default)]
+pub struct HeldOutSum {
+    n: usize,
+    sum2: f64,
+    sum: f64,
+    max: f64,
+    run: Option<((i64, i64), Vector3<f64>, usize)>,
+    iso_sum: f64,
+    poses: usize,
+}
+
+impl HeldOutSum {
+    /// Adds a row of pose `key` with error `e` (m).
+    pub fn add(&mut self, key: (i64, i64), e: &Vector3<f64>) {
+        let v = e.norm();
+        self.n += 1;
+        self.sum2 += v * v;
+        self.sum += v;
+        self.max = self.max.max(v);
+        match &mut self.run {
+            Some((k, s, m)) if *k == key => {
+                *s += e;
+                *m += 1;
+            }
+            _ => {
+                self.close_run();
+                self.run = Some((key, *e, 1));
+            }
+        }
+    }
+
+    fn close_run(&mut self) {
+        if let Some((_, s, m)) = self.run.take() {
+            self.iso_sum += (s / m as f64).norm();
+            self.poses += 1;
+        }
+    }
+
+    /// The statistics of the rows added.
+    pub fn finish(mut self) -> HeldOutStats {
+        self.close_run();
+        if self.n == 0 {
+            return HeldOutStats::default();
+        }
+        let n = self.n as f64;
+        HeldOutStats {
+            n_rows: self.n,
+            n_poses: self.poses,
+            rms_m: (self.sum2 / n).sqrt(),
+            mean_m: self.sum / n,
+            max_m: self.max,
+            iso_mean_m: self.iso_sum / self.poses as f64,
+        }
+    }
+}
+
 /// One fold of a cross-validation.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct FoldStats {

@@ -46,12 +46,13 @@
 //!   says so.
 
 use super::regions;
-use super::stats::{ByRegion, FoldStats, HeldOutStats, Validation};
+use super::stats::{ByRegion, FoldStats, HeldOutSum, Validation};
 use crate::error::{CalibError, Result};
 use crate::fit::CalibrationOptions;
 use crate::fit::problem::{KinematicProblem, Observations, ShareRequest};
 use crate::fit::stream::lane::{Evaluation, Lane, Phase};
 use crate::fit::stream::pass::{check_campaigns, observations};
+use crate::fit::stream::scan::pose_hash;
 use crate::fit::stream::{ChunkSource, StreamedCalibration};
 use crate::model::extensions::Regressors;
 use crate::model::predict::Prediction;
@@ -59,14 +60,6 @@ use nalgebra::{DMatrix, Vector3};
 use sim::Model;
 use sim::measurement_table::MeasurementTable;
 use std::collections::BTreeSet;
-
-/// SplitMix64's finaliser (Steele, Lea and Flood, 2014).
-fn mix(mut z: u64) -> u64 {
-    z = z.wrapping_add(0x9e37_79b9_7f4a_7c15);
-    z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-    z ^ (z >> 31)
-}
 
 /// Salt of the fold hash, so that folds and the streamed fit's sample (keyed by row) are not
 /// correlated for the same seed.
@@ -125,7 +118,7 @@ impl StreamGroups {
 
     /// The fold of the pose `pose` of campaign `campaign`: a seeded hash of both, modulo the folds.
     pub fn fold(&self, campaign: i64, pose: i64) -> usize {
-        let h = mix(mix(mix(self.seed ^ FOLD_SALT) ^ campaign as u64) ^ pose as u64);
+        let h = pose_hash(self.seed ^ FOLD_SALT, campaign, pose);
         (h % self.folds as u64) as usize
     }
 
@@ -207,61 +200,6 @@ impl CellSum {
 struct CellInfo {
     rows: usize,
     campaigns: BTreeSet<i64>,
-}
-
-/// [`HeldOutStats`] summed row by row, poses as runs of consecutive rows with one key.
-#[derive(Clone, Debug, Default)]
-struct HeldOutSum {
-    n: usize,
-    sum2: f64,
-    sum: f64,
-    max: f64,
-    run: Option<((i64, i64), Vector3<f64>, usize)>,
-    iso_sum: f64,
-    poses: usize,
-}
-
-impl HeldOutSum {
-    fn add(&mut self, key: (i64, i64), e: &Vector3<f64>) {
-        let v = e.norm();
-        self.n += 1;
-        self.sum2 += v * v;
-        self.sum += v;
-        self.max = self.max.max(v);
-        match &mut self.run {
-            Some((k, s, m)) if *k == key => {
-                *s += e;
-                *m += 1;
-            }
-            _ => {
-                self.close_run();
-                self.run = Some((key, *e, 1));
-            }
-        }
-    }
-
-    fn close_run(&mut self) {
-        if let Some((_, s, m)) = self.run.take() {
-            self.iso_sum += (s / m as f64).norm();
-            self.poses += 1;
-        }
-    }
-
-    fn finish(mut self) -> HeldOutStats {
-        self.close_run();
-        if self.n == 0 {
-            return HeldOutStats::default();
-        }
-        let n = self.n as f64;
-        HeldOutStats {
-            n_rows: self.n,
-            n_poses: self.poses,
-            rms_m: (self.sum2 / n).sqrt(),
-            mean_m: self.sum / n,
-            max_m: self.max,
-            iso_mean_m: self.iso_sum / self.poses as f64,
-        }
-    }
 }
 
 /// A streamed validation and how it ran.

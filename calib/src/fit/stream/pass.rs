@@ -53,7 +53,7 @@ pub(crate) fn observations(
 }
 
 /// `"{name}: row {k}"` with the piece's row `k` moved by `offset`.
-fn renumber(context: &str, offset: usize) -> String {
+pub(crate) fn renumber(context: &str, offset: usize) -> String {
     match context.rsplit_once(": row ") {
         Some((head, k)) => match k.parse::<usize>() {
             Ok(k) => format!("{head}: row {}", k + offset),

@@ -26,6 +26,13 @@ fn mix(mut z: u64) -> u64 {
     z ^ (z >> 31)
 }
 
+/// A seeded hash of a pose (its campaign and pose id): the same for every row of the pose, however
+/// the file is cut into pieces. Streamed validation deals folds by it, streamed diagnose samples
+/// whole poses by it.
+pub fn pose_hash(seed: u64, campaign: i64, pose: i64) -> u64 {
+    mix(mix(mix(seed) ^ campaign as u64) ^ pose as u64)
+}
+
 /// The sampling key of the 0-based table row `row` under `seed`.
 pub fn row_key(seed: u64, row: usize) -> u64 {
     mix(mix(seed) ^ row as u64)

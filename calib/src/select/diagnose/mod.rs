@@ -44,6 +44,7 @@ pub mod report;
 pub mod screening;
 mod selection;
 pub mod significance;
+pub mod stream;
 mod transfer;
 pub mod unexplained;
 
