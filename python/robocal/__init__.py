@@ -411,6 +411,9 @@ def diagnose(
     data: DataLike,
     *,
     robot: str | os.PathLike[str] | Robot = "iiwa7",
+    stream: str = "auto",
+    sample_rows: int = 100_000,
+    chunk_rows: int = 65_536,
     **options: Any,
 ) -> dict[str, Any]:
     """What the kinematic model misses, its cause and the gain on held-out poses, as ``robocal
@@ -419,12 +422,34 @@ def diagnose(
     Args:
         data: the measurements (DataFrame, dict of arrays, ``.csv``/``.parquet`` path, Dataset).
         robot: a built-in robot name, a URDF path or a :class:`Robot`.
+        stream: for a ``.csv``/``.parquet`` path, whether the file is read in pieces, as ``diagnose
+            --stream``: ``"auto"`` (files of more than 262,144 rows), ``"always"`` or ``"never"``.
+            Streamed, a seeded sample of whole poses (about ``sample_rows`` rows) is diagnosed and
+            every other row predicted by the kinematic and the adopted model fitted on the sample:
+            the document gains ``stream`` (``rows``, ``sample_rows``, ``rest``: the held-out
+            statistics of the rest of the file and the adopted model's ``gain``).
+        sample_rows: rows of the sample a streamed diagnosis diagnoses.
+        chunk_rows: rows read at a time when streaming.
         **options: the ``diagnose`` flags: ``test_fraction=1/3``, ``seed=0``, ``alpha=1e-3``,
             ``noise_floor=None`` (m), ``screen_poses=3000`` (above it the candidates are tried on a
             subsample and the adopted models refitted on every pose); :func:`options` lists them.
     """
     _check_options("diagnose", options)
-    return json.loads(_robocal.diagnose(_robot(robot), to_table(data), flags(options)))
+    rob = _robot(robot)
+    if isinstance(data, (str, os.PathLike)):
+        streamed = _robocal.diagnose_file(
+            rob, os.fspath(data), flags(options), stream, sample_rows, chunk_rows
+        )
+        if streamed is not None:
+            return json.loads(streamed)
+    elif stream == "always":
+        raise BadInput(
+            "stream='always' reads a .csv or .parquet file in pieces, but data is not a file path: a "
+            "DataFrame is in memory already"
+        )
+    elif stream not in ("auto", "never"):
+        raise BadInput(f"stream='{stream}': one of 'auto', 'always' or 'never'")
+    return json.loads(_robocal.diagnose(rob, to_table(data), flags(options)))
 
 
 try:  # for the type annotations only

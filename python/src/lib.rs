@@ -938,6 +938,55 @@ fn diagnose(py: Python<'_>, robot: &Robot, data: &Table, args: Vec<String>) -> P
     Ok(text)
 }
 
+/// Diagnoses the file `path` as `robocal diagnose --data PATH --stream STREAM --sample-rows N
+/// --chunk-rows M --json`: `args` are its value flags. Returns the JSON document as text (with its
+/// `stream` object) when the file is read in pieces, `None` when `stream` keeps it in memory (the
+/// caller reads it as a table).
+#[pyfunction]
+#[pyo3(signature = (robot, path, args, stream, sample_rows, chunk_rows))]
+fn diagnose_file(
+    py: Python<'_>,
+    robot: &Robot,
+    path: String,
+    args: Vec<String>,
+    stream: &str,
+    sample_rows: usize,
+    chunk_rows: usize,
+) -> PyResult<Option<String>> {
+    use robocal::cli::calibrate_stream::StreamMode;
+    let options: diag_cli::Options = quick(py, flags::parse("diagnose", &args))?;
+    let mode = match stream {
+        "auto" => StreamMode::Auto,
+        "always" => StreamMode::Always,
+        "never" => StreamMode::Never,
+        other => {
+            return Err(raise(
+                py,
+                CliError::Input(format!(
+                    "stream='{other}': one of 'auto', 'always' or 'never'"
+                )),
+            ));
+        }
+    };
+    let path = std::path::PathBuf::from(path);
+    let robot = &robot.robot;
+    let streamed = work(py, || {
+        let streaming = diag_cli::Streaming {
+            mode,
+            sample_rows,
+            chunk_rows,
+        };
+        diag_cli::diagnose_file(robot, &path, &options.resolve()?, &streaming)
+    })?;
+    let Some(s) = streamed else {
+        return Ok(None);
+    };
+    warn(py, &s.warnings, 2)?;
+    let mut doc = work(py, || diag_cli::json(&s.diagnosis))?;
+    doc["stream"] = s.json;
+    Ok(Some(doc.to_string()))
+}
+
 /// Generates as `robocal generate --scenario SCENARIO --out OUT`: `args` are its value flags. Returns
 /// the `generate --json` summary text.
 #[pyfunction]
@@ -1011,6 +1060,7 @@ fn _robocal(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(calibrate, m)?)?;
     m.add_function(wrap_pyfunction!(calibrate_file, m)?)?;
     m.add_function(wrap_pyfunction!(diagnose, m)?)?;
+    m.add_function(wrap_pyfunction!(diagnose_file, m)?)?;
     m.add_function(wrap_pyfunction!(register, m)?)?;
     m.add_function(wrap_pyfunction!(register_file, m)?)?;
     m.add_function(wrap_pyfunction!(generate, m)?)?;

@@ -157,6 +157,28 @@ def test_diagnose_gives_the_cli_document(cli, generated, options):
     assert {f["cause"] for f in got["findings"]}  # iiwa7_all hides causes the diagnosis finds
 
 
+def test_diagnose_of_a_file_streams_as_the_cli(cli, generated):
+    """A path streams as `diagnose --stream` (issue 28): the same document, with its `stream` object.
+    The sample (at least 1,000 rows) is here the whole file, so the diagnosis is the in-memory one
+    and nothing is left to predict."""
+    data = generated / "measurements.parquet"
+    expected = cli.json(
+        "diagnose", "--data", data, "--stream", "always", "--sample-rows", "1000", "--chunk-rows", "40"
+    )
+    got = robocal.diagnose(str(data), robot="iiwa7", stream="always", sample_rows=1000, chunk_rows=40)
+    assert got == expected
+    assert got["stream"]["rows"] == 150 and got["stream"]["sample_rows"] == 150
+    assert got["stream"]["rest"] is None
+    in_memory = robocal.diagnose(str(data), robot="iiwa7", stream="never")
+    assert "stream" not in in_memory
+    del got["stream"]
+    assert got == in_memory
+    with pytest.raises(robocal.BadInput, match="data is not a file path"):
+        robocal.diagnose(robocal.read_table(data), robot="iiwa7", stream="always")
+    with pytest.raises(robocal.BadInput, match="--sample-rows 10"):
+        robocal.diagnose(str(data), robot="iiwa7", stream="always", sample_rows=10)
+
+
 def test_test_data_and_base_tip_links_as_the_cli(cli, generated, tmp_path):
     data = generated / "measurements.parquet"
     frame = robocal.read_table(data)

@@ -219,6 +219,72 @@ pub fn json(d: &Diagnosis) -> Result<serde_json::Value, CliError> {
     serde_json::to_value(d).map_err(|e| CliError::Runtime(format!("cannot write JSON: {e}")))
 }
 
+/// How `diagnose` reads a file: `--stream`, `--sample-rows`, `--chunk-rows`.
+#[derive(Clone, Copy, Debug)]
+pub struct Streaming {
+    /// Whether to read the file in pieces.
+    pub mode: StreamMode,
+    /// Rows of the sample diagnosed.
+    pub sample_rows: usize,
+    /// Rows read at a time.
+    pub chunk_rows: usize,
+}
+
+/// A diagnosis of a file read in pieces ([`diagnose_file`]).
+pub struct StreamedFile {
+    /// The diagnosis of the sample.
+    pub diagnosis: Diagnosis,
+    /// The JSON `stream` object.
+    pub json: serde_json::Value,
+    /// The text report's lines on the stream.
+    pub text: String,
+    /// The robot checks' warnings over the whole file.
+    pub warnings: Vec<String>,
+}
+
+/// The streamed diagnosis of the file `path` ([`calib::select::diagnose::stream`]) when `streaming`
+/// says to read it in pieces (`None`: diagnose it in memory), its rows checked against the robot on
+/// the first pass. Bad `--chunk-rows` or `--sample-rows` are input errors naming the flag.
+pub fn diagnose_file(
+    robot: &Robot,
+    path: &std::path::Path,
+    options: &DiagnoseOptions,
+    streaming: &Streaming,
+) -> Result<Option<StreamedFile>, CliError> {
+    check_chunk_rows(streaming.chunk_rows)?;
+    if streaming.sample_rows < MIN_SAMPLE_ROWS {
+        return Err(CliError::Input(format!(
+            "--sample-rows {}: a streamed diagnosis needs a sample of at least {MIN_SAMPLE_ROWS} rows",
+            streaming.sample_rows
+        )));
+    }
+    let stream = match streaming.mode {
+        StreamMode::Never => false,
+        StreamMode::Always => true,
+        StreamMode::Auto => has_more_rows_than(path, STREAM_MIN_ROWS),
+    };
+    if !stream {
+        return Ok(None);
+    }
+    let source = CheckedFile::new(path, streaming.chunk_rows, &robot.model);
+    let mut spinner = Spinner::default();
+    let s = diagnose_streamed(
+        &robot.model,
+        &source,
+        options,
+        streaming.sample_rows,
+        &mut |m| spinner.say(m),
+    );
+    drop(spinner);
+    let s = s?;
+    Ok(Some(StreamedFile {
+        json: s.json(streaming.chunk_rows),
+        text: s.text(),
+        diagnosis: s.diagnosis,
+        warnings: source.warnings(),
+    }))
+}
+
 /// Runs `robocal diagnose`.
 pub fn run(args: Args) -> CliResult {
     let options = args.options.resolve()?;
@@ -246,39 +312,27 @@ pub fn run(args: Args) -> CliResult {
     };
     let robot = Robot::load(&args.robot.robot, &spec)?;
     let name = args.data.display().to_string();
-    check_chunk_rows(args.chunk_rows)?;
-    if args.sample_rows < MIN_SAMPLE_ROWS {
-        return Err(CliError::Input(format!(
-            "--sample-rows {}: a streamed diagnosis needs a sample of at least {MIN_SAMPLE_ROWS} rows",
-            args.sample_rows
-        )));
-    }
-    let stream = match args.stream {
-        StreamMode::Never => false,
-        StreamMode::Always => true,
-        StreamMode::Auto => has_more_rows_than(&args.data, STREAM_MIN_ROWS),
-    };
-    let (d, streamed) = if stream {
-        let source = CheckedFile::new(&args.data, args.chunk_rows, &robot.model);
-        let mut spinner = Spinner::default();
-        let s = diagnose_streamed(
-            &robot.model,
-            &source,
-            &options,
-            args.sample_rows,
-            &mut |m| spinner.say(m),
-        );
-        drop(spinner);
-        let s = s?;
-        for w in source.warnings() {
-            eprintln!("warning: {w}");
+    let streamed = diagnose_file(
+        &robot,
+        &args.data,
+        &options,
+        &Streaming {
+            mode: args.stream,
+            sample_rows: args.sample_rows,
+            chunk_rows: args.chunk_rows,
+        },
+    )?;
+    let (d, streamed) = match streamed {
+        Some(s) => {
+            for w in &s.warnings {
+                eprintln!("warning: {w}");
+            }
+            (s.diagnosis, Some((s.json, s.text)))
         }
-        let json = s.json(args.chunk_rows);
-        let text = s.text();
-        (s.diagnosis, Some((json, text)))
-    } else {
-        let table = read_table(&args.data, &robot.model)?;
-        (run_diagnosis(&robot.model, &table, &name, &options)?, None)
+        None => {
+            let table = read_table(&args.data, &robot.model)?;
+            (run_diagnosis(&robot.model, &table, &name, &options)?, None)
+        }
     };
     if let Some(dir) = &args.report {
         let files = report::write(dir, &d, &d.plots, &name)?;
