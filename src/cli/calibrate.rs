@@ -430,7 +430,8 @@ pub fn run(args: Args) -> CliResult {
     if let (true, false, Some(r), false) = (large, stream, &memory_reason, args.json) {
         eprintln!(
             "note: {data_name} has more than {STREAM_MIN_ROWS} rows, held in memory for {r}; \
-             the kinematic model with --folds 0 and no --robust reads them in pieces"
+             the kinematic model without --robust, --test-fraction or --test-data reads them in \
+             pieces"
         );
     }
     let mut spinner = super::diagnose::Spinner::default();
