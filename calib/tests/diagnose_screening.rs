@@ -3,30 +3,14 @@
 //! and every figure it reports of the adopted models (steps, gains, paired and training `z`) is that
 //! of the fits on every pose, not of the subsample.
 
+mod common;
+
 use calib::select::diagnose::{DiagnoseOptions, diagnose};
-use sim::scenario::{Overrides, Scenario};
 
 /// 600 poses of the iiwa 7 with geometric errors, compliance at joints 2 and 4 and backlash at
 /// joints 1 and 3 (the diagnose benchmark's data, twice the poses).
 fn data() -> (sim::Model, sim::measurement_table::MeasurementTable) {
-    let base = include_str!("../../scenarios/iiwa7_kinematic.toml");
-    let text = format!(
-        "{base}\n[effects.compliance]\nstiffness_nm_per_rad = [inf, 1.2e4, inf, 8e3, inf, inf, inf]\n\
-         [effects.backlash]\ndead_band_rad = [4e-4, 0.0, 3e-4, 0.0, 0.0, 0.0, 0.0]\nmode = \"direction\"\n"
-    );
-    let sc = Scenario::parse(&text, "screening", std::path::Path::new(".")).unwrap();
-    let res = sc
-        .resolve(&Overrides {
-            seed: Some(11),
-            poses: Some(600),
-            noise: None,
-        })
-        .unwrap();
-    let dir = std::env::temp_dir().join(format!("robocal_screening_{}", std::process::id()));
-    sim::generate::generate(&res, &dir, None).unwrap();
-    let table = sim::measurement_table::read(&dir.join("measurements.parquet")).unwrap();
-    let _ = std::fs::remove_dir_all(&dir);
-    (res.model, table)
+    common::simulate_iiwa7(common::COMPLIANCE_AND_BACKLASH, 11, 600)
 }
 
 #[test]

@@ -12,33 +12,13 @@ use calib::select::diagnose::stream::{diagnose_streamed, in_sample};
 use calib::select::diagnose::{DiagnoseOptions, diagnose};
 use calib::validate::{HeldOutStats, held_out_errors};
 use sim::measurement_table::MeasurementTable;
-use sim::scenario::{Overrides, Scenario};
 
 /// `poses` poses of the iiwa 7 with geometric errors, compliance at joints 2 and 4 and backlash at
 /// joints 1 and 3, each row written twice (a pose measured twice, the repeats consecutive).
 fn data(poses: usize, seed: u64) -> (sim::Model, MeasurementTable) {
-    let base = include_str!("../../scenarios/iiwa7_kinematic.toml");
-    let text = format!(
-        "{base}\n[effects.compliance]\nstiffness_nm_per_rad = [inf, 1.2e4, inf, 8e3, inf, inf, inf]\n\
-         [effects.backlash]\ndead_band_rad = [4e-4, 0.0, 3e-4, 0.0, 0.0, 0.0, 0.0]\nmode = \"direction\"\n"
-    );
-    let sc = Scenario::parse(&text, "stream", std::path::Path::new(".")).unwrap();
-    let res = sc
-        .resolve(&Overrides {
-            seed: Some(seed),
-            poses: Some(poses),
-            noise: None,
-        })
-        .unwrap();
-    let dir = std::env::temp_dir().join(format!(
-        "robocal_diagnose_stream_{}_{seed}",
-        std::process::id()
-    ));
-    sim::generate::generate(&res, &dir, None).unwrap();
-    let once = sim::measurement_table::read(&dir.join("measurements.parquet")).unwrap();
-    let _ = std::fs::remove_dir_all(&dir);
+    let (model, once) = common::simulate_iiwa7(common::COMPLIANCE_AND_BACKLASH, seed, poses);
     let twice: Vec<usize> = (0..once.len()).flat_map(|r| [r, r]).collect();
-    (res.model, once.select_rows(&twice))
+    (model, once.select_rows(&twice))
 }
 
 #[test]

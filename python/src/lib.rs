@@ -776,6 +776,25 @@ type Calibrated = (Option<CalibratedModel>, String, Option<String>);
 /// failure message or None)`, or `None` when the table is to be held in memory (`never`; `auto` with
 /// a small file or options that need it), for the caller to read it; the robot checks' warnings are
 /// issued as `DataWarning`s.
+/// The `stream=` keyword of the functions that read a file in pieces (`--stream`).
+fn stream_mode(
+    py: Python<'_>,
+    stream: &str,
+) -> PyResult<robocal::cli::calibrate_stream::StreamMode> {
+    use robocal::cli::calibrate_stream::StreamMode;
+    match stream {
+        "auto" => Ok(StreamMode::Auto),
+        "always" => Ok(StreamMode::Always),
+        "never" => Ok(StreamMode::Never),
+        other => Err(raise(
+            py,
+            CliError::Input(format!(
+                "stream='{other}': one of 'auto', 'always' or 'never'"
+            )),
+        )),
+    }
+}
+
 #[pyfunction]
 #[pyo3(signature = (robot, path, args, stream, chunk_rows))]
 fn calibrate_file(
@@ -786,21 +805,8 @@ fn calibrate_file(
     stream: &str,
     chunk_rows: usize,
 ) -> PyResult<Option<Calibrated>> {
-    use robocal::cli::calibrate_stream::StreamMode;
     let options: cal_cli::Options = quick(py, flags::parse("calibrate", &args))?;
-    let mode = match stream {
-        "auto" => StreamMode::Auto,
-        "always" => StreamMode::Always,
-        "never" => StreamMode::Never,
-        other => {
-            return Err(raise(
-                py,
-                CliError::Input(format!(
-                    "stream='{other}': one of 'auto', 'always' or 'never'"
-                )),
-            ));
-        }
-    };
+    let mode = stream_mode(py, stream)?;
     let path = std::path::PathBuf::from(path);
     let robot = &robot.robot;
     let streamed = work(py, || {
@@ -881,21 +887,8 @@ fn register_file(
     stream: &str,
     chunk_rows: usize,
 ) -> PyResult<Option<(CalibratedModel, String)>> {
-    use robocal::cli::calibrate_stream::StreamMode;
     let options: reg_cli::Options = quick(py, flags::parse("register", &args))?;
-    let mode = match stream {
-        "auto" => StreamMode::Auto,
-        "always" => StreamMode::Always,
-        "never" => StreamMode::Never,
-        other => {
-            return Err(raise(
-                py,
-                CliError::Input(format!(
-                    "stream='{other}': one of 'auto', 'always' or 'never'"
-                )),
-            ));
-        }
-    };
+    let mode = stream_mode(py, stream)?;
     let path = std::path::PathBuf::from(path);
     let done = work(py, || {
         let (stream, _) = cal_cli::decide_stream(mode, &path, None)?;
@@ -953,21 +946,8 @@ fn diagnose_file(
     sample_rows: usize,
     chunk_rows: usize,
 ) -> PyResult<Option<String>> {
-    use robocal::cli::calibrate_stream::StreamMode;
     let options: diag_cli::Options = quick(py, flags::parse("diagnose", &args))?;
-    let mode = match stream {
-        "auto" => StreamMode::Auto,
-        "always" => StreamMode::Always,
-        "never" => StreamMode::Never,
-        other => {
-            return Err(raise(
-                py,
-                CliError::Input(format!(
-                    "stream='{other}': one of 'auto', 'always' or 'never'"
-                )),
-            ));
-        }
-    };
+    let mode = stream_mode(py, stream)?;
     let path = std::path::PathBuf::from(path);
     let robot = &robot.robot;
     let streamed = work(py, || {

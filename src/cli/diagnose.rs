@@ -1,8 +1,6 @@
 //! `robocal diagnose`: what the kinematic model misses, its cause, and the gain on held-out poses.
 
-use super::calibrate_stream::{
-    CheckedFile, STREAM_MIN_ROWS, StreamMode, check_chunk_rows, has_more_rows_than,
-};
+use super::calibrate_stream::{CheckedFile, StreamMode, check_chunk_rows};
 use super::paths::Inputs;
 use super::robot_arg::RobotArgs;
 use super::shared::{CliError, CliResult, print_json, read_table};
@@ -258,11 +256,7 @@ pub fn diagnose_file(
             streaming.sample_rows
         )));
     }
-    let stream = match streaming.mode {
-        StreamMode::Never => false,
-        StreamMode::Always => true,
-        StreamMode::Auto => has_more_rows_than(path, STREAM_MIN_ROWS),
-    };
+    let (stream, _) = super::calibrate::decide_stream(streaming.mode, path, None)?;
     if !stream {
         return Ok(None);
     }

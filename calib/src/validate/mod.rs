@@ -186,26 +186,8 @@ fn check_groups(
 
 /// The validation of `k` folds (seed `seed`) from their pooled errors.
 fn folds_validation(pooled: Pooled, keys: &[(i64, i64)], k: usize, seed: u64) -> Validation {
-    let (before, after, learned) = pooled.stats(keys);
-    let per_fold = pooled.per_group;
-    let rms: Vec<f64> = per_fold.iter().map(|f| f.held_out.rms_m).collect();
-    let mean = rms.iter().sum::<f64>() / k as f64;
-    let spread = (rms.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (k - 1) as f64).sqrt();
-    Validation {
-        kind: "cross_validation".into(),
-        folds: Some(k),
-        seed: Some(seed),
-        before,
-        after,
-        learned,
-        per_fold,
-        fold_rms_spread_m: Some(spread),
-        regions: None,
-        new_region: None,
-        by_region: None,
-        new_campaign: None,
-        by_campaign: None,
-    }
+    let stats = pooled.stats(keys);
+    Validation::cross_validation(k, seed, stats, pooled.per_group)
 }
 
 /// The leave-one-region-out validation of `k` regions (seed `seed`) from their pooled errors.
@@ -346,9 +328,7 @@ pub fn cross_validate_labelled(
             });
             let mut v = folds_validation(pooled_folds?, &keys, k, seed);
             let reg = regions_validation(pooled_regions?, &keys, r, seed);
-            v.regions = Some(r);
-            v.new_region = Some(reg.final_stats().clone());
-            v.by_region = Some(reg);
+            v.set_regions(reg);
             v
         }
     };
@@ -442,10 +422,7 @@ impl Validation {
     ) -> Result<()> {
         let request = request.clone().judged_on(None);
         if k >= 2 {
-            let r = validate_by_region(model, data, &request, k, seed, all)?;
-            self.regions = Some(k);
-            self.new_region = Some(r.final_stats().clone());
-            self.by_region = Some(r);
+            self.set_regions(validate_by_region(model, data, &request, k, seed, all)?);
         }
         if let Some(c) = validate_by_campaign(model, data, &request, seed)? {
             self.new_campaign = Some(c.learned.clone().unwrap_or_else(|| c.after.clone()));

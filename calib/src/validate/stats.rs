@@ -218,6 +218,46 @@ pub struct ByCampaign {
 }
 
 impl Validation {
+    /// A `k`-fold cross-validation (seed `seed`): the pooled held-out statistics of the nominal,
+    /// physical and learned models and the folds' own, with the spread of the folds' RMS (`None`
+    /// with fewer than two folds predicted). Regions and campaigns are added after.
+    pub fn cross_validation(
+        k: usize,
+        seed: u64,
+        (before, after, learned): (HeldOutStats, HeldOutStats, Option<HeldOutStats>),
+        per_fold: Vec<FoldStats>,
+    ) -> Self {
+        let rms: Vec<f64> = per_fold.iter().map(|f| f.held_out.rms_m).collect();
+        let n = rms.len() as f64;
+        let spread = (rms.len() >= 2).then(|| {
+            let mean = rms.iter().sum::<f64>() / n;
+            (rms.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1.0)).sqrt()
+        });
+        Validation {
+            kind: "cross_validation".into(),
+            folds: Some(k),
+            seed: Some(seed),
+            before,
+            after,
+            learned,
+            per_fold,
+            fold_rms_spread_m: spread,
+            regions: None,
+            new_region: None,
+            by_region: None,
+            new_campaign: None,
+            by_campaign: None,
+        }
+    }
+
+    /// Adds the leave-one-region-out validation `r`, and its final model's figures as the promise
+    /// for a new region.
+    pub fn set_regions(&mut self, r: ByRegion) {
+        self.regions = Some(r.regions);
+        self.new_region = Some(r.final_stats().clone());
+        self.by_region = Some(r);
+    }
+
     /// The final model's held-out errors: with the learned correction when there is one.
     pub fn final_stats(&self) -> &HeldOutStats {
         self.learned.as_ref().unwrap_or(&self.after)

@@ -682,30 +682,16 @@ pub fn validate_streamed(
         });
     }
     let [per_fold, per_region] = per;
-    let rms: Vec<f64> = per_fold.iter().map(|f| f.held_out.rms_m).collect();
-    let spread = (rms.len() >= 2).then(|| {
-        let mean = rms.iter().sum::<f64>() / rms.len() as f64;
-        (rms.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (rms.len() - 1) as f64).sqrt()
-    });
     let mut pooled = held.pooled.into_iter();
     let [fold_before, fold_after] = pooled.next().expect("the folds");
-    let mut validation = Validation {
-        kind: "cross_validation".into(),
-        folds: Some(folds),
-        seed: Some(seed),
-        before: fold_before.finish(),
-        after: fold_after.finish(),
-        learned: None,
+    let mut validation = Validation::cross_validation(
+        folds,
+        seed,
+        (fold_before.finish(), fold_after.finish(), None),
         per_fold,
-        fold_rms_spread_m: spread,
-        regions: None,
-        new_region: None,
-        by_region: None,
-        new_campaign: None,
-        by_campaign: None,
-    };
+    );
     if let Some([region_before, region_after]) = pooled.next() {
-        let by_region = ByRegion {
+        validation.set_regions(ByRegion {
             regions,
             seed,
             before: region_before.finish(),
@@ -713,10 +699,7 @@ pub fn validate_streamed(
             learned: None,
             per_region,
             n_rows_not_predicted: held.dropped[1],
-        };
-        validation.regions = Some(regions);
-        validation.new_region = Some(by_region.final_stats().clone());
-        validation.by_region = Some(by_region);
+        });
     }
     if held.dropped[0] > 0 {
         warnings.push(format!(

@@ -237,3 +237,35 @@ pub fn stopping_bound(
     (options.lm.decrease_tol + options.lm.relative_decrease_tol * chi2).sqrt()
         / c.report.chi2_per_dof.sqrt()
 }
+
+/// Compliance at joints 2 and 4 (12,000 and 8,000 N m/rad) and backlash at joints 1 and 3 (0.4 and
+/// 0.3 mrad, by the direction of approach): the `[effects]` of the diagnose benchmark's data.
+pub const COMPLIANCE_AND_BACKLASH: &str = "[effects.compliance]\n\
+    stiffness_nm_per_rad = [inf, 1.2e4, inf, 8e3, inf, inf, inf]\n\
+    [effects.backlash]\ndead_band_rad = [4e-4, 0.0, 3e-4, 0.0, 0.0, 0.0, 0.0]\nmode = \"direction\"\n";
+
+/// `poses` poses of the iiwa 7 with drawn geometric errors (scenarios/iiwa7_kinematic.toml) and
+/// `effects` (TOML), simulated by sim with `seed`: the robot and the measurement table.
+pub fn simulate_iiwa7(effects: &str, seed: u64, poses: usize) -> (Model, MeasurementTable) {
+    use sim::scenario::{Overrides, Scenario};
+    let base = include_str!("../../../scenarios/iiwa7_kinematic.toml");
+    let text = format!("{base}\n{effects}");
+    let sc = Scenario::parse(&text, "calib test", std::path::Path::new(".")).unwrap();
+    let res = sc
+        .resolve(&Overrides {
+            seed: Some(seed),
+            poses: Some(poses),
+            noise: None,
+        })
+        .unwrap();
+    static RUN: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
+    let dir = std::env::temp_dir().join(format!(
+        "robocal_calib_test_{}_{}",
+        std::process::id(),
+        RUN.fetch_add(1, std::sync::atomic::Ordering::Relaxed)
+    ));
+    sim::generate::generate(&res, &dir, None).unwrap();
+    let table = sim::measurement_table::read(&dir.join("measurements.parquet")).unwrap();
+    let _ = std::fs::remove_dir_all(&dir);
+    (res.model, table)
+}

@@ -22,23 +22,9 @@ pub(crate) fn observations(
     excluded: &[usize],
 ) -> Result<Observations> {
     let rows: Vec<usize> = (0..chunk.table.len()).collect();
-    let mut obs = Observations::from_table(&chunk.table, &rows, noise, name).map_err(|e| {
-        // Observations name the piece's row: move it to the file's.
-        match e {
-            CalibError::BadValue {
-                context,
-                field,
-                value,
-                problem,
-            } => CalibError::BadValue {
-                context: renumber(&context, chunk.first_row),
-                field,
-                value,
-                problem,
-            },
-            other => other,
-        }
-    })?;
+    // Observations name the piece's row: move it to the file's.
+    let mut obs = Observations::from_table(&chunk.table, &rows, noise, name)
+        .map_err(|e| in_file(e, chunk.first_row))?;
     for r in &mut obs.source_row {
         *r += chunk.first_row;
     }
@@ -52,8 +38,27 @@ pub(crate) fn observations(
     Ok(obs)
 }
 
+/// `e` with the row of a piece starting at the file's 0-based row `first_row` in its context
+/// moved to the file's row ([`renumber`]); other errors as they are.
+pub(crate) fn in_file(e: CalibError, first_row: usize) -> CalibError {
+    match e {
+        CalibError::BadValue {
+            context,
+            field,
+            value,
+            problem,
+        } => CalibError::BadValue {
+            context: renumber(&context, first_row),
+            field,
+            value,
+            problem,
+        },
+        other => other,
+    }
+}
+
 /// `"{name}: row {k}"` with the piece's row `k` moved by `offset`.
-pub(crate) fn renumber(context: &str, offset: usize) -> String {
+fn renumber(context: &str, offset: usize) -> String {
     match context.rsplit_once(": row ") {
         Some((head, k)) => match k.parse::<usize>() {
             Ok(k) => format!("{head}: row {}", k + offset),

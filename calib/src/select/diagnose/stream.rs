@@ -22,6 +22,7 @@
 use super::{DiagnoseOptions, Diagnosis, diagnose_with_progress};
 use crate::error::{CalibError, Result};
 use crate::fit::stream::ChunkSource;
+use crate::fit::stream::pass::in_file;
 use crate::fit::stream::scan::pose_hash;
 use crate::fit::{Calibration, Dataset, FitRequest, Part, fit};
 use crate::model::spec::ModelSpec;
@@ -112,24 +113,6 @@ pub fn in_sample(seed: u64, fraction: f64, campaign: i64, pose: i64) -> bool {
     }
     let h = pose_hash(seed ^ SAMPLE_SALT, campaign, pose);
     (h as f64) < fraction * (u64::MAX as f64)
-}
-
-/// Moves a piece's row in an error's context to the file's row.
-fn in_file(e: CalibError, first_row: usize) -> CalibError {
-    match e {
-        CalibError::BadValue {
-            context,
-            field,
-            value,
-            problem,
-        } => CalibError::BadValue {
-            context: crate::fit::stream::pass::renumber(&context, first_row),
-            field,
-            value,
-            problem,
-        },
-        other => other,
-    }
 }
 
 /// Diagnoses the rows of `source` through a seeded sample of about `sample_rows` rows of whole poses
