@@ -811,7 +811,8 @@ fn calibrate_file(
     let robot = &robot.robot;
     let streamed = work(py, || {
         let reason = options.needs_memory(false);
-        let (stream, _) = cal_cli::decide_stream(mode, &path, reason.as_deref())?;
+        let (stream, _) =
+            robocal::cli::calibrate_stream::decide_stream(mode, &path, reason.as_deref())?;
         if !stream {
             return Ok(None);
         }
@@ -891,7 +892,7 @@ fn register_file(
     let mode = stream_mode(py, stream)?;
     let path = std::path::PathBuf::from(path);
     let done = work(py, || {
-        let (stream, _) = cal_cli::decide_stream(mode, &path, None)?;
+        let (stream, _) = robocal::cli::calibrate_stream::decide_stream(mode, &path, None)?;
         if !stream {
             return Ok(None);
         }

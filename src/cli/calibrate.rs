@@ -1,7 +1,7 @@
 //! `robocal calibrate`: identify the kinematic error model from a measurement table.
 
 use super::calibrate_stream::{
-    CheckedFile, STREAM_MIN_ROWS, StreamMode, check_chunk_rows, describe, has_more_rows_than,
+    CheckedFile, STREAM_MIN_ROWS, StreamMode, check_chunk_rows, decide_stream, describe,
     needs_memory,
 };
 use super::paths::{Inputs, check_distinct};
@@ -535,29 +535,6 @@ pub fn run(args: Args) -> CliResult {
             eprintln!("wrote {}", p.display());
         }
         Ok(())
-    }
-}
-
-/// Whether `calibrate` reads `path` in pieces under `mode`, given why the options need the table in
-/// memory (`memory_reason`), and whether the file has more than [`STREAM_MIN_ROWS`] rows (known
-/// under `auto` only). `--stream always` with such options is an input error naming them.
-pub fn decide_stream(
-    mode: StreamMode,
-    path: &Path,
-    memory_reason: Option<&str>,
-) -> Result<(bool, bool), CliError> {
-    match mode {
-        StreamMode::Never => Ok((false, false)),
-        StreamMode::Always => match memory_reason {
-            Some(r) => Err(CliError::Input(format!(
-                "--stream always: {r} needs the table in memory"
-            ))),
-            None => Ok((true, false)),
-        },
-        StreamMode::Auto => {
-            let large = has_more_rows_than(path, STREAM_MIN_ROWS);
-            Ok((large && memory_reason.is_none(), large))
-        }
     }
 }
 

@@ -46,6 +46,29 @@ pub fn needs_memory(
     }
 }
 
+/// Whether a command reads `path` in pieces under `mode`, given why the options need the table in
+/// memory (`memory_reason`), and whether the file has more than [`STREAM_MIN_ROWS`] rows (known
+/// under `auto` only). `--stream always` with such options is an input error naming them.
+pub fn decide_stream(
+    mode: StreamMode,
+    path: &Path,
+    memory_reason: Option<&str>,
+) -> Result<(bool, bool), CliError> {
+    match mode {
+        StreamMode::Never => Ok((false, false)),
+        StreamMode::Always => match memory_reason {
+            Some(r) => Err(CliError::Input(format!(
+                "--stream always: {r} needs the table in memory"
+            ))),
+            None => Ok((true, false)),
+        },
+        StreamMode::Auto => {
+            let large = has_more_rows_than(path, STREAM_MIN_ROWS);
+            Ok((large && memory_reason.is_none(), large))
+        }
+    }
+}
+
 /// Whether the file has more than `n` rows, reading at most about that many. A file that cannot be
 /// read counts as small: the in-memory read reports its error.
 pub fn has_more_rows_than(path: &Path, n: usize) -> bool {

@@ -1,6 +1,6 @@
 //! `robocal diagnose`: what the kinematic model misses, its cause, and the gain on held-out poses.
 
-use super::calibrate_stream::{CheckedFile, StreamMode, check_chunk_rows};
+use super::calibrate_stream::{CheckedFile, StreamMode, check_chunk_rows, decide_stream};
 use super::paths::Inputs;
 use super::robot_arg::RobotArgs;
 use super::shared::{CliError, CliResult, print_json, read_table};
@@ -256,7 +256,7 @@ pub fn diagnose_file(
             streaming.sample_rows
         )));
     }
-    let (stream, _) = super::calibrate::decide_stream(streaming.mode, path, None)?;
+    let (stream, _) = decide_stream(streaming.mode, path, None)?;
     if !stream {
         return Ok(None);
     }

@@ -1,7 +1,7 @@
 //! `robocal register`: a new measurement campaign (the tracker was moved) for a calibrated model.
 
 use super::calibrate::Named;
-use super::calibrate::decide_stream;
+use super::calibrate_stream::decide_stream;
 use super::calibrate_stream::{CheckedFile, StreamMode, check_chunk_rows};
 use super::paths::Inputs;
 use super::shared::{CliError, CliResult, print_json, read_table};
