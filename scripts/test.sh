@@ -44,6 +44,7 @@ live="target/golden-live"
 mkdir -p "$live"
 "$py" scripts/mujoco_reference.py --out "$live" --compare-to golden
 "$py" scripts/mujoco_branches.py --out "$live" --compare-to golden
+"$py" scripts/mujoco_coupled.py --out "$live" --compare-to golden
 export ROBOCAL_GOLDEN_LIVE="$PWD/$live"
 
 echo "== Parquet as pandas, polars and DuckDB write it (read back by the Rust tests)" >&2

@@ -79,7 +79,7 @@ fn extension_columns_match_central_differences() {
         &data,
         &CalibrationOptions::default(),
         Some(&settings),
-        &at,
+        Some(&KinematicParams::nominal(model.nq(), false).with_extension(at.clone())),
     )
     .unwrap();
     let mut params = KinematicParams::nominal(model.nq(), false).with_extension(at.clone());
@@ -233,7 +233,7 @@ fn the_model_file_carries_extensions_and_learned_correction_to_predict() {
         &data,
         &options,
         cal.extensions.as_ref(),
-        &cal.params.extension,
+        Some(&cal.params),
     )
     .unwrap();
     let err = position_errors(&model, &cal.params, &obs);
@@ -304,7 +304,7 @@ fn a_cause_at_some_of_its_joints_fits_only_those_and_round_trips() {
         &data,
         &options,
         cal.extensions.as_ref(),
-        &cal.params.extension,
+        Some(&cal.params),
     )
     .unwrap();
     let err = position_errors(&model, &cal.params, &obs);

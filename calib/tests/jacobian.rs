@@ -213,7 +213,11 @@ fn extended_jacobian_matches_central_differences() {
             &Dataset::all(&t, "t"),
             &CalibrationOptions::default(),
             Some(&settings),
-            &at,
+            // Torques on the nominal robot, at the extension values `at`.
+            Some(
+                &calib::model::params::KinematicParams::nominal(model.nq(), false)
+                    .with_extension(at.clone()),
+            ),
         )
         .unwrap();
         let mut params = truth_params(&truth).with_extension(at.clone());

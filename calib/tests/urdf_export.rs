@@ -62,6 +62,7 @@ fn model_file(text: &str, model: &Model, truth: &Truth, model_name: &str) -> Cal
             tip_link: model.tip_link().to_string(),
             urdf: text.to_string(),
             urdf_fnv1a64: None,
+            couplings: Vec::new(),
         },
         parameters: ModelParameters {
             joint_error_twists: truth

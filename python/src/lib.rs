@@ -28,8 +28,8 @@ use robocal::cli::{
     plan_poses as plan_cli, predict, register as reg_cli,
 };
 use robocal::error::CliError;
+use sim::Frame;
 use sim::measurement_table::{self, Column, ColumnValues, MeasurementTable};
-use sim::{ChainSpec, Frame};
 use std::panic::AssertUnwindSafe;
 use std::path::Path;
 use std::sync::{Arc, Mutex};
@@ -121,22 +121,23 @@ struct Robot {
 impl Robot {
     /// Loads a robot: a URDF file path, or a built-in name (`iiwa7`, `ur5`, `ur10`, `wam`). The chain
     /// runs from `base_link` (default: the URDF's root link) to `tip_link` (default: its single leaf).
+    /// `couplings`: a TOML file of coupled joints declared beside the URDF (as `--couplings`).
     #[staticmethod]
-    #[pyo3(signature = (robot = "iiwa7", base_link = None, tip_link = None))]
+    #[pyo3(signature = (robot = "iiwa7", base_link = None, tip_link = None, couplings = None))]
     fn load(
         py: Python<'_>,
         robot: &str,
         base_link: Option<String>,
         tip_link: Option<String>,
+        couplings: Option<String>,
     ) -> PyResult<Self> {
-        let spec = ChainSpec {
+        let args = robocal::cli::robot_arg::RobotArgs {
+            robot: robot.to_string(),
             base_link,
             tip_link,
+            couplings: couplings.map(std::path::PathBuf::from),
         };
-        let robot = quick(
-            py,
-            calib::model::robot::Robot::load(robot, &spec).map_err(CliError::from),
-        )?;
+        let robot = quick(py, args.load_robot())?;
         Ok(Robot { robot })
     }
 
@@ -722,11 +723,19 @@ fn calibrate(
     let options: cal_cli::Options = quick(py, flags::parse("calibrate", &args))?;
     let robot = &robot.robot;
     let (outcome, warnings) = work(py, || {
-        let mut warnings =
-            robocal::cli::shared::check_table(&data.table, &robot.model, &data.source)?;
-        if let Some(t) = test {
-            warnings.extend(robocal::cli::shared::check_table(
+        let whole = robocal::cli::shared::whole_chain(&data.table, &robot.model, &data.source)?;
+        let mut warnings = robocal::cli::shared::check_table(&whole, &robot.model, &data.source)?;
+        let test_whole = match test {
+            Some(t) => Some(robocal::cli::shared::whole_chain(
                 &t.table,
+                &robot.model,
+                &t.source,
+            )?),
+            None => None,
+        };
+        if let (Some(t), Some(w)) = (test, &test_whole) {
+            warnings.extend(robocal::cli::shared::check_table(
+                w,
                 &robot.model,
                 &t.source,
             )?);
@@ -734,13 +743,14 @@ fn calibrate(
         let outcome = cal_cli::calibrate(
             robot,
             cal_cli::Named {
-                table: &data.table,
+                table: &whole,
                 name: &data.source,
             },
-            test.map(|t| cal_cli::Named {
-                table: &t.table,
-                name: &t.source,
-            }),
+            test.zip(test_whole.as_deref())
+                .map(|(t, w)| cal_cli::Named {
+                    table: w,
+                    name: &t.source,
+                }),
             &options,
             &mut |_| {},
             &mut |_| {},
@@ -811,8 +821,12 @@ fn calibrate_file(
     let robot = &robot.robot;
     let streamed = work(py, || {
         let reason = options.needs_memory(false);
-        let (stream, _) =
-            robocal::cli::calibrate_stream::decide_stream(mode, &path, reason.as_deref())?;
+        let (stream, _) = robocal::cli::calibrate_stream::decide_stream(
+            mode,
+            &path,
+            reason.as_deref(),
+            &robot.model,
+        )?;
         if !stream {
             return Ok(None);
         }
@@ -857,11 +871,12 @@ fn register(
     let options: reg_cli::Options = quick(py, flags::parse("register", &args))?;
     let (file, report, warnings) = work(py, || {
         let robot = Predictor::from_file(&model.file)?.model;
-        let warnings = robocal::cli::shared::check_table(&data.table, &robot, &data.source)?;
+        let whole = robocal::cli::shared::whole_chain(&data.table, &robot, &data.source)?;
+        let warnings = robocal::cli::shared::check_table(&whole, &robot, &data.source)?;
         let (file, report) = reg_cli::register(
             &model.file,
             cal_cli::Named {
-                table: &data.table,
+                table: &whole,
                 name: &data.source,
             },
             &options,
@@ -892,7 +907,8 @@ fn register_file(
     let mode = stream_mode(py, stream)?;
     let path = std::path::PathBuf::from(path);
     let done = work(py, || {
-        let (stream, _) = robocal::cli::calibrate_stream::decide_stream(mode, &path, None)?;
+        let robot = model.file.robot_model()?;
+        let (stream, _) = robocal::cli::calibrate_stream::decide_stream(mode, &path, None, &robot)?;
         if !stream {
             return Ok(None);
         }
@@ -918,10 +934,11 @@ fn diagnose(py: Python<'_>, robot: &Robot, data: &Table, args: Vec<String>) -> P
     let options: diag_cli::Options = quick(py, flags::parse("diagnose", &args))?;
     let robot = &robot.robot;
     let (text, warnings) = work(py, || {
-        let warnings = robocal::cli::shared::check_table(&data.table, &robot.model, &data.source)?;
+        let whole = robocal::cli::shared::whole_chain(&data.table, &robot.model, &data.source)?;
+        let warnings = robocal::cli::shared::check_table(&whole, &robot.model, &data.source)?;
         let d = diag_cli::run_diagnosis_with(
             &robot.model,
-            &data.table,
+            &whole,
             &data.source,
             &options.resolve()?,
             &mut |_| {},

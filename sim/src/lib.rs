@@ -25,6 +25,7 @@
 #![warn(missing_docs)]
 
 pub mod campaign;
+pub mod coupled_joints;
 pub mod decoder_guard;
 pub mod effect_id;
 pub mod effects;

@@ -4,6 +4,7 @@
 //! (it moves with joint `i`); the joint axis passes through its origin. `flange` is the tip link frame.
 //! At q = 0 every joint frame sits at its home pose `T_base_joint_home`.
 
+use crate::coupled_joints::{CoupledJoint, CouplingDecl, Couplings};
 use crate::lie::Pose;
 use nalgebra::{Matrix3, Vector3, Vector6};
 
@@ -156,6 +157,7 @@ pub struct Model {
     home_flange: Pose,
     massless_links: Vec<String>,
     notes: Vec<String>,
+    couplings: Couplings,
 }
 
 /// What a [`Model`] is made of: everything [`Model::new`] does not derive.
@@ -176,6 +178,9 @@ pub struct ModelParts {
     pub flange_offset: Pose,
     /// Things the loader tolerated but a user should know (e.g. off-chain movable joints ignored).
     pub notes: Vec<String>,
+    /// Coupled (passive) joints of the chain ([`crate::coupled_joints`]); empty for a chain whose
+    /// every joint is driven.
+    pub couplings: Vec<CoupledJoint>,
 }
 
 impl Model {
@@ -197,6 +202,7 @@ impl Model {
             bodies,
             flange_offset,
             notes,
+            couplings,
         } = parts;
         let structure = |message: String| crate::error::SimError::Structure {
             source_name: name.clone(),
@@ -251,6 +257,8 @@ impl Model {
             j.rotation_terms = Joint::rotation_terms_for(&j.origin, &j.axis);
             j.aligned_axis = Joint::aligned_axis_for(&j.origin, &j.axis);
         }
+        let couplings =
+            Couplings::new(couplings, joints.len(), &|i| joints[i].name.clone(), &name)?;
         let home_flange = home * flange_offset;
         let massless_links = bodies
             .iter()
@@ -267,6 +275,7 @@ impl Model {
             home_flange,
             massless_links,
             notes,
+            couplings,
         })
     }
 
@@ -280,7 +289,35 @@ impl Model {
             bodies: self.bodies.clone(),
             flange_offset: self.flange_offset,
             notes: self.notes.clone(),
+            couplings: self.couplings.list().to_vec(),
         }
+    }
+
+    /// This model with the couplings `decls` (by joint name) added to its own ([`Model::new`]).
+    ///
+    /// # Errors
+    /// A name that is not a movable joint of the chain, a joint coupled twice, what
+    /// [`Couplings::new`] refuses.
+    pub fn with_couplings(&self, decls: &[CouplingDecl]) -> crate::error::Result<Model> {
+        let mut parts = self.to_parts();
+        parts.couplings.extend(Couplings::resolve(
+            decls,
+            &self.joint_names(),
+            false,
+            &self.name,
+        )?);
+        Model::new(parts)
+    }
+
+    /// The coupled joints of the chain and its driven joints ([`crate::coupled_joints`]).
+    pub fn couplings(&self) -> &Couplings {
+        &self.couplings
+    }
+
+    /// Number of driven joints: the joint columns `q1 … qD` of a measurement table (the chain's
+    /// joints less its coupled ones).
+    pub fn n_drives(&self) -> usize {
+        self.couplings.n_drives()
     }
 
     /// This model with joint `i`'s (0-based) origin `T_parent_joint` replaced by `origin` (m), every
@@ -329,6 +366,11 @@ impl Model {
     /// Movable joints from base to tip.
     pub fn joints(&self) -> &[Joint] {
         &self.joints
+    }
+
+    /// Names of the movable joints, base to tip.
+    pub fn joint_names(&self) -> Vec<&str> {
+        self.joints.iter().map(|j| j.name.as_str()).collect()
     }
 
     /// One body per joint: `bodies()[i]` moves with `joints()[i]`.

@@ -27,6 +27,7 @@
 //! floating and flange frames lie on the chain), so none depends on a rule. Loops of joints, a link
 //! with two parent joints, a joint from a link to itself and duplicated names are refused first.
 
+use crate::coupled_joints::{CouplingDecl, Couplings};
 use crate::error::{Result, SimError};
 use crate::lie::{Pose, pose_from, rotation_from_rpy};
 use crate::model::{Body, Joint, JointKind, JointLimits, Model, ModelParts};
@@ -65,7 +66,8 @@ pub fn load_file(path: &Path, spec: &ChainSpec) -> Result<Model> {
 /// Builds a model from URDF text; `source_name` names the text in error messages.
 pub fn load_str(text: &str, source_name: &str, spec: &ChainSpec) -> Result<Model> {
     let robot = parse(text, source_name)?;
-    Builder::new(&robot, source_name)?.build(spec)
+    let declared = Couplings::from_urdf_text(text, source_name)?;
+    Builder::new(&robot, source_name)?.build(spec, &declared)
 }
 
 /// One URDF joint of the chain from the base link to the tip link, as the file writes it.
@@ -519,7 +521,9 @@ impl<'a> Builder<'a> {
         first[depth.max(1) - 1]
     }
 
-    fn build(&self, spec: &ChainSpec) -> Result<Model> {
+    /// The chain `spec` selects, with the `<mimic>` couplings of its joints and the `declared`
+    /// (`<robocal:coupling>`) ones.
+    fn build(&self, spec: &ChainSpec, declared: &[CouplingDecl]) -> Result<Model> {
         let base = self.choose_base(spec)?;
         let tip = self.choose_tip(base, spec)?;
         let path = self.path(base, tip)?;
@@ -571,6 +575,20 @@ impl<'a> Builder<'a> {
             )));
         }
         let flange_offset = pending;
+        let mimics: Vec<CouplingDecl> = path
+            .iter()
+            .filter_map(|j| {
+                j.mimic.as_ref().map(|m| CouplingDecl {
+                    joint: j.name.clone(),
+                    sources: vec![m.joint.clone()],
+                    multipliers: vec![m.multiplier.unwrap_or(1.0)],
+                    offset: m.offset.unwrap_or(0.0),
+                })
+            })
+            .collect();
+        let names: Vec<&str> = joints.iter().map(|j| j.name.as_str()).collect();
+        let mut couplings = Couplings::resolve(&mimics, &names, true, self.source)?;
+        couplings.extend(Couplings::resolve(declared, &names, false, self.source)?);
 
         let mut notes = Vec::new();
         let on_chain: std::collections::HashSet<&str> =
@@ -594,6 +612,7 @@ impl<'a> Builder<'a> {
             bodies,
             flange_offset,
             notes,
+            couplings,
         })
     }
 

@@ -692,3 +692,52 @@ fn a_tree_with_many_leaves_gives_a_one_line_error_of_bounded_length() {
     // A hang guard (the analysis is one pass), not a speed target.
     assert!(start.elapsed().as_secs_f64() < 10.0);
 }
+
+/// A `<mimic>` on a chain joint couples it to its source (multiplier and offset as written, 1 and 0
+/// when absent); a `<mimic>` on a joint off the chain (a gripper finger) is not the chain's.
+#[test]
+fn mimic_joints_on_the_chain_are_coupled_and_off_it_ignored() {
+    let text = format!(
+        r#"<robot name="r">{}{}{}{}{}
+        {}
+        <joint name="j3" type="revolute"><parent link="c"/><child link="d"/><origin xyz="0 0 0.1"/>
+          <axis xyz="0 0 1"/><limit lower="-1" upper="1" effort="1" velocity="1"/>
+          <mimic joint="j2" multiplier="-0.5" offset="0.25"/></joint>
+        <joint name="finger" type="prismatic"><parent link="d"/><child link="e"/><axis xyz="1 0 0"/>
+          <limit lower="0" upper="0.04" effort="1" velocity="1"/><mimic joint="j1"/></joint>
+        <joint name="flange" type="fixed"><parent link="d"/><child link="tip"/></joint>
+        <link name="tip"/></robot>"#,
+        link("a"),
+        link("b"),
+        link("c"),
+        link("d"),
+        link("e"),
+        [
+            revolute("j1", "a", "b", "0 0 0.1"),
+            revolute("j2", "b", "c", "0 0.1 0"),
+        ]
+        .concat()
+    );
+    let spec = ChainSpec {
+        base_link: None,
+        tip_link: Some("tip".into()),
+    };
+    let m = urdf::load_str(&text, "mimic.urdf", &spec).unwrap();
+    assert_eq!((m.nq(), m.n_drives()), (3, 2));
+    let c = m.couplings().list();
+    assert_eq!(c.len(), 1, "the finger's mimic is off the chain: {c:?}");
+    assert_eq!(
+        (c[0].joint, c[0].sources.clone(), c[0].offset),
+        (2, vec![(1, -0.5)], 0.25)
+    );
+    let mut q = [0.0; 3];
+    m.couplings().expand(&[0.3, 0.4], &mut q);
+    assert!((q[2] - (0.25 - 0.5 * 0.4)).abs() < 1e-15);
+    // A mimic of a joint that is not on the chain is refused, naming both.
+    let bad = text.replace(
+        r#"<mimic joint="j2" multiplier="-0.5" offset="0.25"/>"#,
+        r#"<mimic joint="finger"/>"#,
+    );
+    let e = msg(urdf::load_str(&bad, "mimic.urdf", &spec));
+    assert!(e.contains("'j3' is coupled to 'finger'"), "{e}");
+}

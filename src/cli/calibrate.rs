@@ -15,7 +15,6 @@ use calib::model::spec::{ModelChoice, ModelSpec};
 use calib::select::auto::{AUTO_LEARNED_KINDS, AutoChoice};
 use calib::validate::{DEFAULT_FOLDS, Validation, ValidationPlan, fit_and_validate};
 use serde_json::json;
-use sim::ChainSpec;
 use sim::measurement_table::MeasurementTable;
 use std::path::{Path, PathBuf};
 
@@ -417,16 +416,12 @@ pub fn run(args: Args) -> CliResult {
         }
     }
     args.options.resolve(args.test_data.is_some())?;
-    let spec = ChainSpec {
-        base_link: args.robot.base_link.clone(),
-        tip_link: args.robot.tip_link.clone(),
-    };
     check_chunk_rows(args.chunk_rows)?;
-    let robot = Robot::load(&args.robot.robot, &spec)?;
+    let robot = args.robot.load_robot()?;
     let model = &robot.model;
     let data_name = args.data.display().to_string();
     let memory_reason = args.options.needs_memory(args.test_data.is_some());
-    let (stream, large) = decide_stream(args.stream, &args.data, memory_reason.as_deref())?;
+    let (stream, large) = decide_stream(args.stream, &args.data, memory_reason.as_deref(), model)?;
     if let (true, false, Some(r), false) = (large, stream, &memory_reason, args.json) {
         eprintln!(
             "note: {data_name} has more than {STREAM_MIN_ROWS} rows, held in memory for {r}; \

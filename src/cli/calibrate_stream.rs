@@ -53,7 +53,13 @@ pub fn decide_stream(
     mode: StreamMode,
     path: &Path,
     memory_reason: Option<&str>,
+    robot: &sim::Model,
 ) -> Result<(bool, bool), CliError> {
+    let memory_reason = match memory_reason {
+        Some(r) => Some(r),
+        None if !robot.couplings().is_empty() => Some("a robot with coupled joints"),
+        None => None,
+    };
     match mode {
         StreamMode::Never => Ok((false, false)),
         StreamMode::Always => match memory_reason {

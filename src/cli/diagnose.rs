@@ -8,7 +8,6 @@ use crate::report;
 use calib::model::robot::Robot;
 use calib::select::diagnose::stream::diagnose_streamed;
 use calib::select::diagnose::{DiagnoseOptions, Diagnosis, diagnose_with_progress};
-use sim::ChainSpec;
 use std::io::IsTerminal;
 use std::path::PathBuf;
 
@@ -256,7 +255,7 @@ pub fn diagnose_file(
             streaming.sample_rows
         )));
     }
-    let (stream, _) = decide_stream(streaming.mode, path, None)?;
+    let (stream, _) = decide_stream(streaming.mode, path, None, &robot.model)?;
     if !stream {
         return Ok(None);
     }
@@ -300,11 +299,7 @@ pub fn run(args: Args) -> CliResult {
         let names: Vec<&str> = names.iter().map(String::as_str).collect();
         inputs.check_dir("--report", dir, &names)?;
     }
-    let spec = ChainSpec {
-        base_link: args.robot.base_link.clone(),
-        tip_link: args.robot.tip_link.clone(),
-    };
-    let robot = Robot::load(&args.robot.robot, &spec)?;
+    let robot = args.robot.load_robot()?;
     let name = args.data.display().to_string();
     let streamed = diagnose_file(
         &robot,

@@ -18,7 +18,7 @@ mod paths;
 pub mod plan_poses;
 pub mod predict;
 pub mod register;
-mod robot_arg;
+pub mod robot_arg;
 pub mod shared;
 mod sweep;
 mod urdf_out;

@@ -51,6 +51,11 @@ pub fn check_configurations(
     robot: &sim::Model,
     name: &str,
 ) -> Result<Vec<String>, CliError> {
+    if !robot.couplings().is_empty() && table.n_joints != robot.nq() {
+        // The driven joints' columns: check the whole chain's values.
+        let coupled = measurement_table::couple(table.clone(), robot, Path::new(name))?;
+        return check_configurations(&coupled, robot, name);
+    }
     if table.n_joints != robot.nq() {
         return Err(CliError::Input(format!(
             "{name}: {} joint columns, but the model's robot '{}' has {} joints",
@@ -168,7 +173,10 @@ pub fn predict_streaming(
     let name = data.display().to_string();
     let chunks = measurement_table::read_configuration_chunks(data, chunk_rows)?;
     let robot = predictor.model.clone();
-    if chunks.n_joints() != robot.nq() {
+    // A robot with coupled joints: a file of its driven joints, each piece completed
+    // ([`measurement_table::couple`]).
+    let coupled = !robot.couplings().is_empty() && chunks.n_joints() == robot.n_drives();
+    if chunks.n_joints() != robot.nq() && !coupled {
         return Err(CliError::Input(format!(
             "{name}: {} joint columns, but the model's robot '{}' has {} joints",
             chunks.n_joints(),
@@ -186,7 +194,10 @@ pub fn predict_streaming(
         first_rows: MeasurementTable::new(robot.nq(), Default::default()),
     };
     for chunk in chunks {
-        let chunk = chunk?;
+        let mut chunk = chunk?;
+        if coupled {
+            chunk.table = measurement_table::couple(chunk.table, &robot, data)?;
+        }
         check.add(&chunk.table, chunk.first_row)?;
         let preds = predictor.predict_table(&chunk.table, &name)?;
         if summary.rows == 0 {

@@ -160,7 +160,7 @@ pub fn run(args: Args) -> CliResult {
     let robot = Predictor::from_file(&file)?.model;
     check_chunk_rows(args.chunk_rows)?;
     let name = args.data.display().to_string();
-    let (stream, _) = decide_stream(args.stream, &args.data, None)?;
+    let (stream, _) = decide_stream(args.stream, &args.data, None, &robot)?;
     let (out, report, info) = if stream {
         let (out, report, warnings, info) =
             register_streamed(&file, &args.data, &args.options, args.chunk_rows)?;

@@ -1,5 +1,7 @@
-//! The `--robot`, `--base-link` and `--tip-link` flags shared by every subcommand that needs a robot.
+//! The `--robot`, `--base-link`, `--tip-link` and `--couplings` flags shared by every subcommand that
+//! needs a robot.
 
+use sim::coupled_joints::Couplings;
 use sim::{ChainSpec, Model, robots};
 
 /// Which robot to load.
@@ -14,6 +16,11 @@ pub struct RobotArgs {
     /// Tip link of the chain (default: the single leaf link).
     #[arg(long, value_name = "LINK")]
     pub tip_link: Option<String>,
+    /// Coupled joints declared beside the URDF: a TOML file of `[[coupling]]` tables (`joint`,
+    /// `sources`, `multipliers`, `offset`), added to the URDF's own `<mimic>` and
+    /// `<robocal:coupling>` couplings. A coupled joint has no column in the measurement table.
+    #[arg(long, value_name = "FILE")]
+    pub couplings: Option<std::path::PathBuf>,
 }
 
 impl RobotArgs {
@@ -34,6 +41,24 @@ impl RobotArgs {
             base_link: self.base_link.clone(),
             tip_link: self.tip_link.clone(),
         };
-        Ok(robots::load_robot(&self.robot, &spec)?)
+        let model = robots::load_robot(&self.robot, &spec)?;
+        match &self.couplings {
+            None => Ok(model),
+            Some(path) => Ok(model.with_couplings(&Couplings::read_file(path)?)?),
+        }
+    }
+
+    /// The robot with its URDF text ([`calib::model::robot::Robot`]), as calibrate and diagnose
+    /// embed it, with the `--couplings` file applied.
+    pub fn load_robot(&self) -> Result<calib::model::robot::Robot, crate::error::CliError> {
+        let spec = ChainSpec {
+            base_link: self.base_link.clone(),
+            tip_link: self.tip_link.clone(),
+        };
+        let robot = calib::model::robot::Robot::load(&self.robot, &spec)?;
+        match &self.couplings {
+            None => Ok(robot),
+            Some(path) => Ok(robot.with_couplings(Couplings::read_file(path)?)?),
+        }
     }
 }

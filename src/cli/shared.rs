@@ -7,8 +7,9 @@ use sim::measurement_table::{self, MeasurementTable};
 use std::path::Path;
 
 /// Reads a measurement table and checks it against the robot ([`check_table`]); warnings go to stderr.
+/// A robot with coupled joints gets the table of its whole chain ([`measurement_table::couple`]).
 pub(crate) fn read_table(path: &Path, robot: &sim::Model) -> Result<MeasurementTable, CliError> {
-    let table = measurement_table::read(path)?;
+    let table = measurement_table::couple(measurement_table::read(path)?, robot, path)?;
     for w in check_table(&table, robot, &path.display().to_string())? {
         eprintln!("warning: {w}");
     }
@@ -27,6 +28,24 @@ pub fn check_table(
         robot,
         Path::new(name),
     )?)
+}
+
+/// `table` with every chain joint of `robot`: as it is, or, for a robot with coupled joints and a
+/// table of its driven joints, with the coupled joints computed ([`measurement_table::couple`]);
+/// `name` names it in errors.
+pub fn whole_chain<'t>(
+    table: &'t MeasurementTable,
+    robot: &sim::Model,
+    name: &str,
+) -> Result<std::borrow::Cow<'t, MeasurementTable>, CliError> {
+    if robot.couplings().is_empty() || table.n_joints == robot.nq() {
+        return Ok(std::borrow::Cow::Borrowed(table));
+    }
+    Ok(std::borrow::Cow::Owned(measurement_table::couple(
+        table.clone(),
+        robot,
+        Path::new(name),
+    )?))
 }
 
 /// Prints one JSON document to stdout.

@@ -42,7 +42,7 @@ impl<'a> Scored<'a> {
         let regs = match &cal.extensions {
             Some(s) => {
                 let rows: Vec<usize> = (0..table.len()).collect();
-                Regressors::build(model, s, table, &rows, "sweep run", &cal.params.extension)?
+                Regressors::build(model, s, table, &rows, "sweep run", Some(&cal.params))?
             }
             None => Regressors::none(),
         };

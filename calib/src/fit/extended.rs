@@ -65,7 +65,7 @@ fn payload_com_step(
     const H: f64 = 1e-3;
     const COM_SCALE_M: f64 = 1e-2;
     const K_RTOL: f64 = 1e-12;
-    let at = &cal.params.extension;
+    let at = Some(&cal.params);
     let p = cal.layout.len();
     let all: Vec<usize> = (0..p).collect();
     let prepared = |s: &ExtensionSettings| -> Result<Observations> {
@@ -205,9 +205,11 @@ pub(super) fn fit_at_equilibrium(
         Some(w)
             if settings.needs_equilibrium() && w.physical.extension.len() == w.extensions.len() =>
         {
-            w.extension_for(&settings.params(model))
+            let mut at = w.physical.clone();
+            at.extension = w.extension_for(&settings.params(model));
+            Some(at)
         }
-        _ => Vec::new(),
+        _ => None,
     };
     let mut cal = kinematic_fit(
         model,
@@ -216,7 +218,7 @@ pub(super) fn fit_at_equilibrium(
             test,
             options,
             extensions: Some(&settings),
-            at: &first_at,
+            at: first_at.as_ref(),
             warm,
             same_before: None,
         },
@@ -236,7 +238,7 @@ pub(super) fn fit_at_equilibrium(
     let (mut last_move, mut last_com): (Option<f64>, Option<f64>) = (None, None);
     let mut inflation: Option<DMatrix<f64>> = None;
     for _ in 0..EQUILIBRIUM_REFITS {
-        let at = cal.params.extension.clone();
+        let at = cal.params.clone();
         let com_step = if payload {
             let d = payload_com_step(model, train, options, &settings, &cal)?;
             for (c, d) in settings.payload_com_m.iter_mut().zip(d.step_m.iter()) {
@@ -269,7 +271,7 @@ pub(super) fn fit_at_equilibrium(
                 test,
                 options,
                 extensions: Some(&settings),
-                at: &at,
+                at: Some(&at),
                 warm: refit_start,
                 // The base-and-target fit (nominal joints, extensions at zero) is the first fit's.
                 same_before: Some((&cal.before, &cal.report.before)),
@@ -279,7 +281,7 @@ pub(super) fn fit_at_equilibrium(
             .params
             .extension
             .iter()
-            .zip(&at)
+            .zip(&at.extension)
             .zip(&next.layout.extensions)
             .map(|((a, b), p)| (a - b).abs() / p.scale)
             .fold(0.0, f64::max);
@@ -406,8 +408,7 @@ mod tests {
         let p = cal.layout.len();
         let all: Vec<usize> = (0..p).collect();
         let residuals = |s: &ExtensionSettings| {
-            let obs =
-                observations(&model, &train, &options, Some(s), &cal.params.extension).unwrap();
+            let obs = observations(&model, &train, &options, Some(s), Some(&cal.params)).unwrap();
             let mut prob = KinematicProblem::new(&model, &obs, cal.params.clone(), all.clone());
             let mut r = vec![0.0; prob.n_residuals()];
             prob.residuals(&mut r);

@@ -137,6 +137,12 @@ pub enum NullKind {
         /// 1-based joint.
         joint: usize,
     },
+    /// A combination that a coupled joint (1-based `joint`, [`sim::coupled_joints`]) makes
+    /// inseparable: it would be determined if the joint moved on its own, which it never does.
+    Coupling {
+        /// 1-based coupled joint.
+        joint: usize,
+    },
     /// Not one of the named patterns.
     Other,
 }
@@ -146,7 +152,10 @@ impl NullKind {
     pub fn is_structural(&self) -> bool {
         matches!(
             self,
-            NullKind::OwnAxis { .. } | NullKind::ZeroOffset { .. } | NullKind::BaseGauge
+            NullKind::OwnAxis { .. }
+                | NullKind::ZeroOffset { .. }
+                | NullKind::BaseGauge
+                | NullKind::Coupling { .. }
         )
     }
 }
@@ -277,6 +286,78 @@ fn components(layout: &ParamLayout, scales: &[f64], s: &DVector<f64>) -> Vec<(St
     let big = idx.first().map(|&k| phys[k]).unwrap_or(1.0);
     idx.iter()
         .map(|&k| (layout.name(k), phys[k] / big))
+        .collect()
+}
+
+/// `the coupling of joint 4 to joints 2 and 3` (every coupled joint of `model`, 1-based).
+fn coupling_words(model: &Model) -> String {
+    let each: Vec<String> = model
+        .couplings()
+        .list()
+        .iter()
+        .map(|c| {
+            let s: Vec<String> = c.sources.iter().map(|(j, _)| (j + 1).to_string()).collect();
+            format!(
+                "the coupling of joint {} to joint{} {}",
+                c.joint + 1,
+                if s.len() > 1 { "s" } else { "" },
+                s.join(" and ")
+            )
+        })
+        .collect();
+    each.join(", ")
+}
+
+/// Directions (physical units) of the null space of the fit `sub` at `params` that the couplings
+/// make: the part of that null space which the same rows determine once every coupled joint is
+/// moved on its own (by a fixed offset of up to ±0.3 rad or m per row, so that it no longer follows
+/// its sources), with the fit's own rank decision.
+fn coupling_directions(
+    model: &Model,
+    params: &KinematicParams,
+    obs: &Observations,
+    sub: &Subspace,
+    layout: &ParamLayout,
+) -> Vec<DVector<f64>> {
+    let p = layout.len();
+    let n = model.nq();
+    let mut free = obs.clone();
+    for r in 0..free.len() {
+        for c in model.couplings().list() {
+            // A fixed, well spread offset per row and joint (golden-ratio sequence in [-0.3, 0.3]).
+            let u = ((r * n + c.joint) as f64 * 0.618_033_988_749_895).fract();
+            free.q[r * n + c.joint] += 0.6 * u - 0.3;
+        }
+    }
+    let mut problem =
+        crate::fit::problem::KinematicProblem::new(model, &free, params.clone(), (0..p).collect());
+    let group = vec![0; free.len()];
+    let parts = problem.group_parts(&sub.scales, &group, 1);
+    let r = crate::linalg::stacked_r_factor(&parts[0].factors, p);
+    let m = free.len() * free.dim();
+    let decoupled = Subspace::from_factor(&r, &sub.scales, sub.rtol, sub.floor, m);
+    // The coupled fit's null directions with their decoupled-null part removed.
+    let null = sub.v.columns(sub.rank, p - sub.rank).into_owned();
+    let dnull = decoupled
+        .v
+        .columns(decoupled.rank, p - decoupled.rank)
+        .into_owned();
+    let rest = &null - &dnull * (dnull.transpose() * &null);
+    let extra = decoupled.rank.saturating_sub(sub.rank);
+    if extra == 0 {
+        return Vec::new();
+    }
+    let svd = rest.svd(true, false);
+    let u = svd.u.expect("asked for U");
+    let mut order: Vec<usize> = (0..svd.singular_values.len()).collect();
+    order.sort_by(|&a, &b| svd.singular_values[b].total_cmp(&svd.singular_values[a]));
+    order
+        .into_iter()
+        .take(extra)
+        .map(|c| {
+            let s = u.column(c);
+            DVector::from_fn(p, |k, _| s[k] * sub.scales[k])
+        })
         .collect()
 }
 
@@ -473,6 +554,51 @@ pub fn describe_null_space(
             "{base}: the tracker-to-base transform against a common error twist of all joint axes (the split \
              between them is a convention; predictions do not depend on it)"
         ));
+    }
+
+    // 3b. What the couplings make inseparable: the directions that would be determined, at the same
+    // poses, if every coupled joint moved on its own (structural: no pose set moves it so).
+    if !model.couplings().is_empty() {
+        let found = coupling_directions(model, params, obs, sub, &layout);
+        let mut count = 0;
+        for a in found {
+            let joints = coupling_words(model);
+            if namer.offer(
+                &a,
+                NullKind::Coupling {
+                    joint: model.couplings().list()[0].joint + 1,
+                },
+                format!(
+                    "a combination that {joints} makes inseparable: it would be determined if the \
+                     coupled joint moved on its own"
+                ),
+            ) {
+                count += 1;
+            }
+        }
+        if count > 0 {
+            // Which parameters they involve (the share of each scaled unit parameter in them).
+            let dirs: Vec<&NullDirection> = namer
+                .directions
+                .iter()
+                .filter(|d| matches!(d.kind, NullKind::Coupling { .. }))
+                .collect();
+            let mut names: Vec<String> = Vec::new();
+            for d in &dirs {
+                for (name, v) in d.components.iter().take(3) {
+                    if v.abs() > 0.3 && !names.contains(name) {
+                        names.push(name.clone());
+                    }
+                }
+            }
+            names.truncate(6);
+            summary.push(format!(
+                "{count}: combinations {} makes inseparable, whatever the poses (the coupled joint \
+                 never moves on its own), mostly of {}",
+                coupling_words(model),
+                names.join(", ")
+            ));
+        }
     }
 
     // 4. Data-specific: a joint's twist components absorbed by base and target.

@@ -19,8 +19,8 @@ pub(super) fn add_learned(
     test: Option<&Dataset<'_>>,
     options: &CalibrationOptions,
 ) -> Result<()> {
-    let at = cal.params.extension.clone();
-    let obs = observations(model, train, options, cal.extensions.as_ref(), &at)?;
+    let at = cal.params.clone();
+    let obs = observations(model, train, options, cal.extensions.as_ref(), Some(&at))?;
     // In the first campaign's tracker frame, where the correction lives.
     let learned = match kind {
         LearnedKind::Adjoint => {
@@ -47,7 +47,7 @@ pub(super) fn add_learned(
             t,
             options,
             cal.extensions.as_ref(),
-            &at,
+            Some(&at),
         )?)),
         _ => None,
     };

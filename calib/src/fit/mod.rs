@@ -288,7 +288,7 @@ pub fn fit(model: &Model, data: &Dataset<'_>, request: &FitRequest<'_>) -> Resul
             test,
             options,
             extensions: None,
-            at: &[],
+            at: None,
             warm,
             same_before: None,
         };
@@ -449,13 +449,13 @@ impl<'a> WarmStart<'a> {
 }
 
 /// The rows of `data` prepared for the solver, with the extensions' regressors under `extensions`,
-/// torques evaluated at the extension values `at` ([`Regressors::build`]).
+/// torques evaluated at the extension values of `at` ([`Regressors::build`]).
 pub fn observations(
     model: &Model,
     data: &Dataset<'_>,
     options: &CalibrationOptions,
     extensions: Option<&ExtensionSettings>,
-    at: &[f64],
+    at: Option<&KinematicParams>,
 ) -> Result<Observations> {
     let mut obs = Observations::from_table(data.table, &data.rows, &options.noise, &data.name)?;
     if let Some(s) = extensions {
@@ -507,8 +507,9 @@ pub(crate) struct Stage<'a> {
     pub options: &'a CalibrationOptions,
     /// The extensions fitted jointly with the kinematic parameters, if any.
     pub extensions: Option<&'a ExtensionSettings>,
-    /// Extension values at which their torques are evaluated ([`Regressors::build`]; empty: zero).
-    pub at: &'a [f64],
+    /// The parameters whose extension values the extensions' torques are evaluated at
+    /// ([`Regressors::build`]; `None`: extensions at zero).
+    pub at: Option<&'a KinematicParams>,
     /// Where the fit starts ([`WarmStart`]); `None`: the closed form.
     pub warm: Option<WarmStart<'a>>,
     /// The base-and-target fit of an earlier calibration of the same rows (an equilibrium refit:

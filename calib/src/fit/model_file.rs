@@ -28,6 +28,7 @@ impl CalibratedModel {
                 tip_link: robot.model.tip_link().to_string(),
                 urdf: robot.urdf.clone(),
                 urdf_fnv1a64: Some(urdf_checksum(&robot.urdf)),
+                couplings: robot.couplings.clone(),
             },
             parameters: parameters_json(p),
             covariance: Some(CovarianceJson {

@@ -277,7 +277,7 @@ pub fn register(
     }
     if let Some(s) = extensions {
         s.check_table(table, name)?;
-        obs.ext = Regressors::build(model, s, table, &rows, name, &params.extension)?;
+        obs.ext = Regressors::build(model, s, table, &rows, name, Some(params))?;
     }
     let needed = if options.target { 6 } else { 3 };
     if obs.n_configurations() < needed {

@@ -540,6 +540,16 @@ pub fn compensate_table(
 ) -> Result<Compensations> {
     let model = &predictor.model;
     let n = model.nq();
+    if !model.couplings().is_empty() {
+        return Err(CalibError::BadValue {
+            context: file.to_string(),
+            field: "robot".into(),
+            value: model.name().to_string(),
+            problem: "has coupled joints: compensation, which solves for every chain joint, does \
+                      not yet solve for the driven joints alone"
+                .into(),
+        });
+    }
     if table.n_joints != n {
         return Err(CalibError::BadValue {
             context: file.to_string(),
@@ -662,7 +672,7 @@ fn program_targets(
     let params = &predictor.params;
     let rows: Vec<usize> = (0..table.len()).collect();
     let regs = match &predictor.extensions {
-        Some(s) => Regressors::build(model, s, table, &rows, file, &params.extension)?,
+        Some(s) => Regressors::build(model, s, table, &rows, file, Some(params))?,
         None => Regressors::none(),
     };
     let mut predicted = vec![Vector3::zeros(); table.len()];

@@ -65,6 +65,10 @@ pub struct EmbeddedRobot {
     /// model whose URDF text was replaced or edited is refused. Absent in older files (not checked).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub urdf_fnv1a64: Option<String>,
+    /// Couplings declared beside the URDF when the model was calibrated (`--couplings FILE`,
+    /// [`sim::coupled_joints`]); absent when there were none.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub couplings: Vec<sim::coupled_joints::CouplingDecl>,
 }
 
 /// FNV-1a 64-bit hash of `text`, as 16 hex digits ([`EmbeddedRobot::urdf_fnv1a64`]).
@@ -504,6 +508,11 @@ impl CalibratedModel {
             &format!("embedded robot '{}'", self.robot.name),
             &spec,
         )?;
+        let model = if self.robot.couplings.is_empty() {
+            model
+        } else {
+            model.with_couplings(&self.robot.couplings)?
+        };
         if model.nq() != self.parameters.joint_error_twists.len() {
             return Err(CalibError::ModelFile {
                 file: "embedded robot".into(),

@@ -70,7 +70,8 @@ impl BendColumns<'_> {
 }
 
 /// Fills the extension columns of a 3-row Jacobian block (row-major, `layout.len()` columns) whose
-/// kinematic columns are set: a joint-angle term is the joint's zero-offset column times its regressor,
+/// kinematic columns are set: a joint-angle term is the joint's zero-offset column (plus `a` times
+/// that of each joint coupled to it with multiplier `a`) times its regressor,
 /// the growth term `lever` times its regressor, a bending term the bend's own column
 /// ([`Chain::bend_axis`]) times its regressor.
 pub fn extension_columns(
@@ -85,8 +86,13 @@ pub fn extension_columns(
         let ke = layout.extension(e);
         match p.term {
             Term::JointAngle { joint } => {
+                // A driven joint's angle moves the joints coupled to it through the linkage.
                 for row in 0..3 {
-                    block[row * np + ke] = block[row * np + layout.zero_offset(joint)] * g;
+                    let mut c = block[row * np + layout.zero_offset(joint)];
+                    for &(k, a) in layout.couplings.followers(joint) {
+                        c += a * block[row * np + layout.zero_offset(k)];
+                    }
+                    block[row * np + ke] = c * g;
                 }
             }
             Term::Growth => {

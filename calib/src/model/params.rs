@@ -81,6 +81,9 @@ pub struct ParamLayout {
     pub campaign_ids: Vec<i64>,
     /// Whether each campaign after the first has its own target (a re-seated reflector).
     pub campaign_targets: bool,
+    /// The robot's coupled joints ([`sim::coupled_joints`]): a joint-angle term of a driven joint
+    /// moves the joints it drives as well.
+    pub couplings: sim::coupled_joints::Couplings,
 }
 
 impl ParamLayout {
@@ -97,6 +100,7 @@ impl ParamLayout {
             extensions: Vec::new(),
             campaign_ids: vec![0],
             campaign_targets: false,
+            couplings: model.couplings().clone(),
         }
     }
 

@@ -13,6 +13,9 @@ pub struct Robot {
     pub urdf: String,
     /// Where it came from: a file path or `built-in robot 'NAME'`.
     pub source: String,
+    /// Couplings declared beside the URDF (`--couplings FILE`), already in `model`; those of the URDF
+    /// itself (`<mimic>`, `<robocal:coupling>`) are not repeated here.
+    pub couplings: Vec<sim::coupled_joints::CouplingDecl>,
 }
 
 impl Robot {
@@ -30,6 +33,7 @@ impl Robot {
                 model,
                 urdf: text,
                 source: robot.to_string(),
+                couplings: Vec::new(),
             });
         }
         let model = robots::load_robot(robot, spec)?;
@@ -39,6 +43,7 @@ impl Robot {
             model,
             urdf: text.to_string(),
             source: format!("built-in robot '{robot}'"),
+            couplings: Vec::new(),
         })
     }
 
@@ -48,6 +53,19 @@ impl Robot {
             model: urdf::load_str(text, source, spec)?,
             urdf: text.to_string(),
             source: source.to_string(),
+            couplings: Vec::new(),
         })
+    }
+
+    /// This robot with the couplings `decls` (a `--couplings` file, [`sim::coupled_joints`]) added
+    /// to its chain and kept, so that a calibrated model embeds them.
+    ///
+    /// # Errors
+    /// A name that is not a movable joint of the chain, a joint coupled twice, what
+    /// [`sim::coupled_joints::Couplings::new`] refuses.
+    pub fn with_couplings(mut self, decls: Vec<sim::coupled_joints::CouplingDecl>) -> Result<Self> {
+        self.model = self.model.with_couplings(&decls)?;
+        self.couplings.extend(decls);
+        Ok(self)
     }
 }

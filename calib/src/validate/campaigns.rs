@@ -103,7 +103,7 @@ pub fn leave_campaign_out(
                 &rest_set,
                 options,
                 cal.extensions.as_ref(),
-                &reg.params.extension,
+                Some(&reg.params),
             )?;
             Ok(Prediction::new(model, &reg.params)
                 .with_learned(learned)

@@ -22,7 +22,7 @@ pub(super) fn fold_shares(
     if !request.model().causes.is_empty() || options.robust.is_some() {
         return Ok(None);
     }
-    let obs = observations(model, data, options, None, &[])?;
+    let obs = observations(model, data, options, None, None)?;
     if !start.fits(&obs) {
         return Ok(None);
     }

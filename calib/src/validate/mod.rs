@@ -105,7 +105,7 @@ pub fn held_out_errors(
         test,
         options,
         cal.extensions.as_ref(),
-        &cal.params.extension,
+        Some(&cal.params),
     )?;
     obs.campaign_indices_or_error(&cal.params, &test.name)?;
     // The nominal model's extension values are zero: the regressors do not move it.

@@ -58,6 +58,9 @@ pub struct Plan {
     pub payload_kg: Vec<f64>,
     /// Payload centre of mass in the flange frame (m).
     pub payload_com_m: [f64; 3],
+    /// Chain indices of the driven joints when the robot has coupled joints (their columns are the
+    /// measurement table's `q1 … qD`); `None` when every joint is driven.
+    pub drives: Option<Vec<usize>>,
 }
 
 impl Plan {
@@ -122,6 +125,11 @@ pub struct Planner<'a> {
     moved: usize,
     prev: Vec<f64>,
     last: Vec<i8>,
+}
+
+/// Sets the coupled joints of `q` (every chain joint) from their sources.
+fn model_couple(model: &Model, q: &mut [f64]) {
+    model.couplings().apply(q);
 }
 
 impl<'a> Planner<'a> {
@@ -278,6 +286,8 @@ impl<'a> Planner<'a> {
             dir: dirs.as_ref().map(|_| Vec::with_capacity(rows * n)),
             payload_kg: Vec::with_capacity(rows),
             payload_com_m: self.spec.payload_com_m,
+            drives: (!self.model.couplings().is_empty())
+                .then(|| self.model.couplings().drives().to_vec()),
         };
         let mut mass = 0.0;
         for row in r0..r1 {
@@ -331,7 +341,8 @@ impl<'a> Planner<'a> {
         Ok(Some(plan))
     }
 
-    /// Joint values of poses `ks`, row-major.
+    /// Joint values of poses `ks`, row-major (every chain joint; coupled joints follow their
+    /// sources, whatever was drawn for them).
     fn joint_values(&self, ks: std::ops::Range<usize>) -> Result<Vec<f64>> {
         let n = self.model.nq();
         let mut out = vec![0.0; ks.len() * n];
@@ -351,6 +362,7 @@ impl<'a> Planner<'a> {
                 for (i, k) in ks.enumerate() {
                     let idx = u64::from(index[k % index.len()]);
                     grid_point(idx, points_per_joint, ranges, &mut out[i * n..(i + 1) * n]);
+                    model_couple(self.model, &mut out[i * n..(i + 1) * n]);
                 }
             }
             PoseSource::Random { ranges, max_tries } => {
@@ -370,6 +382,7 @@ impl<'a> Planner<'a> {
                                     let u: f64 = rng.random();
                                     *qi = lo + (hi - lo) * u;
                                 }
+                                model_couple(model, q);
                                 forward_kinematics(model, data, q);
                                 if reachable(data, &p_flange, &spec.reachability) {
                                     return true;

@@ -274,7 +274,11 @@ pub(super) fn pose_source(
         }
         Sampling::File { path, .. } => {
             // A pose file needs no measured positions: `pose, q1..qN` (and context columns).
-            let table = crate::measurement_table::read_configurations(path)?;
+            let table = crate::measurement_table::couple(
+                crate::measurement_table::read_configurations(path)?,
+                model,
+                path,
+            )?;
             if table.n_joints != n {
                 return Err(err(
                     file,

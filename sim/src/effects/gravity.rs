@@ -33,6 +33,8 @@ pub(crate) struct GravityWork {
     pub wg: Vec<f64>,
     /// `rⱼ·g` per joint (kg m²/s²).
     pub rg: Vec<f64>,
+    /// The sag `C τ` (or `A C Aᵀ τ` with coupled joints) per joint (rad or m).
+    pub sag: Vec<f64>,
 }
 
 impl GravityWork {
@@ -49,6 +51,7 @@ impl GravityWork {
             piv: vec![0; n],
             wg: vec![0.0; n],
             rg: vec![0.0; n],
+            sag: vec![0.0; n],
         }
     }
 }

@@ -36,6 +36,7 @@ use super::effect::{
 };
 use super::gravity::{BodyMasses, GravityWork, chain_gravity_hessian, chain_gravity_torques};
 use super::rapier_compliance::{RapierCache, RapierCompliance};
+use crate::coupled_joints::Couplings;
 use crate::effect_id::EffectId;
 use crate::error::{Result, SimError};
 use crate::lie::Pose;
@@ -243,11 +244,36 @@ pub(crate) struct Equilibrium<'a> {
     pub payload: Option<&'a Payload>,
     /// Gravity, base frame (m/s²).
     pub gravity: &'a Vector3<f64>,
-    /// `1/kᵢ` (rad/(N m) or m/N; 0 = rigid).
+    /// `1/kᵢ` (rad/(N m) or m/N; 0 = rigid; 0 at coupled joints).
     pub compliance: &'a [f64],
+    /// The chain's coupled joints, when it has any: the springs are then the drives', and the sag is
+    /// `A C Aᵀ τ` (virtual work, [`crate::coupled_joints`]).
+    pub couplings: Option<&'a Couplings>,
 }
 
 impl Equilibrium<'_> {
+    /// The sag `M v` into `out` for joint torques `v` (N m): `M = C` for a chain of driven joints,
+    /// `A C Aᵀ` with coupled joints (the drives feel `Aᵀ v`, their sag moves the coupled joints
+    /// through the linkage). `out` may not alias `v`.
+    #[inline]
+    fn sag(&self, v: &[f64], out: &mut [f64]) {
+        match self.couplings {
+            None => {
+                for ((o, c), t) in out.iter_mut().zip(self.compliance).zip(v) {
+                    *o = c * t;
+                }
+            }
+            Some(cp) => {
+                out.copy_from_slice(v);
+                cp.to_drives(out);
+                for (o, c) in out.iter_mut().zip(self.compliance) {
+                    *o *= c;
+                }
+                cp.propagate(out);
+            }
+        }
+    }
+
     /// The first-order solution `θ₁ = q_motor − K⁻¹ τ_g(q_motor)` (rad or m) into `first`, with
     /// `poses` and `flange` the chain evaluated at `q_motor`.
     pub fn first_order(
@@ -267,8 +293,9 @@ impl Equilibrium<'_> {
             self.gravity,
             ws,
         );
+        self.sag(&ws.tau, &mut ws.sag);
         for (i, f) in first.iter_mut().enumerate() {
-            *f = q_motor[i] - self.compliance[i] * ws.tau[i];
+            *f = q_motor[i] - ws.sag[i];
         }
     }
 
@@ -349,20 +376,42 @@ impl Equilibrium<'_> {
                 self.gravity,
                 ws,
             );
+            self.sag(&ws.tau, &mut ws.sag);
             if it == 1
                 && let Some(first) = first.as_deref_mut()
             {
                 for i in 0..n {
-                    first[i] = q_motor[i] - self.compliance[i] * ws.tau[i];
+                    first[i] = q_motor[i] - ws.sag[i];
                 }
             }
             if it == 1 || last_step > schedule.refresh_step {
                 chain_gravity_hessian(self.chain, self.gravity, ws);
-                for i in 0..n {
-                    let c = self.compliance[i];
-                    for j in 0..n {
-                        let delta = if i == j { 1.0 } else { 0.0 };
-                        ws.jac[i * n + j] = delta + c * ws.hess[i * n + j];
+                match self.couplings {
+                    None => {
+                        for i in 0..n {
+                            let c = self.compliance[i];
+                            for j in 0..n {
+                                let delta = if i == j { 1.0 } else { 0.0 };
+                                ws.jac[i * n + j] = delta + c * ws.hess[i * n + j];
+                            }
+                        }
+                    }
+                    Some(_) => {
+                        // I + A C Aᵀ H, column by column (H symmetric: its column j is its row j).
+                        for j in 0..n {
+                            ws.step.copy_from_slice(&ws.hess[j * n..(j + 1) * n]);
+                            let mut col = std::mem::take(&mut ws.sag);
+                            self.sag(&ws.step, &mut col);
+                            for (i, c) in col.iter().enumerate() {
+                                let delta = if i == j { 1.0 } else { 0.0 };
+                                ws.jac[i * n + j] = delta + c;
+                            }
+                            ws.sag = col;
+                        }
+                        // `ws.sag` held the columns: the sag of the torques again.
+                        let mut sag = std::mem::take(&mut ws.sag);
+                        self.sag(&ws.tau, &mut sag);
+                        ws.sag = sag;
                     }
                 }
                 if !lu_factor(&mut ws.jac, &mut ws.piv, n) {
@@ -374,7 +423,7 @@ impl Equilibrium<'_> {
                 }
             }
             for i in 0..n {
-                ws.step[i] = -(theta[i] - q_motor[i] + self.compliance[i] * ws.tau[i]);
+                ws.step[i] = -(theta[i] - q_motor[i] + ws.sag[i]);
             }
             lu_solve(&ws.jac, &ws.piv, &mut ws.step, n);
             let mut step = 0.0f64;
@@ -422,8 +471,10 @@ pub struct ComplianceSection {
 /// rapier arm builder.
 #[derive(Clone, Debug)]
 pub struct ComplianceStage {
-    /// `1/kᵢ` per joint (rad/(N m) or m/N).
+    /// `1/kᵢ` per joint (rad/(N m) or m/N; 0 at coupled joints).
     compliance: Vec<f64>,
+    /// The model's coupled joints, when it has any.
+    couplings: Option<Couplings>,
     rapier: Option<RapierCompliance>,
 }
 
@@ -475,9 +526,24 @@ impl Effect for JointCompliance {
         self.check_fits(nq)
     }
 
+    /// With coupled joints ([`crate::coupled_joints`]) the springs are the drives': a coupled
+    /// joint's own stiffness is not used (it has no drive; its compliance is 0), and its torque goes
+    /// to its sources by virtual work. The rapier solver has no coupled joints.
     fn prepare(&self, cx: &Prepare<'_>) -> Result<ComplianceStage> {
+        let couplings = cx.model.couplings();
+        let mut compliance = self.compliance();
+        for c in couplings.list() {
+            compliance[c.joint] = 0.0;
+        }
         let rapier = match cx.solver {
             ComplianceSolver::Analytic => None,
+            ComplianceSolver::Rapier(_) if !couplings.is_empty() => {
+                return Err(SimError::ComplianceDiverged {
+                    reason: "the rapier solver does not model coupled joints: use the analytic \
+                             compliance solver for this robot"
+                        .into(),
+                });
+            }
             ComplianceSolver::Rapier(options) => Some(RapierCompliance::new(
                 cx.model,
                 &self.stiffness_nm_per_rad,
@@ -485,7 +551,8 @@ impl Effect for JointCompliance {
             )?),
         };
         Ok(ComplianceStage {
-            compliance: self.compliance(),
+            compliance,
+            couplings: (!couplings.is_empty()).then(|| couplings.clone()),
             rapier,
         })
     }
@@ -517,6 +584,7 @@ impl Effect for JointCompliance {
             payload,
             gravity: st.gravity,
             compliance: &stage.compliance,
+            couplings: stage.couplings.as_ref(),
         };
         // The state holds the chain evaluated at the anchor angles (from whichever stage ran last).
         debug_assert_eq!(

@@ -230,6 +230,15 @@ impl Effect for LinkDeflection {
     }
 
     fn prepare(&self, cx: &Prepare<'_>) -> Result<DeflectionStage> {
+        if !cx.model.couplings().is_empty() {
+            return Err(SimError::bad_effect(
+                EffectId::LinkDeflection,
+                "compliance_rad_per_nm",
+                "given",
+                "link deflection is not simulated on a robot with coupled joints (its equilibrium \
+                 would need the drives' springs through the coupling)",
+            ));
+        }
         let rapier = match (cx.solver, cx.joint_stiffness) {
             (ComplianceSolver::Analytic, _) => None,
             (ComplianceSolver::Rapier(options), Some(k)) => {
@@ -386,6 +395,7 @@ impl Effect for LinkDeflection {
             payload: st.cond.payload.as_ref(),
             gravity: st.gravity,
             compliance: &sc.compliance,
+            couplings: None,
         };
         let (it, flange) = eq
             .newton(

@@ -248,8 +248,12 @@ macro_rules! registry {
             }
 
             /// Runs every present stage in order on `st`, recording each one's displacement of the
-            /// target `p_flange` (flange frame) in `contribution`; `p` is the target so far.
+            /// target `p_flange` (flange frame) in `contribution`; `p` is the target so far. With
+            /// `couplings`, a stage's change of a drive's angle moves the joints coupled to it
+            /// through the linkage (`before` holds the angles before the stage); joint compliance
+            /// solves the coupled balance itself.
             #[inline]
+            #[allow(clippy::too_many_arguments)]
             fn run<'t>(
                 &'t self,
                 st: &mut State<'t, '_>,
@@ -257,9 +261,36 @@ macro_rules! registry {
                 p_flange: &Vector3<f64>,
                 contribution: &mut Contributions,
                 p: &mut Vector3<f64>,
+                couplings: Option<&crate::coupled_joints::Couplings>,
+                before: &mut [f64],
             ) -> Result<()> {
                 $( if let (Some(stage), Some(scr)) = (&self.$key, scratch.$key.as_mut()) {
-                    let moved = <$ty as Effect>::act(stage, st, scr)?;
+                    if couplings.is_some() {
+                        before.copy_from_slice(st.angles);
+                    }
+                    let mut moved = <$ty as Effect>::act(stage, st, scr)?;
+                    if let Some(c) = couplings
+                        && <$ty as Effect>::ID != EffectId::JointCompliance
+                        && moved != Moved::Unchanged
+                    {
+                        let mut carried = false;
+                        for cj in c.list() {
+                            let d: f64 = cj
+                                .sources
+                                .iter()
+                                .map(|&(s, a)| a * (st.angles[s] - before[s]))
+                                .sum();
+                            if d != 0.0 {
+                                st.angles[cj.joint] += d;
+                                st.q_link[cj.joint] += d;
+                                st.q_link_first[cj.joint] += d;
+                                carried = true;
+                            }
+                        }
+                        if carried {
+                            moved = Moved::Changed;
+                        }
+                    }
                     if moved != Moved::Unchanged {
                         if moved == Moved::Changed {
                             st.flange = st.geom.eval(st.angles, st.dt, st.poses);
@@ -382,6 +413,9 @@ pub struct Truth {
     /// Mass (kg) and centre of mass (joint frame, m) of each moving body.
     bodies: Vec<(f64, Vector3<f64>)>,
     solver: ComplianceSolver,
+    /// The robot's coupled joints, when it has any: a stage's change of a drive's angle moves the
+    /// joints coupled to it ([`crate::coupled_joints`]).
+    couplings: Option<crate::coupled_joints::Couplings>,
 }
 
 /// Per-thread workspace of a [`Truth`]: made with [`Truth::scratch`], reused for every pose.
@@ -394,6 +428,8 @@ pub struct TruthScratch {
     q_link_first: Vec<f64>,
     /// Motor-side anchor of the joint springs (see [`State`]).
     anchor: Vec<f64>,
+    /// The angles before a stage, with coupled joints.
+    before: Vec<f64>,
     work: GravityWork,
     stages: StageScratch,
 }
@@ -472,6 +508,7 @@ impl Truth {
             needs: effects.needs(),
             bodies: model.bodies().iter().map(|b| (b.mass, b.com)).collect(),
             solver,
+            couplings: (!model.couplings().is_empty()).then(|| model.couplings().clone()),
         })
     }
 
@@ -494,6 +531,7 @@ impl Truth {
             q_link: vec![0.0; n],
             q_link_first: vec![0.0; n],
             anchor: vec![0.0; n],
+            before: vec![0.0; n],
             work: GravityWork::new(n),
             stages: self.stages.scratch(n),
         }
@@ -598,8 +636,15 @@ impl Truth {
             anchor: &mut s.anchor,
         };
         // 1 … n. The effects, in registry order.
-        self.stages
-            .run(&mut st, &mut s.stages, p_flange, &mut contribution, &mut p)?;
+        self.stages.run(
+            &mut st,
+            &mut s.stages,
+            p_flange,
+            &mut contribution,
+            &mut p,
+            self.couplings.as_ref(),
+            &mut s.before,
+        )?;
         Ok(TruePoint {
             flange: st.flange,
             p_base: p,

@@ -151,7 +151,7 @@ pub(super) fn measurement_columns(has_dir: bool, tracker: &Tracker) -> OptionalC
 /// The measurement table of a simulation: contract columns only (see the module docs).
 pub fn measurement_table(plan: &Plan, sim: &Simulation, tracker: &Tracker) -> MeasurementTable {
     let cols = measurement_columns(plan.dir.is_some(), tracker);
-    MeasurementTable {
+    let table = MeasurementTable {
         n_joints: plan.nq,
         pose: plan.pose.clone(),
         q: plan.q.clone(),
@@ -170,5 +170,32 @@ pub fn measurement_table(plan: &Plan, sim: &Simulation, tracker: &Tracker) -> Me
             .sigma
             .then(|| sim.rows.iter().map(|r| r.reading.sigma_m).collect()),
         campaign: None,
+    };
+    match &plan.drives {
+        None => table,
+        Some(drives) => drive_columns(table, drives),
+    }
+}
+
+/// `table` (every chain joint) with only the joint and direction columns of the driven joints
+/// `drives` (chain indices): a coupled joint has no column of its own
+/// ([`crate::coupled_joints`]).
+fn drive_columns(table: MeasurementTable, drives: &[usize]) -> MeasurementTable {
+    let n = table.n_joints;
+    let q = table
+        .q
+        .chunks_exact(n)
+        .flat_map(|row| drives.iter().map(move |&i| row[i]))
+        .collect();
+    let dir = table.dir.as_ref().map(|d| {
+        d.chunks_exact(n)
+            .flat_map(|row| drives.iter().map(move |&i| row[i]))
+            .collect()
+    });
+    MeasurementTable {
+        n_joints: drives.len(),
+        q,
+        dir,
+        ..table
     }
 }

@@ -79,7 +79,7 @@ pub fn write_dataset_with(
         );
         let mut measurements = measurement_table::ParquetTableWriter::new(
             AtomicFile::create(&m_path)?,
-            nq,
+            res.model.n_drives(),
             measurement_columns(planner.has_dir(), &res.tracker),
             &m_path.display().to_string(),
         )?;

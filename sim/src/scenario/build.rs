@@ -201,6 +201,17 @@ impl Scenario {
         };
         let model = crate::urdf::load_str(&text, &source, &spec)
             .map_err(|e| scenario_err(f, "robot", e.to_string()))?;
+        let model = match &r.couplings {
+            None => model,
+            Some(c) => {
+                let path = self.base_dir.join(c);
+                let decls = crate::coupled_joints::Couplings::read_file(&path)
+                    .map_err(|e| scenario_err(f, "robot.couplings", e.to_string()))?;
+                model
+                    .with_couplings(&decls)
+                    .map_err(|e| scenario_err(f, "robot.couplings", e.to_string()))?
+            }
+        };
         Ok((
             model,
             RobotSource {

@@ -20,6 +20,9 @@ pub struct RobotSection {
     pub base_link: Option<String>,
     /// Tip link of the chain.
     pub tip_link: Option<String>,
+    /// Coupled joints declared beside the URDF: a TOML file of `[[coupling]]` tables, relative to the
+    /// scenario file ([`crate::coupled_joints`]; the CLI's `--couplings`).
+    pub couplings: Option<String>,
     /// Gravity in the base frame (m/s²); default `[0, 0, -9.81]`.
     pub gravity_m_per_s2: Option<[f64; 3]>,
 }

@@ -90,13 +90,7 @@ pub(super) fn candidate_information(
     let n_ext = settings.as_ref().map_or(0, |s| s.params(model).len());
     let mut calibration = options.calibration;
     calibration.noise = options.noise;
-    let obs = observations(
-        model,
-        &data,
-        &calibration,
-        settings.as_ref(),
-        &vec![0.0; n_ext],
-    )?;
+    let obs = observations(model, &data, &calibration, settings.as_ref(), None)?;
     let mut start = KinematicParams::nominal(model.nq(), false);
     start.p_flange_target = options.target_offset;
     start.t_tracker_base = tracker_pose(options.constraints.tracker_base_m.as_ref());

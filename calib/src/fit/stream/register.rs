@@ -275,7 +275,7 @@ fn pass(
             });
         }
         if let Some(s) = extensions {
-            obs.ext = Regressors::build(model, s, t, &rows, source.name(), &params.extension)?;
+            obs.ext = Regressors::build(model, s, t, &rows, source.name(), Some(params))?;
         }
         for r in 0..obs.len() {
             obs.source_row[r] = chunk.first_row + r;

@@ -89,9 +89,16 @@ impl CauseModel for JointCompliance {
         Cause::JointCompliance
     }
 
-    /// Always: with the robot's masses it identifies the compliances, without them the lumped
-    /// products.
-    fn usable(&self, _model: &Model, _table: &MeasurementTable) -> std::result::Result<(), String> {
+    /// With the robot's masses it identifies the compliances, without them the lumped products; not
+    /// a robot with coupled joints and no masses.
+    fn usable(&self, model: &Model, _table: &MeasurementTable) -> std::result::Result<(), String> {
+        if !model.couplings().is_empty() && model.require_inertials().is_err() {
+            return Err(
+                "the robot has coupled joints and no masses: lumped products through a coupling \
+                 are not modelled"
+                    .into(),
+            );
+        }
         Ok(())
     }
 
@@ -104,8 +111,16 @@ impl CauseModel for JointCompliance {
         model: &Model,
         table: &MeasurementTable,
         rows: &[usize],
-        _source: &str,
+        source: &str,
     ) -> Result<()> {
+        if let Err(why) = self.usable(model, table) {
+            return Err(crate::error::CalibError::BadValue {
+                context: source.to_string(),
+                field: "--model".into(),
+                value: "joint_compliance".into(),
+                problem: why,
+            });
+        }
         if model.require_inertials().is_err() && settings.lumped_gravity.is_none() {
             settings.lumped_gravity = Some(LumpedGravity::for_model(
                 model,
@@ -130,6 +145,7 @@ impl CauseModel for JointCompliance {
 
     fn params(&self, model: &Model, settings: &ExtensionSettings) -> Vec<ExtensionParam> {
         match &settings.lumped_gravity {
+            // A coupled joint has no drive and no spring of its own (module docs).
             None => per_joint_params(
                 model,
                 Cause::JointCompliance,
@@ -137,7 +153,14 @@ impl CauseModel for JointCompliance {
                 Unit::RadianPerNewtonMetre,
                 Unit::MetrePerNewton,
                 SCALE_RAD_PER_NM,
-            ),
+            )
+            .into_iter()
+            .filter(|p| {
+                !p.term
+                    .joint()
+                    .is_some_and(|j| model.couplings().is_coupled(j))
+            })
+            .collect(),
             Some(lumped) => lumped_params(model, lumped),
         }
     }
@@ -178,8 +201,16 @@ impl CauseModel for JointCompliance {
     /// the payload) from the row's joint frames.
     fn regressors(&self, settings: &ExtensionSettings, row: &RowInputs<'_>, out: &mut [f64]) {
         let Some(lumped) = &settings.lumped_gravity else {
-            for (o, t) in out.iter_mut().zip(row.tau) {
-                *o = -t;
+            if row.couplings.is_empty() {
+                for (o, t) in out.iter_mut().zip(row.tau) {
+                    *o = -t;
+                }
+            } else {
+                // Each drive feels its own torque and, by virtual work, those of the joints
+                // coupled to it: `(Aᵀ τ)ᵢ`.
+                for (o, &i) in out.iter_mut().zip(row.couplings.drives()) {
+                    *o = -drive_torque(row.couplings, row.tau, i);
+                }
             }
             return;
         };
@@ -242,9 +273,26 @@ impl CauseModel for JointCompliance {
     ) {
         let n = row.q.len();
         let Some(lumped) = &settings.lumped_gravity else {
-            for (i, c) in x.iter().enumerate() {
+            if row.couplings.is_empty() {
+                for (i, c) in x.iter().enumerate() {
+                    for j in 0..n {
+                        d_dtheta[i * n + j] -= c * torque_jacobian[i * n + j];
+                    }
+                }
+                return;
+            }
+            // `Δθ = −A C Aᵀ τ(θ)`: drive `i` turns by `−cᵢ (Aᵀ ∂τ/∂θⱼ)ᵢ`, and so, times their
+            // multipliers, do the joints coupled to it.
+            for (&c, &i) in x.iter().zip(row.couplings.drives()) {
                 for j in 0..n {
-                    d_dtheta[i * n + j] -= c * torque_jacobian[i * n + j];
+                    let mut d = torque_jacobian[i * n + j];
+                    for &(k, a) in row.couplings.followers(i) {
+                        d += a * torque_jacobian[k * n + j];
+                    }
+                    d_dtheta[i * n + j] -= c * d;
+                    for &(k, a) in row.couplings.followers(i) {
+                        d_dtheta[k * n + j] -= a * c * d;
+                    }
                 }
             }
             return;
@@ -376,6 +424,18 @@ impl CauseModel for JointCompliance {
             ),
         }
     }
+}
+
+/// The torque drive `i` feels (N m or N): its own holding torque `τᵢ` and, by virtual work, `a τₖ`
+/// of every joint `k` coupled to it with multiplier `a` ([`sim::coupled_joints`]).
+#[inline]
+fn drive_torque(couplings: &sim::coupled_joints::Couplings, tau: &[f64], i: usize) -> f64 {
+    tau[i]
+        + couplings
+            .followers(i)
+            .iter()
+            .map(|&(k, a)| a * tau[k])
+            .sum::<f64>()
 }
 
 /// The parameters of joint compliance without masses: at each joint whose torque changes, its
@@ -582,6 +642,7 @@ mod tests {
             sim::kinematics::forward_kinematics(&model, data, theta);
             let row = RowInputs {
                 joints: model.joints(),
+                couplings: model.couplings(),
                 q: theta,
                 tau: &[],
                 moment: &[],
@@ -603,6 +664,7 @@ mod tests {
         sim::kinematics::forward_kinematics(&model, &mut data, &theta);
         let row = RowInputs {
             joints: model.joints(),
+            couplings: model.couplings(),
             q: &theta,
             tau: &[],
             moment: &[],

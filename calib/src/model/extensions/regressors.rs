@@ -3,6 +3,7 @@
 
 use super::{Cause, ExtensionParam, ExtensionSettings, Term};
 use crate::error::{CalibError, Result};
+use crate::model::params::KinematicParams;
 use nalgebra::Vector3;
 use rayon::prelude::*;
 use sim::Model;
@@ -13,6 +14,8 @@ use sim::measurement_table::MeasurementTable;
 pub struct RowInputs<'a> {
     /// The robot's joints (kind, axis in the joint frame).
     pub joints: &'a [sim::Joint],
+    /// The robot's coupled joints ([`sim::coupled_joints`]; none for most arms).
+    pub couplings: &'a sim::coupled_joints::Couplings,
     /// Joint values the controller reports (rad; m for prismatic joints).
     pub q: &'a [f64],
     /// Holding torque of each joint against gravity and payload (N m; N for prismatic joints), at the
@@ -44,6 +47,9 @@ pub struct Regressors {
     pub coef: Vec<f64>,
     /// Whether any parameter is a [`Term::Bend`].
     pub bends: bool,
+    /// The robot's coupled joints, when it has any: a joint-angle term of a driven joint moves the
+    /// joints coupled to it ([`apply`]).
+    pub couplings: Option<sim::coupled_joints::Couplings>,
 }
 
 /// Fixed-point steps of the spring balance in [`Regressors::build`]: the error shrinks by about 10⁻²
@@ -57,6 +63,7 @@ impl Regressors {
             params: Vec::new(),
             coef: Vec::new(),
             bends: false,
+            couplings: None,
         }
     }
 
@@ -81,18 +88,20 @@ impl Regressors {
     /// errors.
     ///
     /// Gravity torques are evaluated where the link really is: at the joint angles `θ` that the
-    /// extension values `at` (in [`ExtensionSettings::params`] order) give, `θ = q + Σₑ xₑ gₑ(θ)`,
-    /// solved by fixed-point iteration (each step shrinks the error by the compliance times the
-    /// torque's derivative, about 10⁻²). With `at` empty, at `q`. Once `at` holds the estimate, this
-    /// turns the first-order compliance model into the exact spring balance.
+    /// extension values of the parameters `at` (in [`ExtensionSettings::params`] order) give,
+    /// `θ = q + Σₑ xₑ gₑ(θ)`, solved by fixed-point iteration (each step shrinks the error by the
+    /// compliance times the torque's derivative, about 10⁻²). Without `at`, at `q`. Once `at` holds
+    /// the estimate, this turns the first-order compliance model into the exact spring balance. The
+    /// torques are the nominal robot's (docs/calibrate.md, "The statics' geometry").
     pub fn build(
         model: &Model,
         settings: &ExtensionSettings,
         table: &MeasurementTable,
         rows: &[usize],
         source: &str,
-        at: &[f64],
+        at: Option<&KinematicParams>,
     ) -> Result<Self> {
+        let at: &[f64] = at.map_or(&[], |p| &p.extension);
         let params = settings.params(model);
         let n = params.len();
         let mut coef = vec![0.0; rows.len() * n];
@@ -131,6 +140,7 @@ impl Regressors {
             params,
             coef,
             bends,
+            couplings: couplings_of(model),
         })
     }
 }
@@ -223,6 +233,7 @@ impl<'m> RowRegressors<'m> {
                 params,
                 coef: vec![0.0; n],
                 bends,
+                couplings: couplings_of(model),
             },
             theta: vec![0.0; model.nq()],
         }
@@ -284,6 +295,7 @@ impl<'m> RowRegressors<'m> {
             }
             let inputs = RowInputs {
                 joints: self.model.joints(),
+                couplings: self.model.couplings(),
                 q,
                 tau: &self.tau,
                 moment: &self.moment,
@@ -347,6 +359,7 @@ impl<'m> RowRegressors<'m> {
         }
         let inputs = RowInputs {
             joints: self.model.joints(),
+            couplings: self.model.couplings(),
             q,
             tau: &self.tau,
             moment: &self.moment,
@@ -437,7 +450,8 @@ impl CauseColumns {
 /// Rows per parallel block of [`Regressors::build`].
 const BUILD_BLOCK_ROWS: usize = 256;
 
-/// Effective joint values of row `r`: `q` plus every joint-angle term, into `q_out`; returns the growth
+/// Effective joint values of row `r`: `q` plus every joint-angle term (a driven joint's term moving
+/// the joints coupled to it by their multipliers), into `q_out`; returns the growth
 /// factor `x · g` (0 without growth). Bending terms are left to [`bends`].
 #[inline]
 pub fn apply(regs: &Regressors, values: &[f64], r: usize, q: &[f64], q_out: &mut [f64]) -> f64 {
@@ -453,7 +467,22 @@ pub fn apply(regs: &Regressors, values: &[f64], r: usize, q: &[f64], q_out: &mut
             Term::Bend { .. } => {}
         }
     }
+    if let Some(c) = &regs.couplings {
+        // A driven joint's change of link angle moves the joints coupled to it.
+        for cj in c.list() {
+            q_out[cj.joint] += cj
+                .sources
+                .iter()
+                .map(|&(s, a)| a * (q_out[s] - q[s]))
+                .sum::<f64>();
+        }
+    }
     growth
+}
+
+/// `Some` couplings of `model` when it has any.
+fn couplings_of(model: &Model) -> Option<sim::coupled_joints::Couplings> {
+    (!model.couplings().is_empty()).then(|| model.couplings().clone())
 }
 
 /// The bending rotation vector of each joint in row `r` (rad, joint frame: `φᵢ = Σₑ xₑ gₑ e_about`

@@ -114,7 +114,7 @@ pub(crate) fn evaluate(
     }
     let cal = fit(model, &split.train, &request)?;
     let ext = cal.extensions.as_ref();
-    let at = &cal.params.extension;
+    let at = Some(&cal.params);
     let train_obs = observations(model, &split.train, &options.calibration, ext, at)?;
     let test_obs = observations(model, &split.test, &options.calibration, ext, at)?;
     let prediction = Prediction::new(model, &cal.params);
