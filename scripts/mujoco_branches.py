@@ -20,10 +20,11 @@ Requirements: scripts/requirements.txt (mujoco==4.0.0, numpy).
 import argparse
 import os
 import sys
-import tempfile
 
 import mujoco
 import numpy as np
+
+from mujoco_reference import write_atomic
 
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 URDF_REL = "sim/tests/data/torso_two_arms.urdf"
@@ -104,12 +105,8 @@ def main(argv=None):
             d = float(np.max(np.abs(old[:, n:] - rows[:, n:])))
             print("%s %s: max |tau diff| %.1e N m" % ("OK" if d <= COMPARE_TOL else "MISMATCH", FILE, d))
             status = 0 if d <= COMPARE_TOL else 1
-    os.makedirs(args.out, exist_ok=True)
     out = os.path.join(args.out, FILE)
-    fd, tmp = tempfile.mkstemp(dir=args.out, prefix="." + FILE)
-    with os.fdopen(fd, "w") as f:
-        f.write(text)
-    os.replace(tmp, out)
+    write_atomic(out, text)
     print("wrote %s (%d configurations)" % (out, N_CONFIGS))
     return status
 

@@ -25,10 +25,12 @@ import argparse
 import copy
 import os
 import sys
-import tempfile
 
 import mujoco
 import numpy as np
+
+from mujoco_branches import read  # the golden CSV's numbers, as the branches' script reads them
+from mujoco_reference import write_atomic
 
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 URDF_REL = "sim/tests/data/coupled_torso.urdf"
@@ -183,11 +185,6 @@ def compute(path):
     return head + "\n".join(lines) + "\n", np.array(rows)
 
 
-def read(path):
-    with open(path) as f:
-        return np.array([[float(x) for x in l.split(",")] for l in f if l[0] not in "#q"])
-
-
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--out", default=os.path.join(REPO, "golden"), help="output directory (default <repo>/golden)")
@@ -207,13 +204,8 @@ def main(argv=None):
             ok = dt <= COMPARE_TOL and dx <= COMPARE_TOL
             print("%s %s: max |theta diff| %.1e rad, max |xyz diff| %.1e m" % ("OK" if ok else "MISMATCH", FILE, dt, dx))
             status = 0 if ok else 1
-    os.makedirs(args.out, exist_ok=True)
     out = os.path.join(args.out, FILE)
-    fd, tmp = tempfile.mkstemp(dir=args.out, prefix="." + FILE)
-    with os.fdopen(fd, "w") as f:
-        f.write(text)
-    os.chmod(tmp, 0o644)  # mkstemp makes it 0600
-    os.replace(tmp, out)
+    write_atomic(out, text)
     print("wrote %s (%d configurations)" % (out, N_CONFIGS))
     return status
 

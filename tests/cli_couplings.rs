@@ -48,40 +48,21 @@ fn scenario(dir: &Path, robot: &str) -> PathBuf {
     s
 }
 
-fn generate(scenario: &Path, out: &Path) -> PathBuf {
-    common::robocal_ok(&[
-        "generate",
-        "--scenario",
-        scenario.to_str().unwrap(),
-        "--out",
-        out.to_str().unwrap(),
-    ]);
-    out.join("measurements.parquet")
-}
-
-fn robot_args() -> Vec<String> {
-    vec![
-        "--robot".into(),
-        urdf().display().to_string(),
-        "--tip-link".into(),
-        "left_flange".into(),
-    ]
-}
-
-fn run(args: &[String]) -> (Option<i32>, String) {
-    let a: Vec<&str> = args.iter().map(String::as_str).collect();
-    common::robocal_status(&a)
+/// A path as a command-line argument.
+fn arg(p: &Path) -> &str {
+    p.to_str().unwrap()
 }
 
 #[test]
 fn the_coupling_in_the_urdf_or_beside_it_gives_the_same_bytes_and_the_model_keeps_it() {
     let d = common::scratch_dir("robocal_cli_couplings", "beside");
     let (bare, couplings) = declared_beside(&d);
-    let in_urdf = generate(
+    let in_urdf = common::generate(
         &scenario(&d, &format!("urdf = \"{}\"", urdf().display())),
         &d.join("a"),
+        &[],
     );
-    let beside = generate(
+    let beside = common::generate(
         &scenario(
             &d,
             &format!(
@@ -91,6 +72,7 @@ fn the_coupling_in_the_urdf_or_beside_it_gives_the_same_bytes_and_the_model_keep
             ),
         ),
         &d.join("b"),
+        &[],
     );
     assert_eq!(
         std::fs::read(&in_urdf).unwrap(),
@@ -101,59 +83,60 @@ fn the_coupling_in_the_urdf_or_beside_it_gives_the_same_bytes_and_the_model_keep
     assert_eq!(t.n_joints, 7);
     // Calibrated with the coupling beside the URDF, the model embeds it: predict needs no flag.
     let model = d.join("model.json");
-    let (code, err) = run(&[
-        "calibrate".into(),
-        "--robot".into(),
-        bare.display().to_string(),
-        "--tip-link".into(),
-        "left_flange".into(),
-        "--couplings".into(),
-        couplings.display().to_string(),
-        "--data".into(),
-        beside.display().to_string(),
-        "--model".into(),
-        "joint_compliance".into(),
-        "--out".into(),
-        model.display().to_string(),
+    let (code, err) = common::robocal_status(&[
+        "calibrate",
+        "--robot",
+        arg(&bare),
+        "--tip-link",
+        "left_flange",
+        "--couplings",
+        arg(&couplings),
+        "--data",
+        arg(&beside),
+        "--model",
+        "joint_compliance",
+        "--out",
+        arg(&model),
     ]);
     assert_eq!(code, Some(0), "{err}");
     let json: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&model).unwrap()).unwrap();
     assert_eq!(json["robot"]["couplings"][0]["joint"], "torso_pitch_3");
-    let names: Vec<String> = json["extensions"]["parameters"]
+    // One compliance per drive: joints 2, 3 and 5–8 (and the vertical yaw's, 1), none at joint 4.
+    let names: Vec<&str> = json["extensions"]["names"]
         .as_array()
-        .map(|a| {
-            a.iter()
-                .map(|p| p["name"].as_str().unwrap_or("").to_string())
-                .collect()
-        })
-        .unwrap_or_default();
+        .expect("the model file lists its extension parameters")
+        .iter()
+        .map(|p| p.as_str().unwrap())
+        .collect();
+    assert!(names.contains(&"joint 2 compliance"), "{names:?}");
     assert!(
         names.iter().all(|n| !n.starts_with("joint 4 ")),
         "a compliance of the passive joint: {names:?}"
     );
     let pred = d.join("pred.csv");
-    let (code, err) = run(&[
-        "predict".into(),
-        "--model".into(),
-        model.display().to_string(),
-        "--data".into(),
-        beside.display().to_string(),
-        "--out".into(),
-        pred.display().to_string(),
+    let (code, err) = common::robocal_status(&[
+        "predict",
+        "--model",
+        arg(&model),
+        "--data",
+        arg(&beside),
+        "--out",
+        arg(&pred),
     ]);
     assert_eq!(code, Some(0), "{err}");
     // Without the coupling the same data is a table of the wrong robot.
-    let (code, err) = run(&[
-        "calibrate".into(),
-        "--robot".into(),
-        bare.display().to_string(),
-        "--tip-link".into(),
-        "left_flange".into(),
-        "--data".into(),
-        beside.display().to_string(),
-        "--out".into(),
-        d.join("wrong.json").display().to_string(),
+    let wrong = d.join("wrong.json");
+    let (code, err) = common::robocal_status(&[
+        "calibrate",
+        "--robot",
+        arg(&bare),
+        "--tip-link",
+        "left_flange",
+        "--data",
+        arg(&beside),
+        "--out",
+        arg(&wrong),
     ]);
     assert_eq!(code, Some(2), "{err}");
     let _ = std::fs::remove_dir_all(&d);
@@ -162,9 +145,10 @@ fn the_coupling_in_the_urdf_or_beside_it_gives_the_same_bytes_and_the_model_keep
 #[test]
 fn a_table_of_every_joint_must_agree_with_the_coupling_and_other_counts_are_refused() {
     let d = common::scratch_dir("robocal_cli_couplings", "columns");
-    let data = generate(
+    let data = common::generate(
         &scenario(&d, &format!("urdf = \"{}\"", urdf().display())),
         &d.join("g"),
+        &[],
     );
     let t = sim::measurement_table::read(&data).unwrap();
     let model = sim::urdf::load_file(
@@ -180,26 +164,32 @@ fn a_table_of_every_joint_must_agree_with_the_coupling_and_other_counts_are_refu
     assert_eq!(full.n_joints, 8);
     let ok = d.join("full.parquet");
     sim::measurement_table::write(&ok, &full).unwrap();
-    let mut args = vec!["calibrate".to_string()];
-    args.extend(robot_args());
-    let with = |data: &Path, out: &str| {
-        let mut a = args.clone();
-        a.extend([
-            "--data".into(),
-            data.display().to_string(),
-            "--out".into(),
-            d.join(out).display().to_string(),
-        ]);
-        a
+    let urdf = urdf();
+    // `calibrate` of the torso on `data` into `out` (in the scratch folder), with `extra` flags.
+    let calibrate = |data: &Path, out: &str, extra: &[&str]| {
+        let out = d.join(out);
+        let mut a = vec![
+            "calibrate",
+            "--robot",
+            arg(&urdf),
+            "--tip-link",
+            "left_flange",
+            "--data",
+            arg(data),
+            "--out",
+            arg(&out),
+        ];
+        a.extend_from_slice(extra);
+        common::robocal_status(&a)
     };
-    let (code, err) = run(&with(&ok, "full.json"));
+    let (code, err) = calibrate(&ok, "full.json", &[]);
     assert_eq!(code, Some(0), "{err}");
     // The passive joint's column off its coupling at row 17: the row and column are named.
     let mut off = full.clone();
     off.q[16 * 8 + 3] += 0.01;
     let bad = d.join("off.csv");
     sim::measurement_table::write(&bad, &off).unwrap();
-    let (code, err) = run(&with(&bad, "off.json"));
+    let (code, err) = calibrate(&bad, "off.json", &[]);
     assert_eq!(code, Some(2), "{err}");
     assert!(
         err.contains("row 17") && err.contains("q4") && err.contains("torso_pitch_3"),
@@ -213,26 +203,25 @@ fn a_table_of_every_joint_must_agree_with_the_coupling_and_other_counts_are_refu
     six.dir = None;
     let short = d.join("six.csv");
     sim::measurement_table::write(&short, &six).unwrap();
-    let (code, err) = run(&with(&short, "six.json"));
+    let (code, err) = calibrate(&short, "six.json", &[]);
     assert_eq!(code, Some(2), "{err}");
     assert!(
         err.contains("6 joint columns") && err.contains("7 driven joints"),
         "{err}"
     );
     // Streaming and compensation do not handle coupled joints yet: they say so.
-    let mut a = with(&data, "stream.json");
-    a.extend(["--stream".into(), "always".into()]);
-    let (code, err) = run(&a);
+    let (code, err) = calibrate(&data, "stream.json", &["--stream", "always"]);
     assert_eq!(code, Some(2), "{err}");
     assert!(err.contains("coupled joints"), "{err}");
-    let (code, err) = run(&[
-        "compensate".into(),
-        "--model".into(),
-        d.join("full.json").display().to_string(),
-        "--targets".into(),
-        data.display().to_string(),
-        "--out".into(),
-        d.join("q.csv").display().to_string(),
+    let (full_model, q) = (d.join("full.json"), d.join("q.csv"));
+    let (code, err) = common::robocal_status(&[
+        "compensate",
+        "--model",
+        arg(&full_model),
+        "--targets",
+        arg(&data),
+        "--out",
+        arg(&q),
     ]);
     assert_eq!(code, Some(2), "{err}");
     assert!(err.contains("coupled joints"), "{err}");

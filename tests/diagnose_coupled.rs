@@ -82,17 +82,7 @@ fn parameter(list: &Value, name: &str) -> Option<(f64, f64)> {
 fn generate(dir: &Path, k: &[f64; 8], seed: u64) -> PathBuf {
     let sc = dir.join("scenario.toml");
     std::fs::write(&sc, scenario(k)).unwrap();
-    let out = dir.join("gen");
-    common::robocal_ok(&[
-        "generate",
-        "--scenario",
-        sc.to_str().unwrap(),
-        "--out",
-        out.to_str().unwrap(),
-        "--seed",
-        &seed.to_string(),
-    ]);
-    out.join("measurements.parquet")
+    common::generate(&sc, &dir.join("gen"), &["--seed", &seed.to_string()])
 }
 
 #[test]

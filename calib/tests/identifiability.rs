@@ -10,6 +10,16 @@ use common::{Truth, random_configs, rng, table};
 use sim::measurement_table::MeasurementTable;
 use sim::robots;
 
+/// The kinematic calibration of every row of `t` with the default options.
+fn fit_kinematic(model: &sim::Model, t: &MeasurementTable) -> calib::fit::Calibration {
+    fit(
+        model,
+        &Dataset::all(t, "t"),
+        &FitRequest::kinematic(&CalibrationOptions::default()),
+    )
+    .unwrap()
+}
+
 #[test]
 fn identifiable_count_matches_the_closed_form() {
     for (name, orientation) in [
@@ -29,12 +39,7 @@ fn identifiable_count_matches_the_closed_form() {
             0.0,
             &mut g,
         );
-        let cal = fit(
-            &model,
-            &Dataset::all(&t, "t"),
-            &FitRequest::kinematic(&CalibrationOptions::default()),
-        )
-        .unwrap();
+        let cal = fit_kinematic(&model, &t);
         let revolute = model
             .joints()
             .iter()
@@ -69,12 +74,7 @@ fn joint_1_that_never_moves_is_named_and_the_rest_is_still_recovered() {
         q[0] = 0.3;
     }
     let t = table(&model, &truth, &configs, 0.0, 0.0, &mut g);
-    let cal = fit(
-        &model,
-        &Dataset::all(&t, "t"),
-        &FitRequest::kinematic(&CalibrationOptions::default()),
-    )
-    .unwrap();
+    let cal = fit_kinematic(&model, &t);
     assert!(cal.report.was_successful());
     assert!(cal.report.health.is_clean(), "{}", cal.report.health);
     let text = cal.report.text();
@@ -304,12 +304,7 @@ fn gross_errors_are_excluded_by_default_and_named() {
             .sum();
         (e2 / test_q.len() as f64).sqrt()
     };
-    let cal = fit(
-        &model,
-        &Dataset::all(&t, "t"),
-        &FitRequest::kinematic(&CalibrationOptions::default()),
-    )
-    .unwrap();
+    let cal = fit_kinematic(&model, &t);
     assert!(cal.report.was_successful());
     assert!(cal.report.health.is_clean(), "{}", cal.report.health);
     let mut excluded: Vec<usize> = cal.report.excluded.iter().map(|o| o.row - 1).collect();
@@ -363,12 +358,7 @@ fn a_coupling_is_named_for_what_it_makes_inseparable() {
         model.couplings().apply(q);
     }
     let t = table(&model, &truth, &configs, 0.0, 0.0, &mut g);
-    let cal = fit(
-        &model,
-        &Dataset::all(&t, "t"),
-        &FitRequest::kinematic(&CalibrationOptions::default()),
-    )
-    .unwrap();
+    let cal = fit_kinematic(&model, &t);
     let null = &cal.report.unidentifiable;
     assert_eq!(cal.report.observability.rank, 33);
     assert!(null.data_specific.is_empty(), "{:?}", null.data_specific);
@@ -399,11 +389,6 @@ fn a_coupling_is_named_for_what_it_makes_inseparable() {
         q[3] += 0.3 * ((k as f64 * 0.618).fract() * 2.0 - 1.0);
     }
     let t = table(&free, &truth, &moved, 0.0, 0.0, &mut g);
-    let cal = fit(
-        &free,
-        &Dataset::all(&t, "t"),
-        &FitRequest::kinematic(&CalibrationOptions::default()),
-    )
-    .unwrap();
+    let cal = fit_kinematic(&free, &t);
     assert_eq!(cal.report.observability.rank, 35);
 }

@@ -723,13 +723,14 @@ fn calibrate(
     let options: cal_cli::Options = quick(py, flags::parse("calibrate", &args))?;
     let robot = &robot.robot;
     let (outcome, warnings) = work(py, || {
-        let whole = robocal::cli::shared::whole_chain(&data.table, &robot.model, &data.source)?;
+        let whole =
+            measurement_table::whole_chain(&data.table, &robot.model, Path::new(&data.source))?;
         let mut warnings = robocal::cli::shared::check_table(&whole, &robot.model, &data.source)?;
         let test_whole = match test {
-            Some(t) => Some(robocal::cli::shared::whole_chain(
+            Some(t) => Some(measurement_table::whole_chain(
                 &t.table,
                 &robot.model,
-                &t.source,
+                Path::new(&t.source),
             )?),
             None => None,
         };
@@ -871,7 +872,7 @@ fn register(
     let options: reg_cli::Options = quick(py, flags::parse("register", &args))?;
     let (file, report, warnings) = work(py, || {
         let robot = Predictor::from_file(&model.file)?.model;
-        let whole = robocal::cli::shared::whole_chain(&data.table, &robot, &data.source)?;
+        let whole = measurement_table::whole_chain(&data.table, &robot, Path::new(&data.source))?;
         let warnings = robocal::cli::shared::check_table(&whole, &robot, &data.source)?;
         let (file, report) = reg_cli::register(
             &model.file,
@@ -934,7 +935,8 @@ fn diagnose(py: Python<'_>, robot: &Robot, data: &Table, args: Vec<String>) -> P
     let options: diag_cli::Options = quick(py, flags::parse("diagnose", &args))?;
     let robot = &robot.robot;
     let (text, warnings) = work(py, || {
-        let whole = robocal::cli::shared::whole_chain(&data.table, &robot.model, &data.source)?;
+        let whole =
+            measurement_table::whole_chain(&data.table, &robot.model, Path::new(&data.source))?;
         let warnings = robocal::cli::shared::check_table(&whole, &robot.model, &data.source)?;
         let d = diag_cli::run_diagnosis_with(
             &robot.model,

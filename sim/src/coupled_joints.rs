@@ -238,23 +238,17 @@ impl Couplings {
         Ok(f.coupling)
     }
 
-    /// The `<robocal:coupling …/>` elements of a URDF text (module docs); `source_name` names the
-    /// text in errors.
+    /// The `<robocal:coupling …/>` elements of a URDF text (module docs), children of `<robot>` read by
+    /// [`crate::urdf_text::robot_children`] (a commented-out element is not read); `source_name`
+    /// names the text in errors.
     pub fn from_urdf_text(text: &str, source_name: &str) -> Result<Vec<CouplingDecl>> {
-        const TAG: &str = "<robocal:coupling";
         let bad = |message: String| SimError::Parse {
             source_name: source_name.to_string(),
             message,
         };
         let mut out = Vec::new();
-        let mut rest = text;
-        while let Some(at) = rest.find(TAG) {
-            let after = &rest[at + TAG.len()..];
-            let end = after
-                .find('>')
-                .ok_or_else(|| bad("an unterminated <robocal:coupling> element".into()))?;
-            let attrs = after[..end].trim_end_matches('/');
-            let get = |key: &str| attribute(attrs, key);
+        for attrs in crate::urdf_text::robot_children(text, source_name, "robocal:coupling")? {
+            let get = |key: &str| attrs.iter().find(|(k, _)| k == key).map(|(_, v)| v.clone());
             let joint = get("joint")
                 .ok_or_else(|| bad("a <robocal:coupling> element without joint=\"…\"".into()))?;
             let sources: Vec<String> = get("sources")
@@ -291,7 +285,6 @@ impl Couplings {
                 multipliers,
                 offset,
             });
-            rest = &after[end..];
         }
         Ok(out)
     }
@@ -369,26 +362,6 @@ impl Couplings {
     }
 }
 
-/// The value of attribute `key` in the attribute text of a start tag (`key="…"` or `key='…'`).
-fn attribute(attrs: &str, key: &str) -> Option<String> {
-    let mut from = 0;
-    while let Some(k) = attrs[from..].find(key) {
-        let at = from + k;
-        let before_ok = at == 0 || attrs[..at].ends_with(char::is_whitespace);
-        let rest = attrs[at + key.len()..].trim_start();
-        if before_ok && let Some(v) = rest.strip_prefix('=') {
-            let v = v.trim_start();
-            let quote = v.chars().next()?;
-            if quote == '"' || quote == '\'' {
-                let body = &v[1..];
-                return body.find(quote).map(|e| body[..e].to_string());
-            }
-        }
-        from = at + key.len();
-    }
-    None
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -458,11 +431,13 @@ mod tests {
         }
     }
 
+    /// The attributes as written; a commented-out element is not a coupling.
     #[test]
     fn the_robocal_element_is_read_with_its_attributes() {
         let text = r#"<robot name="r" xmlns:robocal="https://robocal.dev/urdf">
           <robocal:coupling joint="j4" sources="j2  j3" multipliers="-1 -1.5" offset="0.25"/>
           <robocal:coupling joint='j6' sources='j5'/>
+          <!-- <robocal:coupling joint="j7" sources="j1"/> -->
         </robot>"#;
         let d = Couplings::from_urdf_text(text, "t").unwrap();
         assert_eq!(d.len(), 2);
@@ -473,7 +448,7 @@ mod tests {
         assert_eq!(d[1].multipliers, vec![1.0]);
         assert_eq!(d[1].offset, 0.0);
         let e = Couplings::from_urdf_text(
-            r#"<robocal:coupling joint="j4" sources="j2" multipliers="x"/>"#,
+            r#"<robot name="r"><robocal:coupling joint="j4" sources="j2" multipliers="x"/></robot>"#,
             "t",
         )
         .unwrap_err()

@@ -68,7 +68,7 @@ pub use chunks::{
     CSV_BLOCK_BYTES, Chunk, DEFAULT_CHUNK_ROWS, TableChunks, read_chunks, read_configuration_chunks,
 };
 pub use columns::{Column, ColumnValues, configurations_from_columns, from_columns};
-pub use couple::{COUPLING_TOLERANCE, couple, drives_only};
+pub use couple::{COUPLING_TOLERANCE, couple, drive_columns, whole_chain};
 pub use csv::{read_csv_str, write_csv_string};
 pub use parquet::{PARQUET_MAX_ROW_GROUP_ROWS, ParquetTableWriter, write_parquet_bytes};
 

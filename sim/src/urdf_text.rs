@@ -11,6 +11,59 @@ use crate::error::{Result, SimError};
 use std::collections::HashMap;
 use std::ops::Range;
 
+/// The attributes (name, unescaped value) of every `<name>` element that is a child of `<robot>`, in
+/// document order, read with the scanner of [`edit_joint_origins`]: comments, CDATA and elements
+/// nested deeper are not children. `source_name` names the text in errors.
+///
+/// # Errors
+/// [`SimError::Parse`] when the markup is unterminated or an end tag closes another element.
+pub fn robot_children(
+    text: &str,
+    source_name: &str,
+    name: &str,
+) -> Result<Vec<Vec<(String, String)>>> {
+    let err = |message: String| SimError::Parse {
+        source_name: source_name.to_string(),
+        message,
+    };
+    let mut stack: Vec<&str> = Vec::new();
+    let mut out = Vec::new();
+    for item in Scanner::new(text) {
+        let item =
+            item.map_err(|(pos, what)| err(format!("{what} at line {}", line_of(text, pos))))?;
+        match item {
+            Item::Open(tag) => {
+                if stack.len() == 1 && stack[0] == "robot" && tag.name(text) == name {
+                    out.push(
+                        tag.attrs
+                            .iter()
+                            .map(|a| {
+                                (
+                                    text[a.name.clone()].to_string(),
+                                    unescape(&text[a.value.clone()]),
+                                )
+                            })
+                            .collect(),
+                    );
+                }
+                if !tag.self_closing {
+                    stack.push(tag.name(text));
+                }
+            }
+            Item::Close(span, closed) => {
+                if stack.pop() != Some(closed) {
+                    return Err(err(format!(
+                        "</{closed}> does not close the open element at line {}",
+                        line_of(text, span.start)
+                    )));
+                }
+            }
+            Item::Comment(_) => {}
+        }
+    }
+    Ok(out)
+}
+
 /// `urdf` without its `<inertial>` elements (and every other byte kept): the robot as a vendor's
 /// kinematics file or a DH table describes it, with no masses. What a study of calibration without
 /// masses starts from (joint compliance then identifies lumped products; see

@@ -51,11 +51,8 @@ pub fn check_configurations(
     robot: &sim::Model,
     name: &str,
 ) -> Result<Vec<String>, CliError> {
-    if !robot.couplings().is_empty() && table.n_joints != robot.nq() {
-        // The driven joints' columns: check the whole chain's values.
-        let coupled = measurement_table::couple(table.clone(), robot, Path::new(name))?;
-        return check_configurations(&coupled, robot, name);
-    }
+    // A robot with coupled joints: the driven joints' columns, checked as the whole chain.
+    let table = measurement_table::whole_chain(table, robot, Path::new(name))?;
     if table.n_joints != robot.nq() {
         return Err(CliError::Input(format!(
             "{name}: {} joint columns, but the model's robot '{}' has {} joints",
@@ -65,7 +62,7 @@ pub fn check_configurations(
         )));
     }
     Ok(measurement_table::check_against_model(
-        table,
+        &table,
         robot,
         Path::new(name),
     )?)

@@ -30,24 +30,6 @@ pub fn check_table(
     )?)
 }
 
-/// `table` with every chain joint of `robot`: as it is, or, for a robot with coupled joints and a
-/// table of its driven joints, with the coupled joints computed ([`measurement_table::couple`]);
-/// `name` names it in errors.
-pub fn whole_chain<'t>(
-    table: &'t MeasurementTable,
-    robot: &sim::Model,
-    name: &str,
-) -> Result<std::borrow::Cow<'t, MeasurementTable>, CliError> {
-    if robot.couplings().is_empty() || table.n_joints == robot.nq() {
-        return Ok(std::borrow::Cow::Borrowed(table));
-    }
-    Ok(std::borrow::Cow::Owned(measurement_table::couple(
-        table.clone(),
-        robot,
-        Path::new(name),
-    )?))
-}
-
 /// Prints one JSON document to stdout.
 pub fn print_json(value: &serde_json::Value) -> CliResult {
     let s = serde_json::to_string_pretty(value)

@@ -55,3 +55,18 @@ pub fn seed() -> u64 {
                 .as_nanos() as u64
         })
 }
+
+/// Runs `robocal generate --scenario SCENARIO --out OUT` with `extra` flags (asserting exit 0);
+/// the measurement file it wrote.
+pub fn generate(scenario: &std::path::Path, out: &std::path::Path, extra: &[&str]) -> PathBuf {
+    let mut args = vec![
+        "generate",
+        "--scenario",
+        scenario.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ];
+    args.extend_from_slice(extra);
+    robocal_ok(&args);
+    out.join("measurements.parquet")
+}

@@ -560,9 +560,9 @@ pub fn describe_null_space(
     // poses, if every coupled joint moved on its own (structural: no pose set moves it so).
     if !model.couplings().is_empty() {
         let found = coupling_directions(model, params, obs, sub, &layout);
+        let joints = coupling_words(model);
         let mut count = 0;
         for a in found {
-            let joints = coupling_words(model);
             if namer.offer(
                 &a,
                 NullKind::Coupling {
@@ -593,9 +593,8 @@ pub fn describe_null_space(
             }
             names.truncate(6);
             summary.push(format!(
-                "{count}: combinations {} makes inseparable, whatever the poses (the coupled joint \
-                 never moves on its own), mostly of {}",
-                coupling_words(model),
+                "{count}: combinations {joints} makes inseparable, whatever the poses (the coupled \
+                 joint never moves on its own), mostly of {}",
                 names.join(", ")
             ));
         }

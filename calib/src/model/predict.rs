@@ -683,7 +683,8 @@ impl Predictor {
     /// A table of a robot with coupled joints may give the driven joints only
     /// ([`sim::measurement_table::couple`]).
     pub fn predict_table(&mut self, table: &MeasurementTable, file: &str) -> Result<Predictions> {
-        let table = &*self.whole_chain(table, file)?;
+        let table =
+            &*sim::measurement_table::whole_chain(table, &self.model, std::path::Path::new(file))?;
         let (campaign, regs) = self.inputs(table, file)?;
         let orientation = self.params.r_flange_target.is_some();
         let mut out = Predictions {
@@ -764,26 +765,10 @@ impl Predictor {
         if self.uncertainty.is_none() {
             return Ok(None);
         }
-        let table = &*self.whole_chain(table, file)?;
+        let table =
+            &*sim::measurement_table::whole_chain(table, &self.model, std::path::Path::new(file))?;
         let (campaign, regs) = self.inputs(table, file)?;
         Ok(self.sigmas(table, &regs, &campaign))
-    }
-
-    /// `table` with every chain joint: as it is, or (a robot with coupled joints and a table of its
-    /// driven joints) the coupled joints computed ([`sim::measurement_table::couple`]).
-    pub fn whole_chain<'t>(
-        &self,
-        table: &'t MeasurementTable,
-        file: &str,
-    ) -> Result<std::borrow::Cow<'t, MeasurementTable>> {
-        if self.model.couplings().is_empty() || table.n_joints == self.model.nq() {
-            return Ok(std::borrow::Cow::Borrowed(table));
-        }
-        Ok(std::borrow::Cow::Owned(sim::measurement_table::couple(
-            table.clone(),
-            &self.model,
-            std::path::Path::new(file),
-        )?))
     }
 
     /// Every row's predicted standard deviation (m), when the predictor has an uncertainty. The

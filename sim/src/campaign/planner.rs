@@ -127,11 +127,6 @@ pub struct Planner<'a> {
     last: Vec<i8>,
 }
 
-/// Sets the coupled joints of `q` (every chain joint) from their sources.
-fn model_couple(model: &Model, q: &mut [f64]) {
-    model.couplings().apply(q);
-}
-
 impl<'a> Planner<'a> {
     /// Resolves the pose source of `spec` for `model` (draws nothing for random sampling; runs the
     /// inverse kinematics of ISO 9283, filters the grid, reads the pose file) and checks the counts:
@@ -362,7 +357,7 @@ impl<'a> Planner<'a> {
                 for (i, k) in ks.enumerate() {
                     let idx = u64::from(index[k % index.len()]);
                     grid_point(idx, points_per_joint, ranges, &mut out[i * n..(i + 1) * n]);
-                    model_couple(self.model, &mut out[i * n..(i + 1) * n]);
+                    self.model.couplings().apply(&mut out[i * n..(i + 1) * n]);
                 }
             }
             PoseSource::Random { ranges, max_tries } => {
@@ -382,7 +377,7 @@ impl<'a> Planner<'a> {
                                     let u: f64 = rng.random();
                                     *qi = lo + (hi - lo) * u;
                                 }
-                                model_couple(model, q);
+                                model.couplings().apply(q);
                                 forward_kinematics(model, data, q);
                                 if reachable(data, &p_flange, &spec.reachability) {
                                     return true;

@@ -399,19 +399,13 @@ impl Equilibrium<'_> {
                     Some(_) => {
                         // I + A C Aᵀ H, column by column (H symmetric: its column j is its row j).
                         for j in 0..n {
-                            ws.step.copy_from_slice(&ws.hess[j * n..(j + 1) * n]);
-                            let mut col = std::mem::take(&mut ws.sag);
-                            self.sag(&ws.step, &mut col);
-                            for (i, c) in col.iter().enumerate() {
+                            // `ws.step` is free until the right-hand side below.
+                            self.sag(&ws.hess[j * n..(j + 1) * n], &mut ws.step);
+                            for (i, c) in ws.step.iter().enumerate() {
                                 let delta = if i == j { 1.0 } else { 0.0 };
                                 ws.jac[i * n + j] = delta + c;
                             }
-                            ws.sag = col;
                         }
-                        // `ws.sag` held the columns: the sag of the torques again.
-                        let mut sag = std::mem::take(&mut ws.sag);
-                        self.sag(&ws.tau, &mut sag);
-                        ws.sag = sag;
                     }
                 }
                 if !lu_factor(&mut ws.jac, &mut ws.piv, n) {

@@ -173,29 +173,6 @@ pub fn measurement_table(plan: &Plan, sim: &Simulation, tracker: &Tracker) -> Me
     };
     match &plan.drives {
         None => table,
-        Some(drives) => drive_columns(table, drives),
-    }
-}
-
-/// `table` (every chain joint) with only the joint and direction columns of the driven joints
-/// `drives` (chain indices): a coupled joint has no column of its own
-/// ([`crate::coupled_joints`]).
-fn drive_columns(table: MeasurementTable, drives: &[usize]) -> MeasurementTable {
-    let n = table.n_joints;
-    let q = table
-        .q
-        .chunks_exact(n)
-        .flat_map(|row| drives.iter().map(move |&i| row[i]))
-        .collect();
-    let dir = table.dir.as_ref().map(|d| {
-        d.chunks_exact(n)
-            .flat_map(|row| drives.iter().map(move |&i| row[i]))
-            .collect()
-    });
-    MeasurementTable {
-        n_joints: drives.len(),
-        q,
-        dir,
-        ..table
+        Some(drives) => crate::measurement_table::drive_columns(table, drives),
     }
 }

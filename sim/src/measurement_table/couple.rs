@@ -1,7 +1,7 @@
 //! A measurement table of a robot with coupled joints ([`crate::coupled_joints`]): its joint columns
 //! `q1 … qD` are the driven joints, in chain order; the coupled joints have none. [`couple`] turns it
 //! into a table of every chain joint, the coupled ones computed from their sources, which is what
-//! every tool evaluates; [`drives_only`] turns such a table back into the file's columns.
+//! every tool evaluates; [`drive_columns`] turns such a table back into the file's columns.
 
 use super::MeasurementTable;
 use crate::error::{Result, SimError};
@@ -111,28 +111,39 @@ pub fn couple(table: MeasurementTable, model: &Model, file: &Path) -> Result<Mea
     })
 }
 
-/// The columns a file of `model` has: the driven joints' values and directions of a table of every
-/// chain joint (the inverse of [`couple`] for a table it made). A robot without couplings, or a table
-/// whose joint count is not the chain's: `table` as it is.
-pub fn drives_only(table: MeasurementTable, model: &Model) -> MeasurementTable {
-    let c = model.couplings();
-    let n = model.nq();
-    if c.is_empty() || table.n_joints != n {
-        return table;
+/// [`couple`] for a table that is borrowed: `table` itself when it already has every chain joint of
+/// `model` (or the robot has no couplings), else a coupled copy; `file` names it in errors.
+///
+/// # Errors
+/// What [`couple`] refuses.
+pub fn whole_chain<'t>(
+    table: &'t MeasurementTable,
+    model: &Model,
+    file: &Path,
+) -> Result<std::borrow::Cow<'t, MeasurementTable>> {
+    if model.couplings().is_empty() || table.n_joints == model.nq() {
+        return Ok(std::borrow::Cow::Borrowed(table));
     }
-    let pick = |v: &[f64]| -> Vec<f64> {
-        v.chunks_exact(n)
-            .flat_map(|row| c.drives().iter().map(move |&i| row[i]))
-            .collect()
-    };
-    let q = pick(&table.q);
-    let dir = table.dir.as_ref().map(|dir| {
-        dir.chunks_exact(n)
-            .flat_map(|row| c.drives().iter().map(move |&i| row[i]))
+    Ok(std::borrow::Cow::Owned(couple(table.clone(), model, file)?))
+}
+
+/// The columns a file of a robot with coupled joints has: `table` (every chain joint) with only the
+/// joint and direction columns of the driven joints `drives` (chain indices,
+/// [`crate::coupled_joints::Couplings::drives`]); the inverse of [`couple`] for a table it made.
+pub fn drive_columns(table: MeasurementTable, drives: &[usize]) -> MeasurementTable {
+    let n = table.n_joints;
+    let q = table
+        .q
+        .chunks_exact(n)
+        .flat_map(|row| drives.iter().map(move |&i| row[i]))
+        .collect();
+    let dir = table.dir.as_ref().map(|d| {
+        d.chunks_exact(n)
+            .flat_map(|row| drives.iter().map(move |&i| row[i]))
             .collect()
     });
     MeasurementTable {
-        n_joints: c.n_drives(),
+        n_joints: drives.len(),
         q,
         dir,
         ..table
