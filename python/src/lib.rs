@@ -479,6 +479,15 @@ impl Table {
                 f((0..n).map(|r| t.q[r * nq + j]).collect()),
             ));
         }
+        if let Some(b) = &t.branch {
+            let nb = b.names.len();
+            for (k, name) in b.names.iter().enumerate() {
+                out.push((
+                    format!("q_{name}"),
+                    f((0..n).map(|r| b.values[r * nb + k]).collect()),
+                ));
+            }
+        }
         target_columns(py, &t.position, t.orientation.as_deref(), &mut out);
         for (name, col) in [("t", &t.t), ("temp", &t.temp)] {
             if let Some(v) = col {

@@ -4,10 +4,20 @@
 //! Units: q in rad (or m for prismatic joints), positions in m in the tracker frame, t in s, temp in °C,
 //! payload in kg, sigma in m.
 //!
+//! # Branch joints
+//! A column named `q_<joint name>` (`q_` followed by a non-empty name, e.g. `q_neck_yaw`) holds the
+//! value (rad; m for prismatic joints) of a movable joint of a *branch* that hangs off the measured
+//! chain (a second arm, a head): its links load the chain with their mass but are not on it. Such
+//! columns are optional and kept in [`MeasurementTable::branch`] ([`BranchColumns`]), in header
+//! order, their values numbers and finite exactly like `q1..qN`. Which joints they are, and whether
+//! they lie within their limits, is the robot model's business, not the table's. `q_` alone (no
+//! name) is an error.
+//!
 //! # Files
 //! [`read`] and [`write`] choose the format from the extension (`.csv` or `.parquet`, any letter case).
-//! Column order on write: `pose, q1..qN, x, y, z, [qw, qx, qy, qz], [t], [temp], [dir1..dirN], [payload],
-//! [sigma], [campaign]`. On read, columns may come in any order, and columns the contract does not name are ignored.
+//! Column order on write: `pose, q1..qN, [q_<branch joint>…], x, y, z, [qw, qx, qy, qz], [t], [temp],
+//! [dir1..dirN], [payload], [sigma], [campaign]`. On read, columns may come in any order, and columns
+//! the contract does not name are ignored.
 //! The number of joints N is the number of `q1..qN` columns, which must run from `q1` without a gap;
 //! `dir1..dirN`, when present, must match N. Writes are atomic: a temporary file in the same folder is
 //! renamed over the target once complete.
@@ -16,7 +26,8 @@
 //!   blanks around cells trimmed, RFC 4180 quotes understood. Floats are written as the shortest decimal
 //!   that reads back to the same `f64` (Rust's `{:?}`: always with a `.` or an exponent, so that every
 //!   reader infers a float column), so CSV round-trips bit-exactly, `-0.0` and subnormals included.
-//! * Parquet: `pose` and `campaign` Int64, `dir*` Int8, every other column Float64, none nullable; SNAPPY compression;
+//! * Parquet: `pose` and `campaign` Int64, `dir*` Int8, every other column (`q_<joint>` included)
+//!   Float64, none nullable; SNAPPY compression;
 //!   at most [`PARQUET_MAX_ROW_GROUP_ROWS`] rows per row group; the same table always gives the same
 //!   bytes (no timestamps; writer properties set explicitly). On read any integer or float Arrow type is
 //!   accepted when its values convert exactly (Int32 pose, Float32 positions, …); nulls are errors.
@@ -29,8 +40,8 @@
 //!
 //! Errors on read (and on write, which refuses to store such a table): a missing required column
 //! (`pose`, `q1`, `x`, `y`, `z`), a gap in `q1..qN` or `dir1..dirN`, part of `qw, qx, qy, qz`, a duplicate
-//! column name, no data rows, a cell that is empty, not a number or not finite, a `pose` that is not an
-//! integer, a `campaign` that is not an integer, a `dir` that is not −1, 0 or +1, negative `payload` or `sigma`, a `sigma` outside
+//! column name, a `q_` column without a joint name, no data rows, a cell that is empty, not a number or
+//! not finite, a `pose` that is not an integer, a `campaign` that is not an integer, a `dir` that is not −1, 0 or +1, negative `payload` or `sigma`, a `sigma` outside
 //! [[`MIN_SIGMA_M`], [`MAX_SIGMA_M`]] (zero and subnormals included), and an orientation quaternion
 //! whose norm differs from 1 by more than [`QUATERNION_NORM_ERROR`] (not a unit quaternion at all).
 //! Quaternions closer to unit than that are kept exactly as stored (so files round-trip);
@@ -130,6 +141,34 @@ pub struct MeasurementTable {
     /// Measurement campaign per row (an integer id): each campaign has its own tracker placement.
     /// Pose ids are per campaign: a pose is identified by `(campaign, pose)`.
     pub campaign: Option<Vec<i64>>,
+    /// Values of the movable joints of branches off the chain (`q_<joint name>` columns, rad or m);
+    /// None when the table has no `q_` column.
+    pub branch: Option<BranchColumns>,
+}
+
+/// Values of the movable joints of branches off the chain (`q_<joint name>` columns): joints whose
+/// links load the chain but are not on it (rad; m for prismatic joints).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct BranchColumns {
+    /// Joint names, the column names without their `q_` prefix, in column order.
+    pub names: Vec<String>,
+    /// Values, row-major: row `r` is `values[r * names.len() .. (r + 1) * names.len()]`.
+    pub values: Vec<f64>,
+}
+
+/// Prefix of a branch joint's column: `q_<joint name>`.
+const BRANCH_PREFIX: &str = "q_";
+
+/// What is wrong with `name` as the joint name of a branch column `q_<name>`, if anything: empty,
+/// or blanks at either end (a file's reader trims column names, so such a name would not read back).
+fn branch_name_problem(name: &str) -> Option<&'static str> {
+    if name.trim().is_empty() {
+        Some("a branch joint column needs the joint's name after 'q_' (q_<joint name>)")
+    } else if name.trim() != name {
+        Some("a branch joint's name must not start or end with blanks")
+    } else {
+        None
+    }
 }
 
 /// Which optional columns a table has (the required ones, `pose, q1..qN, x, y, z`, it always has).
@@ -199,6 +238,8 @@ pub struct Row<'a> {
     pub sigma: Option<f64>,
     /// Measurement campaign id.
     pub campaign: Option<i64>,
+    /// Values of the branch joints `q_<name>` (rad or m), one per [`MeasurementTable::branch_names`].
+    pub branch: Option<&'a [f64]>,
 }
 
 /// File format of a measurement table.
@@ -351,7 +392,20 @@ impl MeasurementTable {
             payload: v(columns.payload),
             sigma: v(columns.sigma),
             campaign: columns.campaign.then(|| Vec::with_capacity(rows)),
+            branch: None,
         }
+    }
+
+    /// An empty table with the columns of this one (joint count, optional columns, branch joint
+    /// names), with room for `rows` rows: for copying rows of this table with
+    /// [`MeasurementTable::push_row`].
+    pub fn empty_like(&self, rows: usize) -> Self {
+        let mut out = Self::with_capacity(self.n_joints, self.columns(), rows);
+        out.branch = self.branch.as_ref().map(|b| BranchColumns {
+            names: b.names.clone(),
+            values: Vec::with_capacity(rows * b.names.len()),
+        });
+        out
     }
 
     /// Which optional columns the table has.
@@ -394,6 +448,22 @@ impl MeasurementTable {
             .map(|d| &d[r * self.n_joints..(r + 1) * self.n_joints])
     }
 
+    /// Branch joint values of row `r` (rad or m), in [`MeasurementTable::branch_names`] order, or
+    /// `None` without `q_` columns. Panics if `r >= len()`.
+    #[inline]
+    pub fn branch_row(&self, r: usize) -> Option<&[f64]> {
+        self.branch.as_ref().map(|b| {
+            let n = b.names.len();
+            &b.values[r * n..(r + 1) * n]
+        })
+    }
+
+    /// Names of the branch joints, the `q_<name>` columns without their prefix, in column order
+    /// (empty without).
+    pub fn branch_names(&self) -> &[String] {
+        self.branch.as_ref().map_or(&[], |b| &b.names)
+    }
+
     /// Payload of row `r` (kg); 0 when the table has no `payload` column (the contract's default).
     #[inline]
     pub fn payload_or_zero(&self, r: usize) -> f64 {
@@ -423,12 +493,13 @@ impl MeasurementTable {
             payload: self.payload.as_ref().map(|v| v[r]),
             sigma: self.sigma.as_ref().map(|v| v[r]),
             campaign: self.campaign.as_ref().map(|v| v[r]),
+            branch: self.branch_row(r),
         }
     }
 
     /// Appends a row. Fails (and leaves the table unchanged) if `row.q` or `row.dir` do not have
-    /// `n_joints` values or if an optional field is `Some` where the table lacks the column or `None`
-    /// where it has it. Values are checked when the table is written ([`MeasurementTable::validate`]).
+    /// `n_joints` values, if `row.branch` does not have one value per branch joint, or if an optional
+    /// field is `Some` where the table lacks the column or `None` where it has it. Values are checked when the table is written ([`MeasurementTable::validate`]).
     pub fn push_row(&mut self, row: &Row<'_>) -> Result<()> {
         let at = Some(self.len() + 1);
         let err = |column: &str, message: String| table_err(IN_MEMORY, at, Some(column), message);
@@ -453,6 +524,31 @@ impl MeasurementTable {
                     self.n_joints
                 ),
             ));
+        }
+        match (self.branch_names().first(), row.branch) {
+            (Some(first), None) => {
+                return Err(err(
+                    &format!("{BRANCH_PREFIX}{first}"),
+                    "the table has this column but the row gives no value".into(),
+                ));
+            }
+            (None, Some(_)) => {
+                return Err(err(
+                    BRANCH_PREFIX,
+                    "the row gives branch joint values but the table has no q_ column".into(),
+                ));
+            }
+            (Some(first), Some(b)) if b.len() != self.branch_names().len() => {
+                return Err(err(
+                    &format!("{BRANCH_PREFIX}{first}"),
+                    format!(
+                        "{} branch joint values for a table of {} branch joints",
+                        b.len(),
+                        self.branch_names().len()
+                    ),
+                ));
+            }
+            _ => {}
         }
         let has = self.columns();
         let given = [
@@ -496,15 +592,24 @@ impl MeasurementTable {
         if let (Some(v), Some(x)) = (self.campaign.as_mut(), row.campaign) {
             v.push(x);
         }
+        if let (Some(b), Some(x)) = (self.branch.as_mut(), row.branch) {
+            b.values.extend_from_slice(x);
+        }
         Ok(())
     }
 
-    /// Column names in file order: `pose, q1..qN, x, y, z`, then the optional columns present.
+    /// Column names in file order: `pose, q1..qN`, the branch joints' `q_<name>`, `x, y, z`, then the
+    /// optional columns present.
     pub fn column_names(&self) -> Vec<String> {
         let n = self.n_joints;
         let c = self.columns();
         let mut names = vec!["pose".to_string()];
         names.extend((1..=n).map(|j| format!("q{j}")));
+        names.extend(
+            self.branch_names()
+                .iter()
+                .map(|b| format!("{BRANCH_PREFIX}{b}")),
+        );
         names.extend(["x", "y", "z"].map(String::from));
         if c.orientation {
             names.extend(["qw", "qx", "qy", "qz"].map(String::from));
@@ -579,10 +684,10 @@ impl MeasurementTable {
         groups
     }
 
-    /// A new table with the given rows, in the given order (e.g. a train/test split by pose).
-    /// Panics if a row index is out of range.
+    /// A new table with the given rows, in the given order (e.g. a train/test split by pose), every
+    /// column kept (branch joints included). Panics if a row index is out of range.
     pub fn select_rows(&self, rows: &[usize]) -> MeasurementTable {
-        let mut out = MeasurementTable::with_capacity(self.n_joints, self.columns(), rows.len());
+        let mut out = self.empty_like(rows.len());
         for &r in rows {
             out.push_row(&self.row(r))
                 .expect("a row of a table fits a table with the same columns");
@@ -590,8 +695,10 @@ impl MeasurementTable {
         out
     }
 
-    /// Checks that every column has one entry per row (`q` and `dir`: `n_joints` per row). Errors name
-    /// the table [`IN_MEMORY`].
+    /// Checks that every column has one entry per row (`q` and `dir`: `n_joints` per row; branch
+    /// values: one per branch joint per row) and that branch joint names are unique and not empty
+    /// (a table without branch joints has `branch` None, not an empty list of names).
+    /// Errors name the table [`IN_MEMORY`].
     pub fn validate_shape(&self) -> Result<()> {
         self.shape_check(IN_MEMORY)
     }
@@ -610,6 +717,51 @@ impl MeasurementTable {
             ("sigma", self.sigma.as_ref().map_or(n, Vec::len), n),
             ("campaign", self.campaign.as_ref().map_or(n, Vec::len), n),
         ];
+        if self.branch.as_ref().is_some_and(|b| b.names.is_empty()) {
+            return Err(table_err(
+                file,
+                None,
+                Some(BRANCH_PREFIX),
+                "branch columns without a joint name: a table without branch joints has none (None)"
+                    .into(),
+            ));
+        }
+        let nb = self.branch_names().len();
+        let branch_len = self.branch.as_ref().map_or(0, |b| b.values.len());
+        if branch_len != n * nb {
+            let column = self
+                .branch_names()
+                .first()
+                .map_or(BRANCH_PREFIX.to_string(), |b| format!("{BRANCH_PREFIX}{b}"));
+            return Err(table_err(
+                file,
+                None,
+                Some(&fragment(&column)),
+                format!(
+                    "{branch_len} values, but {n} rows of {nb} branch joints need {}",
+                    n * nb
+                ),
+            ));
+        }
+        let names = self.branch_names();
+        for (i, name) in names.iter().enumerate() {
+            let column = fragment(&format!("{BRANCH_PREFIX}{name}"));
+            if let Some(problem) = branch_name_problem(name) {
+                return Err(table_err(file, None, Some(&column), problem.into()));
+            }
+            if let Some(first) = names[..i].iter().position(|m| m == name) {
+                return Err(table_err(
+                    file,
+                    None,
+                    Some(&column),
+                    format!(
+                        "the branch joint appears twice (branch columns {} and {})",
+                        first + 1,
+                        i + 1
+                    ),
+                ));
+            }
+        }
         for (col, got, want) in lens {
             if got != want {
                 return Err(table_err(
@@ -730,6 +882,14 @@ impl MeasurementTable {
         for (j, &v) in self.q_row(r).iter().enumerate() {
             if !v.is_finite() {
                 return bad(&format!("q{}", j + 1), format!("{v} is not finite"));
+            }
+        }
+        if let Some(b) = self.branch_row(r) {
+            for (k, &v) in b.iter().enumerate() {
+                if !v.is_finite() {
+                    let column = format!("{BRANCH_PREFIX}{}", self.branch_names()[k]);
+                    return bad(&fragment(&column), format!("{v} is not finite"));
+                }
             }
         }
         for (name, &v) in ["x", "y", "z"].iter().zip(&self.position[r]) {
@@ -860,6 +1020,8 @@ enum Role {
     Temp,
     /// Direction column, 0-based joint index.
     Dir(usize),
+    /// Branch joint column `q_<name>`, 0-based index among the branch columns in header order.
+    Branch(usize),
     Payload,
     Sigma,
     Campaign,
@@ -872,6 +1034,26 @@ struct Layout {
     columns: OptionalColumns,
     /// One role per file column.
     roles: Vec<Role>,
+    /// Names of the branch joints (`q_<name>` columns without the prefix), in header order.
+    branch: Vec<String>,
+}
+
+impl Layout {
+    /// The branch columns of an empty table of this layout, with room for `rows` rows.
+    fn branch_columns(&self, rows: usize) -> Option<BranchColumns> {
+        (!self.branch.is_empty()).then(|| BranchColumns {
+            names: self.branch.clone(),
+            values: Vec::with_capacity(rows * self.branch.len()),
+        })
+    }
+
+    /// An empty table of this layout (every column, branch joints included), with room for `rows`
+    /// rows.
+    fn empty_table(&self, rows: usize) -> MeasurementTable {
+        let mut t = MeasurementTable::with_capacity(self.n_joints, self.columns, rows);
+        t.branch = self.branch_columns(rows);
+        t
+    }
 }
 
 /// `prefix` followed by a 1-based number written without leading zeros, e.g. `q12`:
@@ -918,6 +1100,7 @@ fn resolve_columns(names: &[String], file: &str, positions: Positions) -> Result
     let mut roles = Vec::with_capacity(names.len());
     let mut q_idx = Vec::new();
     let mut dir_idx = Vec::new();
+    let mut branch = Vec::new();
     for name in names {
         let role = match name.as_str() {
             "pose" => Role::Pose,
@@ -954,6 +1137,12 @@ fn resolve_columns(names: &[String], file: &str, positions: Positions) -> Result
                     })?;
                     dir_idx.push(k);
                     Role::Dir(k - 1)
+                } else if let Some(joint) = name.strip_prefix(BRANCH_PREFIX) {
+                    if let Some(problem) = branch_name_problem(joint) {
+                        return err(Some(name), problem.into());
+                    }
+                    branch.push(joint.to_string());
+                    Role::Branch(branch.len() - 1)
                 } else {
                     Role::Ignore
                 }
@@ -1051,5 +1240,6 @@ fn resolve_columns(names: &[String], file: &str, positions: Positions) -> Result
             campaign: roles.contains(&Role::Campaign),
         },
         roles,
+        branch,
     })
 }

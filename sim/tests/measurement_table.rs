@@ -120,6 +120,7 @@ fn random_table(rng: &mut StdRng, cols: Option<OptionalColumns>) -> MeasurementT
                 .sigma
                 .then(|| bounded_f64(rng, 1.0).abs().max(MIN_SIGMA_M)),
             campaign: cols.campaign.then_some(campaign),
+            branch: None,
         })
         .unwrap();
     }
@@ -161,6 +162,12 @@ fn assert_bit_equal(a: &MeasurementTable, b: &MeasurementTable, what: &str) {
     assert_eq!(opt(&a.payload), opt(&b.payload), "{what}: payload");
     assert_eq!(opt(&a.sigma), opt(&b.sigma), "{what}: sigma");
     assert_eq!(a.campaign, b.campaign, "{what}: campaign");
+    assert_eq!(a.branch_names(), b.branch_names(), "{what}: branch names");
+    assert_eq!(
+        a.branch.as_ref().map(|b| bits(b.values.iter().copied())),
+        b.branch.as_ref().map(|b| bits(b.values.iter().copied())),
+        "{what}: branch values"
+    );
 }
 
 #[test]
@@ -1596,4 +1603,535 @@ fn pose_repeats_are_checked_against_the_first_row_in_any_order() {
         row(1, 0.3 - 0.9 * tol)
     );
     assert_eq!(read_csv_str(&fine, "data.csv").unwrap().len(), 4);
+}
+
+// ---------------------------------------------------------------------------------------------
+// Branch joint columns (`q_<joint name>`): joints of branches off the chain, kept row for row.
+
+/// `table` with branch joint columns `q_<name>` for `names`, one random finite value each per row
+/// (the extreme doubles included); rows of one pose get one set of values, as the chain's do.
+fn with_branch(rng: &mut StdRng, table: &MeasurementTable, names: &[&str]) -> MeasurementTable {
+    let nb = names.len();
+    let mut of_pose: std::collections::HashMap<(i64, i64), Vec<f64>> = Default::default();
+    let mut values = Vec::with_capacity(table.len() * nb);
+    for r in 0..table.len() {
+        let fresh: Vec<f64> = (0..nb).map(|_| any_f64(rng)).collect();
+        values.extend_from_slice(of_pose.entry(table.pose_key(r)).or_insert(fresh));
+    }
+    let mut t = table.clone();
+    t.branch = Some(mt::BranchColumns {
+        names: names.iter().map(|n| n.to_string()).collect(),
+        values,
+    });
+    t.validate_shape().unwrap();
+    t
+}
+
+/// Names of branch joints as URDFs spell them, a comma and a quote included (CSV quotes them).
+const BRANCH_NAMES: &[&str] = &["neck_yaw", "arm2_joint_1", "head,tilt", "say \"cheese\""];
+
+#[test]
+fn branch_columns_round_trip_bit_exactly_through_csv_and_parquet() {
+    let dir = temp_dir("branch_roundtrip");
+    let mut rng = StdRng::seed_from_u64(20260801);
+    for case in 0..24 {
+        let cols = match case {
+            0 => Some(OptionalColumns::NONE),
+            1 => Some(OptionalColumns::ALL),
+            _ => None,
+        };
+        let names = &BRANCH_NAMES[..1 + case % BRANCH_NAMES.len()];
+        let plain = random_table(&mut rng, cols);
+        let table = with_branch(&mut rng, &plain, names);
+        let what = format!("case {case}");
+        let csv = write_csv_string(&table).unwrap();
+        // Written right after q1..qN, quoted where a name needs it.
+        let header = csv.lines().next().unwrap();
+        let qs: Vec<String> = (1..=table.n_joints).map(|j| format!("q{j}")).collect();
+        let mut expect = format!("pose,{},q_neck_yaw", qs.join(","));
+        for (name, cell) in [
+            ("arm2_joint_1", "q_arm2_joint_1"),
+            ("head,tilt", "\"q_head,tilt\""),
+            ("say \"cheese\"", "\"q_say \"\"cheese\"\"\""),
+        ] {
+            if names.contains(&name) {
+                expect += &format!(",{cell}");
+            }
+        }
+        expect += ",x,y,z";
+        assert!(header.starts_with(&expect), "{what}: {header}");
+        let from_csv = read_csv_str(&csv, "mem.csv").unwrap();
+        assert_bit_equal(&table, &from_csv, &format!("{what}: CSV"));
+        let names_read: Vec<&str> = from_csv.branch_names().iter().map(String::as_str).collect();
+        assert_eq!(names_read, names, "{what}");
+
+        let pq = dir.join(format!("t{case}.parquet"));
+        mt::write(&pq, &table).unwrap();
+        let from_pq = mt::read(&pq).unwrap();
+        assert_bit_equal(&table, &from_pq, &format!("{what}: Parquet"));
+        assert_eq!(
+            write_parquet_bytes(&from_pq).unwrap(),
+            std::fs::read(&pq).unwrap()
+        );
+        assert_eq!(from_pq.column_names(), table.column_names(), "{what}");
+        // In the file, the branch columns are Float64, after q1..qN.
+        let schema = parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(
+            std::fs::File::open(&pq).unwrap(),
+        )
+        .unwrap()
+        .schema()
+        .clone();
+        for (k, name) in names.iter().enumerate() {
+            let field = schema.field(1 + table.n_joints + k);
+            assert_eq!(field.name(), &format!("q_{name}"), "{what}");
+            assert_eq!(
+                field.data_type(),
+                &arrow_schema::DataType::Float64,
+                "{what}"
+            );
+        }
+
+        let csv_path = dir.join(format!("t{case}.csv"));
+        mt::write(&csv_path, &from_pq).unwrap();
+        assert_eq!(std::fs::read_to_string(&csv_path).unwrap(), csv, "{what}");
+        assert_bit_equal(
+            &table,
+            &mt::read(&csv_path).unwrap(),
+            &format!("{what}: file"),
+        );
+        // Joint configurations keep them too.
+        assert_bit_equal(
+            &table,
+            &mt::read_configurations(&csv_path).unwrap(),
+            &format!("{what}: configurations"),
+        );
+    }
+    // A file without q_ columns has none, and writes as before.
+    let t = read_csv_str("pose,q1,x,y,z,qa,q_1x\n0,0.5,1,2,3,7,8\n", "n.csv").unwrap();
+    assert_eq!(
+        t.branch.as_ref().map(|b| b.names.clone()),
+        Some(vec!["1x".to_string()])
+    );
+    let t = read_csv_str("pose,q1,x,y,z,qa,note\n0,0.5,1,2,3,7,8\n", "n.csv").unwrap();
+    assert_eq!(t.branch, None);
+    assert_eq!(t.branch_names(), &[] as &[String]);
+    assert_eq!(t.branch_row(0), None);
+    assert_eq!(
+        write_csv_string(&t).unwrap(),
+        "pose,q1,x,y,z\n0,0.5,1.0,2.0,3.0\n"
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn branch_columns_are_read_from_any_column_position() {
+    let text = "q_neck_yaw,pose,x,q2,y,q_hand,z,q1\n\
+                0.25,0,1,0.5,2,-0.0,3,0.125\n\
+                -1.5,1,1,0.5,2,2e-3,3,0.125\n";
+    let t = read_csv_str(text, "any.csv").unwrap();
+    assert_eq!(t.n_joints, 2);
+    assert_eq!(
+        t.branch_names(),
+        &["neck_yaw".to_string(), "hand".to_string()]
+    );
+    assert_eq!(t.branch_row(0), Some(&[0.25, -0.0][..]));
+    assert_eq!(t.branch_row(1), Some(&[-1.5, 2e-3][..]));
+    assert_eq!(t.row(1).branch, Some(&[-1.5, 2e-3][..]));
+    assert_eq!(t.q, vec![0.125, 0.5, 0.125, 0.5]);
+    assert_eq!(
+        write_csv_string(&t).unwrap(),
+        "pose,q1,q2,q_neck_yaw,q_hand,x,y,z\n\
+         0,0.125,0.5,0.25,-0.0,1.0,2.0,3.0\n\
+         1,0.125,0.5,-1.5,0.002,1.0,2.0,3.0\n"
+    );
+}
+
+#[test]
+fn branch_columns_come_in_every_streamed_piece() {
+    let dir = temp_dir("branch_chunks");
+    let mut rng = StdRng::seed_from_u64(20260802);
+    // 302 rows with three branch joints: pieces of 7 or 64 rows (Parquet) leave a shorter last piece
+    // (302 % 7 = 1, 302 % 64 = 46); CSV pieces of 4 KiB or 16 KiB of text split wherever the bytes fall.
+    let cols = OptionalColumns {
+        dir: true,
+        campaign: true,
+        ..OptionalColumns::NONE
+    };
+    let mut table = MeasurementTable::new(3, cols);
+    for r in 0..302 {
+        let q = [r as f64 * 1e-3, -0.5, 0.25];
+        table
+            .push_row(&Row {
+                pose: r,
+                q: &q,
+                position: [1.0, 2.0, 3.0],
+                dir: Some(&[1, 0, -1]),
+                campaign: Some(r % 2),
+                ..Default::default()
+            })
+            .unwrap();
+    }
+    let table = with_branch(&mut rng, &table, &BRANCH_NAMES[..3]);
+    let csv = dir.join("b.csv");
+    let parquet = dir.join("b.parquet");
+    mt::write(&csv, &table).unwrap();
+    mt::write(&parquet, &table).unwrap();
+    for path in [&csv, &parquet] {
+        let whole = mt::read(path).unwrap();
+        assert_bit_equal(&whole, &table, "whole read");
+        for rows in [7, 64] {
+            let what = format!("{} in pieces of {rows}", path.display());
+            let chunks = mt::read_chunks(path, rows).unwrap();
+            assert_eq!(chunks.branch_names(), table.branch_names(), "{what}");
+            let lens: Vec<usize> = mt::read_chunks(path, rows)
+                .unwrap()
+                .map(|c| c.unwrap().table.len())
+                .collect();
+            assert!(lens.len() > 1, "{what}: one piece");
+            assert!(
+                lens.iter().any(|&n| n != lens[0]),
+                "{what}: pieces of equal size {lens:?}"
+            );
+            for chunk in mt::read_chunks(path, rows).unwrap() {
+                let chunk = chunk.unwrap();
+                assert_eq!(chunk.table.branch_names(), table.branch_names(), "{what}");
+                for r in 0..chunk.table.len() {
+                    assert_eq!(
+                        chunk.table.branch_row(r),
+                        whole.branch_row(chunk.first_row + r),
+                        "{what}: row {}",
+                        chunk.first_row + r
+                    );
+                }
+            }
+            assert_chunks_are_the_table(mt::read_chunks(path, rows).unwrap(), &table, &what);
+            let configs = mt::read_configuration_chunks(path, rows).unwrap();
+            assert_eq!(configs.branch_names(), table.branch_names(), "{what}");
+        }
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn from_columns_keeps_branch_columns() {
+    use mt::{Column, ColumnValues};
+    let col = |name, values| Column {
+        name,
+        values,
+        first_null: None,
+    };
+    let csv = "pose,q1,q_neck_yaw,x,y,z,q_hand,note\n0,0.5,0.25,0.1,0.2,0.3,-1.0,a\n\
+               1,0.25,-0.125,1.5,-0.5,0.75,3.0,b\n";
+    let expected = read_csv_str(csv, "m.csv").unwrap();
+    assert_eq!(expected.branch_row(1), Some(&[-0.125, 3.0][..]));
+    let cols = [
+        col("pose", ColumnValues::I64(&[0, 1])),
+        col("q_hand", ColumnValues::I32(&[-1, 3])),
+        col("q1", ColumnValues::F64(&[0.5, 0.25])),
+        col("x", ColumnValues::F64(&[0.1, 1.5])),
+        col("y", ColumnValues::F64(&[0.2, -0.5])),
+        col("z", ColumnValues::F64(&[0.3, 0.75])),
+        col("q_neck_yaw", ColumnValues::F32(&[0.25, -0.125])),
+        col("note", ColumnValues::Other("object")),
+    ];
+    let t = mt::from_columns(&cols, "df").unwrap();
+    // Header order: q_hand before q_neck_yaw here.
+    assert_eq!(
+        t.branch_names(),
+        &["hand".to_string(), "neck_yaw".to_string()]
+    );
+    assert_eq!(t.branch_row(0), Some(&[-1.0, 0.25][..]));
+    assert_eq!(t.branch_row(1), Some(&[3.0, -0.125][..]));
+    assert_eq!(
+        (t.pose.clone(), t.q.clone()),
+        (expected.pose.clone(), expected.q.clone())
+    );
+    let c = mt::configurations_from_columns(&cols[..3], "df").unwrap();
+    assert_eq!(c.branch_row(1), Some(&[3.0][..]));
+    // Errors as for a file.
+    let mut bad = cols;
+    bad[6] = col("q_neck_yaw", ColumnValues::F64(&[0.5, f64::INFINITY]));
+    let e = mt::from_columns(&bad, "df").unwrap_err().to_string();
+    assert_eq!(e, "df: row 2, column q_neck_yaw: inf is not finite");
+    bad[6] = col("q_neck_yaw", ColumnValues::Other("object"));
+    let e = mt::from_columns(&bad, "df").unwrap_err().to_string();
+    assert_eq!(
+        e,
+        "df: column q_neck_yaw: has type object; an integer or floating-point type is required"
+    );
+    bad[6] = Column {
+        first_null: Some(0),
+        ..col("q_neck_yaw", ColumnValues::F64(&[0.5, 0.5]))
+    };
+    let e = mt::from_columns(&bad, "df").unwrap_err().to_string();
+    assert_eq!(
+        e,
+        "df: row 1, column q_neck_yaw: missing value (null): a number is required"
+    );
+}
+
+#[test]
+fn bad_branch_columns_give_one_line_errors_naming_row_and_column() {
+    let with =
+        |cell: &str| format!("pose,q1,x,y,z,q_neck_yaw\n0,0.5,1,2,3,0.25\n1,0.5,1,2,3,{cell}\n");
+    csv_error(
+        &with("abc"),
+        &["data.csv: row 2 (line 3), column q_neck_yaw: 'abc' is not a number"],
+    );
+    csv_error(
+        &with("inf"),
+        &["data.csv: row 2 (line 3), column q_neck_yaw: 'inf' is not finite"],
+    );
+    csv_error(
+        &with("NaN"),
+        &["data.csv: row 2 (line 3), column q_neck_yaw: 'NaN' is not finite"],
+    );
+    csv_error(
+        &with(""),
+        &["data.csv: row 2 (line 3), column q_neck_yaw: empty cell: a number is required"],
+    );
+    // The header: `q_` without a name, a name of blanks, a branch joint twice.
+    csv_error(
+        "pose,q1,q_,x,y,z\n0,0.5,0.25,1,2,3\n",
+        &["data.csv: column q_: a branch joint column needs the joint's name after 'q_'"],
+    );
+    csv_error(
+        "pose,q1,\"q_  \",x,y,z\n0,0.5,0.25,1,2,3\n",
+        &["data.csv: column q_  : a branch joint column needs the joint's name"],
+    );
+    csv_error(
+        "pose,q1,q_neck,x,y,z,q_neck\n0,0.5,0.25,1,2,3,0.25\n",
+        &["data.csv: column q_neck: the column name appears twice (columns 3 and 7 of the header)"],
+    );
+    // Parquet: a null, a NaN, text.
+    use arrow_array::{ArrayRef, Float64Array, Int64Array, StringArray};
+    use std::sync::Arc;
+    let dir = temp_dir("branch_errors");
+    let f64a = |v: Vec<Option<f64>>| Arc::new(Float64Array::from(v)) as ArrayRef;
+    let base = |branch: ArrayRef| {
+        vec![
+            (
+                "pose",
+                Arc::new(Int64Array::from(vec![1, 2, 3])) as ArrayRef,
+            ),
+            ("q1", f64a(vec![Some(0.0); 3])),
+            ("x", f64a(vec![Some(0.0); 3])),
+            ("y", f64a(vec![Some(0.0); 3])),
+            ("z", f64a(vec![Some(0.0); 3])),
+            ("q_neck_yaw", branch),
+        ]
+    };
+    for (name, branch, expect) in [
+        (
+            "null",
+            f64a(vec![Some(0.0), None, Some(0.0)]),
+            "null.parquet: row 2, column q_neck_yaw: missing value (null): a number is required",
+        ),
+        (
+            "nan",
+            f64a(vec![Some(0.0), Some(0.0), Some(f64::NAN)]),
+            "nan.parquet: row 3, column q_neck_yaw: NaN is not finite",
+        ),
+        (
+            "text",
+            Arc::new(StringArray::from(vec!["a", "b", "c"])) as ArrayRef,
+            "text.parquet: column q_neck_yaw: has Arrow type Utf8; an integer or floating-point type is required",
+        ),
+    ] {
+        let p = dir.join(format!("{name}.parquet"));
+        write_arrow(&p, base(branch));
+        let msg = mt::read(&p).unwrap_err().to_string();
+        assert!(msg.ends_with(expect), "expected '{expect}' in: {msg}");
+        let chunked = mt::read_chunks(&p, 1)
+            .unwrap()
+            .find_map(Result::err)
+            .expect("an error")
+            .to_string();
+        assert_eq!(chunked, msg, "{name}: streamed");
+    }
+    let p = dir.join("empty_name.parquet");
+    write_arrow(
+        &p,
+        vec![
+            ("pose", Arc::new(Int64Array::from(vec![1])) as ArrayRef),
+            ("q1", f64a(vec![Some(0.0)])),
+            ("x", f64a(vec![Some(0.0)])),
+            ("y", f64a(vec![Some(0.0)])),
+            ("z", f64a(vec![Some(0.0)])),
+            ("q_", f64a(vec![Some(0.0)])),
+        ],
+    );
+    let msg = mt::read(&p).unwrap_err().to_string();
+    assert!(
+        msg.ends_with(
+            "column q_: a branch joint column needs the joint's name after 'q_' (q_<joint name>)"
+        ),
+        "{msg}"
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn tables_in_memory_with_bad_branch_columns_are_refused() {
+    let mut t = read_csv_str(
+        "pose,q1,x,y,z,q_neck_yaw,q_hand\n0,0.5,1,2,3,0.25,1\n1,0.5,1,2,3,-0.25,2\n",
+        "m.csv",
+    )
+    .unwrap();
+    t.validate_shape().unwrap();
+    let b = |t: &mut MeasurementTable| t.branch.as_mut().unwrap().clone();
+    let good = b(&mut t);
+    // Shape: one value per branch joint and row; names unique and not empty.
+    t.branch.as_mut().unwrap().values.pop();
+    assert_eq!(
+        t.validate_shape().unwrap_err().to_string(),
+        "<measurement table>: column q_neck_yaw: 3 values, but 2 rows of 2 branch joints need 4"
+    );
+    t.branch = Some(mt::BranchColumns::default());
+    let e = t.validate_shape().unwrap_err().to_string();
+    assert!(
+        e.starts_with("<measurement table>: column q_: branch columns without a joint name"),
+        "{e}"
+    );
+    t.branch = Some(good.clone());
+    t.branch.as_mut().unwrap().names[1] = "neck_yaw".into();
+    assert_eq!(
+        t.validate_shape().unwrap_err().to_string(),
+        "<measurement table>: column q_neck_yaw: the branch joint appears twice (branch columns 1 and 2)"
+    );
+    t.branch.as_mut().unwrap().names[1] = String::new();
+    let e = write_csv_string(&t).unwrap_err().to_string();
+    assert!(
+        e.starts_with("<measurement table>: column q_: a branch joint column needs"),
+        "{e}"
+    );
+    t.branch.as_mut().unwrap().names[1] = " hand".into();
+    let e = write_parquet_bytes(&t).unwrap_err().to_string();
+    assert!(e.contains("must not start or end with blanks"), "{e}");
+    // Values: finite, checked on write.
+    t.branch = Some(good.clone());
+    t.branch.as_mut().unwrap().values[3] = f64::NEG_INFINITY;
+    assert_eq!(
+        write_csv_string(&t).unwrap_err().to_string(),
+        "<measurement table>: row 2, column q_hand: -inf is not finite"
+    );
+    t.branch = Some(good);
+    write_csv_string(&t).unwrap();
+
+    // push_row: the row's branch values must match the table's branch columns.
+    let mut u = t.empty_like(0);
+    assert_eq!(u.branch_names(), t.branch_names());
+    let row = t.row(1);
+    u.push_row(&row).unwrap();
+    assert_eq!(u.branch_row(0), Some(&[-0.25, 2.0][..]));
+    let e = u
+        .push_row(&Row {
+            branch: None,
+            ..row
+        })
+        .unwrap_err();
+    assert_eq!(
+        e.to_string(),
+        "<measurement table>: row 2, column q_neck_yaw: the table has this column but the row gives no value"
+    );
+    let e = u
+        .push_row(&Row {
+            branch: Some(&[1.0]),
+            ..row
+        })
+        .unwrap_err();
+    assert!(
+        e.to_string().contains(
+            "row 2, column q_neck_yaw: 1 branch joint values for a table of 2 branch joints"
+        ),
+        "{e}"
+    );
+    let mut plain = MeasurementTable::new(1, OptionalColumns::NONE);
+    let e = plain.push_row(&row).unwrap_err();
+    assert!(
+        e.to_string().contains(
+            "column q_: the row gives branch joint values but the table has no q_ column"
+        ),
+        "{e}"
+    );
+    assert_eq!((u.len(), plain.len()), (1, 0));
+
+    // The streaming Parquet writer: parts with the table's branch joints only, names checked.
+    let names = t.branch_names().to_vec();
+    let mut w = mt::ParquetTableWriter::with_branch_names(
+        Vec::new(),
+        1,
+        OptionalColumns::NONE,
+        &names,
+        "w.parquet",
+    )
+    .unwrap();
+    w.append(&t.select_rows(&[0])).unwrap();
+    let e = w.append(&plain_table()).unwrap_err().to_string();
+    assert_eq!(e, "w.parquet: a part with other columns than the table's");
+    let mut swapped = t.select_rows(&[1]);
+    swapped.branch.as_mut().unwrap().names.reverse();
+    assert!(w.append(&swapped).is_err());
+    w.append(&t.select_rows(&[1])).unwrap();
+    assert_eq!(w.finish().unwrap(), write_parquet_bytes(&t).unwrap());
+    let e = mt::ParquetTableWriter::with_branch_names(
+        Vec::new(),
+        1,
+        OptionalColumns::NONE,
+        &["a".to_string(), "a".to_string()],
+        "w.parquet",
+    )
+    .err()
+    .expect("a duplicated name is refused")
+    .to_string();
+    assert!(
+        e.starts_with("w.parquet: column q_a: the branch joint appears twice"),
+        "{e}"
+    );
+    let mut w =
+        mt::ParquetTableWriter::new(Vec::new(), 1, OptionalColumns::NONE, "p.parquet").unwrap();
+    assert!(w.append(&t).is_err());
+    w.append(&plain_table()).unwrap();
+}
+
+/// A valid one-row table of one joint, without optional or branch columns.
+fn plain_table() -> MeasurementTable {
+    read_csv_str("pose,q1,x,y,z\n7,0.5,1,2,3\n", "p.csv").unwrap()
+}
+
+#[test]
+fn select_rows_and_drive_columns_keep_each_rows_branch_values() {
+    let mut t = MeasurementTable::new(3, OptionalColumns::NONE);
+    t.branch = Some(mt::BranchColumns {
+        names: vec!["neck_yaw".into(), "arm2_j1".into()],
+        values: Vec::new(),
+    });
+    for r in 0..6 {
+        let v = [r as f64, -(r as f64) - 0.5];
+        t.push_row(&Row {
+            pose: r,
+            q: &[0.1 * r as f64, 0.2, 0.3],
+            position: [1.0, 2.0, 3.0],
+            branch: Some(&v),
+            ..Default::default()
+        })
+        .unwrap();
+    }
+    let s = t.select_rows(&[4, 1, 4, 0]);
+    assert_eq!(s.pose, vec![4, 1, 4, 0]);
+    assert_eq!(s.branch_names(), t.branch_names());
+    for (k, &r) in [4usize, 1, 4, 0].iter().enumerate() {
+        assert_eq!(s.branch_row(k), t.branch_row(r), "selected row {k}");
+        assert_eq!(s.branch_row(k), Some(&[r as f64, -(r as f64) - 0.5][..]));
+    }
+    assert_eq!(s.branch.as_ref().unwrap().values.len(), 8);
+    s.validate_shape().unwrap();
+    let none = t.select_rows(&[]);
+    assert_eq!(none.branch_names(), t.branch_names());
+    assert!(none.branch.as_ref().unwrap().values.is_empty());
+    // A table of drives: the chain's joint columns change, the branch columns do not.
+    let d = mt::drive_columns(t.clone(), &[0, 2]);
+    assert_eq!(d.n_joints, 2);
+    assert_eq!(d.q_row(3), &[0.30000000000000004, 0.3]);
+    assert_eq!(d.branch, t.branch);
 }

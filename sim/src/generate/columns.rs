@@ -170,6 +170,7 @@ pub fn measurement_table(plan: &Plan, sim: &Simulation, tracker: &Tracker) -> Me
             .sigma
             .then(|| sim.rows.iter().map(|r| r.reading.sigma_m).collect()),
         campaign: None,
+        branch: None,
     };
     match &plan.drives {
         None => table,

@@ -8,7 +8,8 @@
 //! file-wide row (and CSV line), exactly as a whole-file read names them. One check differs: rows that
 //! share a pose id must agree in their joint values ([`super::POSE_REPEAT_TOLERANCE`]) only within a
 //! piece, since a file-wide check would hold every pose in memory. The concatenated pieces are the
-//! table [`super::read`] returns (tested for both formats and several piece sizes).
+//! table [`super::read`] returns (tested for both formats and several piece sizes), branch joint
+//! columns (`q_<name>`) included: each piece carries its rows' values.
 
 use super::{MeasurementTable, OptionalColumns, Positions, csv::CsvChunks, table_err};
 use crate::error::{Result, SimError};
@@ -121,6 +122,12 @@ impl TableChunks {
     /// The optional columns the file has.
     pub fn columns(&self) -> OptionalColumns {
         self.layout().columns
+    }
+
+    /// Names of the file's branch joints (its `q_<name>` columns without the prefix, in column
+    /// order; empty without): every piece's [`MeasurementTable::branch_names`].
+    pub fn branch_names(&self) -> &[String] {
+        &self.layout().branch
     }
 
     /// The file name as shown in errors.

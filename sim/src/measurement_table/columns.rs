@@ -249,6 +249,9 @@ pub(super) struct ColumnsBuilder {
     pose: Vec<i64>,
     campaign: Vec<i64>,
     q: Vec<Vec<f64>>,
+    /// One column per branch joint (`q_<name>`), in header order.
+    branch_names: Vec<String>,
+    branch: Vec<Vec<f64>>,
     dir: Vec<Vec<i8>>,
     position: [Vec<f64>; 3],
     quaternion: [Vec<f64>; 4],
@@ -267,6 +270,8 @@ impl ColumnsBuilder {
             pose: Vec::with_capacity(rows),
             campaign: Vec::new(),
             q: vec![Vec::with_capacity(rows); nq],
+            branch_names: layout.branch.clone(),
+            branch: vec![Vec::with_capacity(rows); layout.branch.len()],
             dir: vec![Vec::new(); if layout.columns.dir { nq } else { 0 }],
             position: Default::default(),
             quaternion: Default::default(),
@@ -297,6 +302,7 @@ impl ColumnsBuilder {
                 let v = floats(values)?;
                 match role {
                     Role::Q(j) => self.q[j].extend(v),
+                    Role::Branch(k) => self.branch[k].extend(v),
                     Role::Position(i) => self.position[i].extend(v),
                     Role::Quaternion(i) => self.quaternion[i].extend(v),
                     Role::T => self.t.extend(v),
@@ -332,6 +338,16 @@ impl ColumnsBuilder {
             for r in 0..n {
                 d.extend(self.dir.iter().map(|c| c[r]));
             }
+        }
+        if !self.branch_names.is_empty() {
+            let mut values = Vec::with_capacity(n * self.branch.len());
+            for r in 0..n {
+                values.extend(self.branch.iter().map(|c| c[r]));
+            }
+            table.branch = Some(super::BranchColumns {
+                names: self.branch_names,
+                values,
+            });
         }
         let c = self.columns;
         table.t = c.t.then_some(self.t);

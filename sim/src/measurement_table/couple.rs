@@ -20,6 +20,9 @@ pub const COUPLING_TOLERANCE: f64 = 1e-3;
 /// * `N` joint columns (every chain joint): the coupled joints' columns must agree with the coupling
 ///   to within [`COUPLING_TOLERANCE`]; the first row that does not is named.
 ///
+/// Branch joint columns (`q_<name>`, [`MeasurementTable::branch`]) are not chain joints: they pass
+/// through unchanged.
+///
 /// # Errors
 /// [`SimError::Table`] for another joint count, or a coupled column that disagrees.
 pub fn couple(table: MeasurementTable, model: &Model, file: &Path) -> Result<MeasurementTable> {
@@ -130,6 +133,7 @@ pub fn whole_chain<'t>(
 /// The columns a file of a robot with coupled joints has: `table` (every chain joint) with only the
 /// joint and direction columns of the driven joints `drives` (chain indices,
 /// [`crate::coupled_joints::Couplings::drives`]); the inverse of [`couple`] for a table it made.
+/// Branch joint columns pass through unchanged.
 pub fn drive_columns(table: MeasurementTable, drives: &[usize]) -> MeasurementTable {
     let n = table.n_joints;
     let q = table

@@ -371,7 +371,7 @@ fn parse(bytes: &[u8], file: &str, positions: Positions) -> Result<MeasurementTa
         .collect();
 
     let rows: usize = parts.iter().map(|p| p.as_ref().map_or(0, |c| c.rows)).sum();
-    let mut table = MeasurementTable::with_capacity(layout.n_joints, layout.columns, rows);
+    let mut table = layout.empty_table(rows);
     let (mut rows_before, mut line_before) = (0usize, first_line - 1);
     for part in parts {
         match part {
@@ -411,6 +411,9 @@ fn append(table: &mut MeasurementTable, part: MeasurementTable) {
     ext(&mut table.payload, part.payload);
     ext(&mut table.sigma, part.sigma);
     ext(&mut table.campaign, part.campaign);
+    if let (Some(a), Some(b)) = (table.branch.as_mut(), part.branch) {
+        a.values.extend(b.values);
+    }
 }
 
 /// Parses whole data lines (`text`: the same bytes as text, when valid UTF-8).
@@ -421,8 +424,8 @@ fn parse_chunk(
 ) -> std::result::Result<Chunk, ChunkError> {
     let Layout {
         n_joints: nq,
-        columns,
         roles,
+        ..
     } = layout;
     let (nq, n_cols) = (*nq, roles.len());
     let mut rec = Records::new(bytes);
@@ -431,8 +434,9 @@ fn parse_chunk(
     let sample = &bytes[..bytes.len().min(1 << 16)];
     let sample_lines = sample.iter().filter(|&&b| b == b'\n').count().max(1);
     let estimate = bytes.len() / (sample.len() / sample_lines).max(1) * 21 / 20 + 1;
-    let mut table = MeasurementTable::with_capacity(nq, *columns, estimate);
+    let mut table = layout.empty_table(estimate);
     let mut q = vec![0.0; nq];
+    let mut branch = vec![0.0; layout.branch.len()];
     let mut dir = vec![0i8; nq];
     let mut pos = [0.0; 3];
     let mut quat = [0.0; 4];
@@ -477,6 +481,7 @@ fn parse_chunk(
                 Role::Ignore => Ok(()),
                 Role::Pose => parse_i64(s).map(|v| pose = v),
                 Role::Q(j) => parse_f64(s).map(|v| q[j] = v),
+                Role::Branch(k) => parse_f64(s).map(|v| branch[k] = v),
                 Role::Position(k) => parse_f64(s).map(|v| pos[k] = v),
                 Role::Quaternion(k) => parse_f64(s).map(|v| quat[k] = v),
                 Role::T => parse_f64(s).map(|v| t = v),
@@ -519,6 +524,9 @@ fn parse_chunk(
         if let Some(v) = table.campaign.as_mut() {
             v.push(campaign);
         }
+        if let Some(b) = table.branch.as_mut() {
+            b.values.extend_from_slice(&branch);
+        }
     }
     Ok(Chunk {
         table,
@@ -534,6 +542,24 @@ fn put_f64(out: &mut Vec<u8>, v: f64) {
     write!(out, "{v:?}").expect("writing to a Vec cannot fail");
 }
 
+/// A header cell: the column name, quoted (RFC 4180) when it holds what would end or change an
+/// unquoted cell (a `,`, a `"`, a line end, blanks at either end). Only a branch joint's name
+/// (`q_<name>`) can; the contract's own names are written as they are.
+fn put_name(out: &mut Vec<u8>, name: &str) {
+    let plain = !name.is_empty()
+        && !name
+            .bytes()
+            .any(|b| matches!(b, b',' | b'"' | b'\n' | b'\r'))
+        && name.trim_matches([' ', '\t']) == name;
+    if plain {
+        out.extend_from_slice(name.as_bytes());
+    } else {
+        out.push(b'"');
+        out.extend_from_slice(name.replace('"', "\"\"").as_bytes());
+        out.push(b'"');
+    }
+}
+
 /// The CSV bytes of a table assumed valid.
 pub(super) fn write_csv_bytes(table: &MeasurementTable) -> Vec<u8> {
     use rayon::prelude::*;
@@ -545,7 +571,12 @@ pub(super) fn write_csv_bytes(table: &MeasurementTable) -> Vec<u8> {
         .map(|k| write_rows(table, k * ROWS_PER_CHUNK..((k + 1) * ROWS_PER_CHUNK).min(n)))
         .collect();
     let mut out = Vec::with_capacity(64 + chunks.iter().map(Vec::len).sum::<usize>());
-    out.extend_from_slice(names.join(",").as_bytes());
+    for (k, name) in names.iter().enumerate() {
+        if k > 0 {
+            out.push(b',');
+        }
+        put_name(&mut out, name);
+    }
     out.push(b'\n');
     for c in chunks {
         out.extend_from_slice(&c);
@@ -556,10 +587,15 @@ pub(super) fn write_csv_bytes(table: &MeasurementTable) -> Vec<u8> {
 /// The CSV lines of rows `rows`.
 fn write_rows(table: &MeasurementTable, rows: std::ops::Range<usize>) -> Vec<u8> {
     let nq = table.n_joints;
-    let mut out = Vec::with_capacity(rows.len() * (table.n_joints + 4) * 20);
+    let width = table.n_joints + table.branch_names().len() + 4;
+    let mut out = Vec::with_capacity(rows.len() * width * 20);
     for r in rows {
         write!(out, "{}", table.pose[r]).expect("writing to a Vec cannot fail");
         for &v in table.q_row(r) {
+            out.push(b',');
+            put_f64(&mut out, v);
+        }
+        for &v in table.branch_row(r).unwrap_or(&[]) {
             out.push(b',');
             put_f64(&mut out, v);
         }

@@ -47,9 +47,16 @@ fn writer_properties(n_joints: usize, columns: OptionalColumns) -> WriterPropert
 }
 
 /// The Arrow schema of a table's file: `pose` and `campaign` Int64, `dir*` Int8, every other column
-/// Float64.
-fn schema(n_joints: usize, columns: OptionalColumns) -> Arc<Schema> {
-    let fields: Vec<Field> = MeasurementTable::new(n_joints, columns)
+/// (the branch joints' `q_<name>` included) Float64.
+fn schema(n_joints: usize, columns: OptionalColumns, branch_names: &[String]) -> Arc<Schema> {
+    let mut empty = MeasurementTable::new(n_joints, columns);
+    if !branch_names.is_empty() {
+        empty.branch = Some(super::BranchColumns {
+            names: branch_names.to_vec(),
+            values: Vec::new(),
+        });
+    }
+    let fields: Vec<Field> = empty
         .column_names()
         .into_iter()
         .map(|name| {
@@ -75,6 +82,12 @@ fn arrays(table: &MeasurementTable, rows: std::ops::Range<usize>) -> Vec<ArrayRe
     ))];
     for j in 0..nq {
         out.push(f(rows.clone().map(|r| table.q[r * nq + j]).collect()));
+    }
+    if let Some(b) = &table.branch {
+        let nb = b.names.len();
+        for k in 0..nb {
+            out.push(f(rows.clone().map(|r| b.values[r * nb + k]).collect()));
+        }
     }
     for k in 0..3 {
         out.push(f(rows.clone().map(|r| table.position[r][k]).collect()));
@@ -102,7 +115,13 @@ fn arrays(table: &MeasurementTable, rows: std::ops::Range<usize>) -> Vec<ArrayRe
 
 /// The Parquet bytes of a table assumed valid; `file` names it in errors.
 pub(super) fn write_parquet_unchecked(table: &MeasurementTable, file: &str) -> Result<Vec<u8>> {
-    let mut w = ParquetTableWriter::new(Vec::new(), table.n_joints, table.columns(), file)?;
+    let mut w = ParquetTableWriter::with_branch_names(
+        Vec::new(),
+        table.n_joints,
+        table.columns(),
+        table.branch_names(),
+        file,
+    )?;
     w.append_unchecked(table)?;
     w.finish()
 }
@@ -116,6 +135,8 @@ pub struct ParquetTableWriter<W: std::io::Write + Send> {
     schema: Arc<Schema>,
     n_joints: usize,
     columns: OptionalColumns,
+    /// Names of the branch joints (`q_<name>` columns), in column order.
+    branch_names: Vec<String>,
     /// Rows written so far (to number the rows of a part in errors).
     rows: usize,
     /// The file, for errors.
@@ -123,13 +144,37 @@ pub struct ParquetTableWriter<W: std::io::Write + Send> {
 }
 
 impl<W: std::io::Write + Send> ParquetTableWriter<W> {
-    /// A writer into `sink` of a table with `n_joints` joint columns and the optional `columns`;
-    /// `file` names it in errors.
+    /// A writer into `sink` of a table with `n_joints` joint columns and the optional `columns`, and
+    /// no branch joint columns; `file` names it in errors.
     ///
     /// # Errors
     /// [`SimError::Io`] naming `file` when the parquet writer cannot be made.
     pub fn new(sink: W, n_joints: usize, columns: OptionalColumns, file: &str) -> Result<Self> {
-        let schema = schema(n_joints, columns);
+        Self::with_branch_names(sink, n_joints, columns, &[], file)
+    }
+
+    /// [`ParquetTableWriter::new`] for a table with the branch joint columns `q_<name>` of
+    /// `branch_names` ([`MeasurementTable::branch_names`]; none when empty), written after `q1..qN`.
+    ///
+    /// # Errors
+    /// [`SimError::Table`] naming `file` for a branch joint name that is empty, has blanks at either
+    /// end or is given twice; [`SimError::Io`] when the parquet writer cannot be made.
+    pub fn with_branch_names(
+        sink: W,
+        n_joints: usize,
+        columns: OptionalColumns,
+        branch_names: &[String],
+        file: &str,
+    ) -> Result<Self> {
+        if !branch_names.is_empty() {
+            let mut check = MeasurementTable::new(n_joints, columns);
+            check.branch = Some(super::BranchColumns {
+                names: branch_names.to_vec(),
+                values: Vec::new(),
+            });
+            check.shape_check(file)?;
+        }
+        let schema = schema(n_joints, columns, branch_names);
         let stream = crate::io::ParquetStream::new(
             sink,
             schema.clone(),
@@ -142,19 +187,24 @@ impl<W: std::io::Write + Send> ParquetTableWriter<W> {
             schema,
             n_joints,
             columns,
+            branch_names: branch_names.to_vec(),
             rows: 0,
             file: file.to_string(),
         })
     }
 
-    /// Appends the rows of `part`, which must have the writer's columns and be valid
+    /// Appends the rows of `part`, which must have the writer's columns (branch joint names included,
+    /// in the same order) and be valid
     /// ([`MeasurementTable::validate`]; errors name the file and the row in the whole table; pose
     /// ids are checked for reuse within the part).
     ///
     /// # Errors
     /// [`SimError::Table`] for an invalid part, [`SimError::Io`] for a failed write.
     pub fn append(&mut self, part: &MeasurementTable) -> Result<()> {
-        if part.n_joints != self.n_joints || part.columns() != self.columns {
+        if part.n_joints != self.n_joints
+            || part.columns() != self.columns
+            || part.branch_names() != self.branch_names.as_slice()
+        {
             return Err(table_err(
                 &self.file,
                 None,

@@ -407,10 +407,9 @@ fn candidate_rows(
             ),
         ));
     }
-    let mut columns = table.columns();
-    columns.payload = true;
     let n = table.len() * options.payloads_kg.len();
-    let mut out = MeasurementTable::with_capacity(table.n_joints, columns, n);
+    let mut out = table.empty_like(n);
+    out.payload = Some(Vec::with_capacity(n));
     let mut index = Vec::with_capacity(n);
     for (r, &k) in kept.iter().enumerate() {
         for &m in &options.payloads_kg {

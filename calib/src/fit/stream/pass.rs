@@ -400,7 +400,7 @@ impl<'a> FinalSums<'a> {
         out.sigma2 += obs.sigma.iter().map(|s| s * s).sum::<f64>();
         let first_spaced = chunk.first_row.div_ceil(stride) * stride;
         if out.spaced.n_joints == 0 {
-            out.spaced = MeasurementTable::new(chunk.table.n_joints, chunk.table.columns());
+            out.spaced = chunk.table.empty_like(0);
         }
         let mut r = first_spaced;
         while r < chunk.first_row + chunk.table.len() {

@@ -95,7 +95,8 @@ pub fn scan(
     let sample_rows = sample_rows.max(MIN_CAMPAIGN_SAMPLE);
     let mut reservoirs: BTreeMap<i64, Reservoir> = BTreeMap::new();
     let mut rows = 0;
-    let mut layout: Option<(usize, sim::measurement_table::OptionalColumns)> = None;
+    // An empty table of the file's columns (branch joints included), for the reservoirs and sample.
+    let mut layout: Option<MeasurementTable> = None;
     let mut pose_runs = 0;
     let mut last: Option<(i64, i64)> = None;
     let mut scatter = crate::fit::repeats::RepeatScatter::default();
@@ -114,8 +115,7 @@ pub fn scan(
                 ),
             });
         }
-        let shape = (t.n_joints, t.columns());
-        let (n_joints, columns) = *layout.get_or_insert(shape);
+        let empty = &*layout.get_or_insert_with(|| t.empty_like(0));
         for r in 0..t.len() {
             let key = t.pose_key(r);
             if last != Some(key) {
@@ -126,7 +126,7 @@ pub fn scan(
             let campaign = t.campaign_of(r).unwrap_or(0);
             let res = reservoirs.entry(campaign).or_insert_with(|| Reservoir {
                 keys: Vec::new(),
-                rows: MeasurementTable::new(n_joints, columns),
+                rows: empty.empty_like(0),
                 rows_seen: 0,
                 bar: u64::MAX,
             });
@@ -145,7 +145,7 @@ pub fn scan(
         rows += t.len();
         progress(&format!("reading {}: {rows} rows", source.name()));
     }
-    let Some((n_joints, columns)) = layout else {
+    let Some(empty) = layout else {
         return Err(CalibError::BadValue {
             context: source.name().to_string(),
             field: "rows".into(),
@@ -167,14 +167,14 @@ pub fn scan(
         }
     }
     order.sort_unstable();
-    let mut sample = MeasurementTable::with_capacity(n_joints, columns, order.len());
+    let mut sample = empty.empty_like(order.len());
     for (_, campaign, i) in order {
         sample.push_row(&reservoirs[&campaign].rows.row(i))?;
     }
     Ok(Scan {
         rows,
-        n_joints,
-        orientation: columns.orientation,
+        n_joints: empty.n_joints,
+        orientation: empty.orientation.is_some(),
         campaigns: reservoirs.keys().copied().collect(),
         pose_runs,
         sample,

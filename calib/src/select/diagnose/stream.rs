@@ -28,7 +28,6 @@ use crate::fit::{Calibration, Dataset, FitRequest, Part, fit};
 use crate::model::spec::ModelSpec;
 use crate::validate::{HeldOutStats, HeldOutSum, held_out_errors};
 use sim::Model;
-use sim::measurement_table::MeasurementTable;
 
 /// Rows of the sample a streamed diagnosis takes by default: 100,000 (the in-memory diagnosis of
 /// 100,000 rows of `iiwa7_all` takes about 13 s and 430 MB on the 2-core machine).
@@ -133,11 +132,11 @@ pub fn diagnose_streamed(
     for chunk in source.pass()? {
         crate::cancel::checkpoint()?;
         let chunk = chunk?;
-        columns.get_or_insert((chunk.table.n_joints, chunk.table.columns()));
+        columns.get_or_insert_with(|| chunk.table.empty_like(0));
         rows += chunk.table.len();
         progress(&format!("reading {name}: {rows} rows"));
     }
-    let Some((n_joints, columns)) = columns.filter(|_| rows > 0) else {
+    let Some(empty) = columns.filter(|_| rows > 0) else {
         return Err(CalibError::BadValue {
             context: name,
             field: "rows".into(),
@@ -148,7 +147,7 @@ pub fn diagnose_streamed(
     // 2. Sample whole poses.
     let fraction = sample_rows as f64 / rows as f64;
     let seed = options.seed;
-    let mut sample = MeasurementTable::new(n_joints, columns);
+    let mut sample = empty;
     let mut done = 0;
     for chunk in source.pass()? {
         crate::cancel::checkpoint()?;
