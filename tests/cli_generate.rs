@@ -88,7 +88,10 @@ fn every_shipped_scenario_generates_a_valid_dataset() {
         let table = sim::measurement_table::read(&m).unwrap();
         assert_eq!(table.n_poses(), 25, "{stem}");
         let names = sim::generate::parquet_column_names(&m).unwrap();
-        let allowed = contract(table.n_joints);
+        // The contract's columns, and the branch joints' values (`q_<joint>`, robocal's extension:
+        // what the controller reports, never truth).
+        let mut allowed = contract(table.n_joints);
+        allowed.extend(table.branch_names().iter().map(|n| format!("q_{n}")));
         for n in &names {
             assert!(
                 allowed.contains(n),

@@ -59,6 +59,7 @@ fn check(model: &str, data: &sim::measurement_table::MeasurementTable, robot: &R
                 dir: Some(&dir),
                 temp_c: Some(24.0),
                 t_s: Some(900.0),
+                branch: None,
             },
             campaign: 0,
         };

@@ -87,6 +87,7 @@ fn bench(c: &mut Criterion) {
                             dir: None,
                             temp_c: 20.0,
                             payload: Some(payload),
+                            branch: None,
                         };
                         black_box(
                             truth

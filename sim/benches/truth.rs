@@ -131,6 +131,7 @@ fn bench(c: &mut Criterion) {
                     dir: Some(&dirs[k]),
                     temp_c: 20.0 + 0.1 * k as f64,
                     payload,
+                    branch: None,
                 };
                 black_box(
                     t.target(&cond, &p_flange, &gravity, &mut sc)
@@ -148,6 +149,7 @@ fn bench(c: &mut Criterion) {
                 dir: Some(&dirs[k]),
                 temp_c: 20.0 + 0.1 * k as f64,
                 payload,
+                branch: None,
             };
             black_box(
                 truth

@@ -24,6 +24,7 @@
 //! ```
 #![warn(missing_docs)]
 
+pub mod branches;
 pub mod campaign;
 pub mod coupled_joints;
 pub mod decoder_guard;
@@ -32,6 +33,7 @@ pub mod effects;
 pub mod error;
 pub mod generate;
 pub mod io;
+pub mod joint_kind;
 pub mod kinematics;
 pub mod lie;
 pub mod magnitude;

@@ -65,6 +65,7 @@
 //! assert_eq!(err.to_string(), "m.csv: row 1 (line 2), column q1: 'abc' is not a number");
 //! ```
 
+mod branch_values;
 mod check;
 mod chunks;
 mod columns;
@@ -72,6 +73,7 @@ mod couple;
 mod csv;
 mod parquet;
 
+pub use branch_values::BranchValues;
 pub use check::{
     LIMIT_TOLERANCE, ModelCheck, check_against_model, check_within_limits, reach_bound,
 };

@@ -4,45 +4,11 @@
 //! (it moves with joint `i`); the joint axis passes through its origin. `flange` is the tip link frame.
 //! At q = 0 every joint frame sits at its home pose `T_base_joint_home`.
 
+use crate::branches::Branches;
 use crate::coupled_joints::{CoupledJoint, CouplingDecl, Couplings};
+pub use crate::joint_kind::{JointKind, JointLimits};
 use crate::lie::Pose;
 use nalgebra::{Matrix3, Vector3, Vector6};
-
-/// Kind of a movable joint.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum JointKind {
-    /// Rotation about the axis within limits; `q` in rad.
-    Revolute,
-    /// Rotation about the axis without limits; `q` in rad.
-    Continuous,
-    /// Translation along the axis; `q` in m.
-    Prismatic,
-}
-
-impl JointKind {
-    /// True for revolute and continuous joints.
-    pub fn is_rotational(self) -> bool {
-        !matches!(self, JointKind::Prismatic)
-    }
-    /// Unit of `q` for this joint: `rad` or `m`.
-    pub fn unit(self) -> &'static str {
-        if self.is_rotational() { "rad" } else { "m" }
-    }
-}
-
-/// Position and effort limits of one joint from the URDF.
-#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct JointLimits {
-    /// Lower position limit (rad or m).
-    pub lower: f64,
-    /// Upper position limit (rad or m).
-    pub upper: f64,
-    /// Velocity limit (rad/s or m/s); 0 when the URDF gives none.
-    pub velocity: f64,
-    /// Effort limit (N m or N); 0 when the URDF gives none.
-    pub effort: f64,
-}
 
 /// One movable joint of the chain.
 #[derive(Clone, Debug)]
@@ -158,6 +124,7 @@ pub struct Model {
     massless_links: Vec<String>,
     notes: Vec<String>,
     couplings: Couplings,
+    branches: Branches,
 }
 
 /// What a [`Model`] is made of: everything [`Model::new`] does not derive.
@@ -181,6 +148,9 @@ pub struct ModelParts {
     /// Coupled (passive) joints of the chain ([`crate::coupled_joints`]); empty for a chain whose
     /// every joint is driven.
     pub couplings: Vec<CoupledJoint>,
+    /// Movable joints of branches off the chain ([`crate::branches`]): their masses are in
+    /// `bodies` at zero, and move with the joints' values from a measurement table.
+    pub branches: Branches,
 }
 
 impl Model {
@@ -203,6 +173,7 @@ impl Model {
             flange_offset,
             notes,
             couplings,
+            branches,
         } = parts;
         let structure = |message: String| crate::error::SimError::Structure {
             source_name: name.clone(),
@@ -276,6 +247,7 @@ impl Model {
             massless_links,
             notes,
             couplings,
+            branches,
         })
     }
 
@@ -290,6 +262,7 @@ impl Model {
             flange_offset: self.flange_offset,
             notes: self.notes.clone(),
             couplings: self.couplings.list().to_vec(),
+            branches: self.branches.clone(),
         }
     }
 
@@ -307,6 +280,11 @@ impl Model {
             &self.name,
         )?);
         Model::new(parts)
+    }
+
+    /// Movable joints of branches off the chain whose masses load it ([`crate::branches`]).
+    pub fn branches(&self) -> &Branches {
+        &self.branches
     }
 
     /// The coupled joints of the chain and its driven joints ([`crate::coupled_joints`]).

@@ -15,6 +15,8 @@ pub const STREAM_PAYLOAD: u64 = 3;
 pub const STREAM_TRACKER: u64 = 4;
 /// Stream id of the scenario's parameter draws (index: a hash of the key).
 pub const STREAM_PARAMETERS: u64 = 5;
+/// Stream id of the branch joints' values (index: pose).
+pub const STREAM_BRANCHES: u64 = 6;
 
 /// SplitMix64 finaliser: a bijective, well-mixing map of 64-bit words (Steele, Lea and Flood 2014).
 #[inline]

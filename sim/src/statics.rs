@@ -21,7 +21,8 @@ pub struct Payload {
 }
 
 /// Gravity torques at `q` for `gravity` (base frame, m/s²) into `data.gravity_torque`; also runs
-/// forward kinematics. Fails if a moving body has no inertial data.
+/// forward kinematics. The branches off the chain are where [`Data::pose_branches`] last put them
+/// (at zero by default). Fails if a moving body has no inertial data.
 ///
 /// # Panics
 /// If `q.len() != model.nq()`.
@@ -45,7 +46,7 @@ pub fn gravity_torques(
     for i in (0..model.nq()).rev() {
         let t = &data.joint_poses[i];
         let body = &model.bodies()[i];
-        let c = t * nalgebra::Point3::from(body.com);
+        let c = t * nalgebra::Point3::from(data.body_com[i]);
         mass += body.mass;
         moment += c.coords * body.mass;
         let joint = &model.joints()[i];

@@ -27,6 +27,7 @@
 //! floating and flange frames lie on the chain), so none depends on a rule. Loops of joints, a link
 //! with two parent joints, a joint from a link to itself and duplicated names are refused first.
 
+use crate::branches::{BranchJoint, Branches};
 use crate::coupled_joints::{CouplingDecl, Couplings};
 use crate::error::{Result, SimError};
 use crate::lie::{Pose, pose_from, rotation_from_rpy};
@@ -594,15 +595,25 @@ impl<'a> Builder<'a> {
         let on_chain: std::collections::HashSet<&str> =
             body_links.iter().flatten().copied().collect();
         let mut bodies = Vec::with_capacity(joints.len());
-        for links in &body_links {
+        let mut branches: Vec<BranchBuild<'_>> = Vec::new();
+        for (i, links) in body_links.iter().enumerate() {
             let mut parts: Vec<(&str, Pose)> = Vec::new();
             for l in links {
                 let t = link_in_body[l];
                 parts.push((l, t));
                 // Fixed-joint subtrees hanging off this chain link (not the chain itself).
-                self.fixed_subtree(l, t, &on_chain, &mut parts, &mut notes)?;
+                self.fixed_subtree(l, t, i, &on_chain, &mut parts, &mut branches, &mut notes)?;
             }
             bodies.push(self.merge(&parts)?);
+        }
+        let mut branch_joints = Vec::with_capacity(branches.len());
+        for b in branches {
+            let moving = self.merge(&b.links)?;
+            branch_joints.push(BranchJoint {
+                mass: moving.mass,
+                com: moving.com,
+                ..b.joint
+            });
         }
         Model::new(ModelParts {
             name: self.robot.name.clone(),
@@ -613,15 +624,21 @@ impl<'a> Builder<'a> {
             flange_offset,
             notes,
             couplings,
+            branches: Branches::new(branch_joints),
         })
     }
 
+    /// Links fixed to chain body `body` below `link` (pose `t` in the body's frame) into `parts`,
+    /// except the chain's own; a movable joint off the chain starts a branch ([`Builder::branch_edge`]).
+    #[allow(clippy::too_many_arguments)]
     fn fixed_subtree(
         &self,
         link: &'a str,
         t: Pose,
+        body: usize,
         on_chain: &std::collections::HashSet<&str>,
         parts: &mut Vec<(&'a str, Pose)>,
+        branches: &mut Vec<BranchBuild<'a>>,
         notes: &mut Vec<String>,
     ) -> Result<()> {
         for j in self.child_joints.get(link).into_iter().flatten() {
@@ -629,46 +646,118 @@ impl<'a> Builder<'a> {
             if on_chain.contains(child) {
                 continue;
             }
-            let tc = t * self.joint_origin(j)?;
-            parts.push((child, tc));
             if is_movable(j) {
-                let mut movable = vec![j.name.clone()];
-                self.branch_subtree(child, tc, parts, &mut movable)?;
-                notes.push(format!(
-                    "a branch leaves the chain at joint '{}': its links' masses load the chain with \
-                     its movable joints ({}) at zero",
-                    j.name,
-                    movable
-                        .iter()
+                let first = branches.len();
+                let mut held = Vec::new();
+                let at = BranchAt {
+                    body,
+                    owner: None,
+                    t_owner: t,
+                    t_body: t,
+                };
+                self.branch_edge(j, at, parts, branches, &mut held)?;
+                let quoted = |names: &mut dyn Iterator<Item = &str>| {
+                    names
                         .map(|n| format!("'{n}'"))
                         .collect::<Vec<_>>()
                         .join(", ")
-                ));
+                };
+                let mut note = format!(
+                    "a branch leaves the chain at joint '{}': its links' masses load the chain",
+                    j.name
+                );
+                if branches.len() > first {
+                    note += &format!(
+                        ", posed by its movable joints ({}) at the values of the measurement table's \
+                         columns q_<joint name>, or at zero",
+                        quoted(&mut branches[first..].iter().map(|b| b.joint.name.as_str()))
+                    );
+                }
+                if !held.is_empty() {
+                    note += &format!(
+                        "; joints {} (floating or planar) are held at zero",
+                        quoted(&mut held.iter().copied())
+                    );
+                }
+                notes.push(note);
                 continue;
             }
-            self.fixed_subtree(child, tc, on_chain, parts, notes)?;
+            let tc = t * self.joint_origin(j)?;
+            parts.push((child, tc));
+            self.fixed_subtree(child, tc, body, on_chain, parts, branches, notes)?;
         }
         Ok(())
     }
 
-    /// Every link below `link` of a branch off the chain (pose `t` in the body's frame), with the
-    /// branch's movable joints at zero (the child frame at the joint's origin), into `parts`; the
-    /// movable joints' names into `movable`.
-    fn branch_subtree(
+    /// The edge `j` of a branch off the chain and everything below it: every link into `parts` at
+    /// its pose in the body's frame with the branch at zero; each revolute, continuous or prismatic
+    /// joint into `branches` with the links that move with it; joints of other movable types are
+    /// held at zero (their names into `held`).
+    fn branch_edge(
         &self,
-        link: &'a str,
-        t: Pose,
+        j: &'a urdf_rs::Joint,
+        at: BranchAt,
         parts: &mut Vec<(&'a str, Pose)>,
-        movable: &mut Vec<String>,
+        branches: &mut Vec<BranchBuild<'a>>,
+        held: &mut Vec<&'a str>,
     ) -> Result<()> {
-        for j in self.child_joints.get(link).into_iter().flatten() {
-            let child = j.child.link.as_str();
-            let tc = t * self.joint_origin(j)?;
-            parts.push((child, tc));
-            if is_movable(j) {
-                movable.push(j.name.clone());
+        let child = j.child.link.as_str();
+        let origin = self.joint_origin(j)?;
+        let t_owner = at.t_owner * origin;
+        let t_body = at.t_body * origin;
+        parts.push((child, t_body));
+        let kind = match j.joint_type {
+            urdf_rs::JointType::Revolute => Some(JointKind::Revolute),
+            urdf_rs::JointType::Continuous => Some(JointKind::Continuous),
+            urdf_rs::JointType::Prismatic => Some(JointKind::Prismatic),
+            urdf_rs::JointType::Fixed => None,
+            _ => {
+                held.push(j.name.as_str());
+                None
             }
-            self.branch_subtree(child, tc, parts, movable)?;
+        };
+        let below = match kind {
+            Some(kind) => {
+                self.finite("joint", &j.name, "axis xyz", &j.axis.xyz[..])?;
+                let axis = Vector3::new(j.axis.xyz[0], j.axis.xyz[1], j.axis.xyz[2]);
+                let norm = axis.norm();
+                if norm < 1e-9 {
+                    return Err(self.bad("joint", &j.name, "axis xyz", norm, "a zero-length axis"));
+                }
+                branches.push(BranchBuild {
+                    joint: BranchJoint {
+                        name: j.name.clone(),
+                        kind,
+                        axis: axis / norm,
+                        limits: self.limits(j, kind)?,
+                        body: at.body,
+                        parent: at.owner,
+                        origin: t_owner,
+                        mass: 0.0,
+                        com: Vector3::zeros(),
+                    },
+                    links: vec![(child, Pose::identity())],
+                });
+                BranchAt {
+                    body: at.body,
+                    owner: Some(branches.len() - 1),
+                    t_owner: Pose::identity(),
+                    t_body,
+                }
+            }
+            None => {
+                if let Some(k) = at.owner {
+                    branches[k].links.push((child, t_owner));
+                }
+                BranchAt {
+                    t_owner,
+                    t_body,
+                    ..at
+                }
+            }
+        };
+        for next in self.child_joints.get(child).into_iter().flatten() {
+            self.branch_edge(next, below, parts, branches, held)?;
         }
         Ok(())
     }
@@ -781,6 +870,24 @@ impl<'a> Builder<'a> {
 
 /// The largest joint or centre-of-mass offset a URDF may give (m).
 pub const MAX_LENGTH_M: f64 = 1000.0;
+
+/// A branch joint while its branch is read: the joint, and the links that move with it (pose in its
+/// frame).
+struct BranchBuild<'a> {
+    joint: BranchJoint,
+    links: Vec<(&'a str, Pose)>,
+}
+
+/// Where [`Builder::branch_edge`] is in a branch: the chain body, the branch joint whose frame the
+/// current link moves with (`None`: the body's), and the link's pose in that frame and in the body's
+/// frame with the branch at zero.
+#[derive(Clone, Copy)]
+struct BranchAt {
+    body: usize,
+    owner: Option<usize>,
+    t_owner: Pose,
+    t_body: Pose,
+}
 
 /// Where one chain of movable joints ends ([`Builder::chain_ends`]).
 struct ChainEnd<'a> {

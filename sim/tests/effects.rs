@@ -107,6 +107,7 @@ fn cond<'a>(
         dir,
         temp_c,
         payload,
+        branch: None,
     }
 }
 

@@ -63,6 +63,7 @@ fn check_file(path: &Path) -> (f64, f64) {
             dir: None,
             temp_c: 20.0,
             payload: None,
+            branch: None,
         };
         let t = true_target(&model, &effects, &cond, &Vector3::zeros(), &g).unwrap();
         for k in 0..8 {
@@ -131,6 +132,7 @@ fn the_passive_torque_goes_to_the_drives() {
         dir: None,
         temp_c: 20.0,
         payload: None,
+        branch: None,
     };
     let a = true_target(&coupled, &effects, &cond, &Vector3::zeros(), &g).unwrap();
     let b = true_target(&free, &effects, &cond, &Vector3::zeros(), &g).unwrap();
@@ -164,6 +166,7 @@ fn a_drive_backlash_moves_the_passive_joint_through_the_linkage() {
         dir: Some(&dir),
         temp_c: 20.0,
         payload: None,
+        branch: None,
     };
     let t = true_target(
         &model,

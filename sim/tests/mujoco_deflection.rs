@@ -164,6 +164,7 @@ fn check_file(path: &Path) -> Agreement {
                 dir: None,
                 temp_c: 20.0,
                 payload: Some(r.payload),
+                branch: None,
             };
             let t = truth.target(&cond, &Vector3::zeros(), &g, &mut s).unwrap();
             let dp = (t.flange.translation.vector - r.p).norm();

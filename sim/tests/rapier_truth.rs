@@ -170,6 +170,7 @@ fn check_settle_file(path: &Path) {
                 dir: None,
                 temp_c: 20.0,
                 payload: Some(case.payload),
+                branch: None,
             };
             let a = truth
                 .target(&cond, &Vector3::zeros(), &gravity(), &mut scratch)
@@ -366,6 +367,7 @@ fn rigid_joints_tilted_gravity_and_payload_match_the_analytic_statics() {
             dir: None,
             temp_c: 20.0,
             payload: Some(pl),
+            branch: None,
         };
         let a = truth
             .target(&cond, &Vector3::zeros(), &g, &mut scratch)

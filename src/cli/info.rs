@@ -32,10 +32,24 @@ pub fn run(args: Args) -> CliResult {
                 })
             })
             .collect();
+        let branch_joints: Vec<_> = model
+            .branches()
+            .joints()
+            .iter()
+            .map(|j| {
+                json!({
+                    "name": j.name, "column": format!("q_{}", j.name), "kind": j.kind,
+                    "limits": j.limits, "hangs_from_joint": j.body + 1,
+                    "after_branch_joint": j.parent.map(|p| &model.branches().joints()[p].name),
+                    "own_links_mass_kg": j.mass,
+                })
+            })
+            .collect();
         let m = model.home_flange().to_homogeneous();
         return print_json(&json!({
             "robot": model.name(), "base_link": model.base_link(), "tip_link": model.tip_link(),
             "joints": joints,
+            "branch_joints": branch_joints,
             "home_flange": {"position_m": model.home_flange().translation.vector.as_slice(),
                              "rotation": (0..3).map(|r| (0..3).map(|c| m[(r, c)]).collect::<Vec<_>>()).collect::<Vec<_>>()},
             "moving_mass_kg": model.moving_mass(),
@@ -73,6 +87,15 @@ pub fn run(args: Args) -> CliResult {
             p.z,
             lim,
             b.mass
+        );
+    }
+    for j in model.branches().joints() {
+        eprintln!(
+            "branch joint {} (column q_{}) on the body of joint {}: {:.4} kg of links before the next branch joint",
+            j.name,
+            j.name,
+            j.body + 1,
+            j.mass
         );
     }
     let p = model.home_flange().translation.vector;

@@ -610,10 +610,12 @@ pub fn compensate_table(
     }
     let compensator = Compensator::new(predictor);
     let rows: Vec<usize> = (0..table.len()).collect();
+    let branch = sim::measurement_table::BranchValues::new(table, &predictor.model);
     let chunks: Vec<Result<Vec<Solution>>> = rows
         .par_chunks(CHUNK_ROWS)
         .map(|chunk| {
             let mut s = compensator.scratch();
+            let mut values = vec![0.0; branch.as_ref().map_or(0, |b| b.len())];
             chunk
                 .iter()
                 .map(|&r| {
@@ -626,6 +628,7 @@ pub fn compensate_table(
                             dir: table.dir_row(r),
                             temp_c: table.temp.as_ref().map(|t| t[r]),
                             t_s: table.t.as_ref().map(|t| t[r]),
+                            branch: branch.as_ref().map(|b| b.row(table, r, &mut values)),
                         },
                         campaign: campaign[r],
                     };

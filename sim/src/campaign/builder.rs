@@ -1,7 +1,9 @@
 //! [`CampaignBuilder`]: a [`CampaignSpec`] made value by value, checked when built.
 
 use super::err;
-use super::spec::{CampaignSpec, DirectionRule, PayloadRule, Sampling, check_model_free};
+use super::spec::{
+    BranchRule, CampaignSpec, DirectionRule, PayloadRule, Sampling, check_model_free,
+};
 use crate::effects::thermal_drift::TemperatureProfile;
 use crate::error::Result;
 use crate::kinematics::ik::Reachability;
@@ -71,6 +73,11 @@ impl CampaignBuilder {
     /// Approach-direction rule.
     pub fn directions(mut self, rule: DirectionRule) -> CampaignBuilder {
         self.spec.directions = rule;
+        self
+    }
+    /// Where the branches off the chain are (checked against the robot by [`super::plan`]).
+    pub fn branches(mut self, rule: BranchRule) -> CampaignBuilder {
+        self.spec.branches = rule;
         self
     }
     /// Joint positions before the first pose (rad or m; checked against the robot by [`super::plan`]).

@@ -72,7 +72,7 @@ pub use crate::seeds::{
 pub use builder::CampaignBuilder;
 pub use iso9283::iso9283_points;
 pub use planner::{MAX_FORMAT_ROWS, MAX_ROWS, Plan, Planner, check_row_count, plan};
-pub use spec::{CampaignSpec, DirectionRule, Iso9283, PayloadRule, Sampling};
+pub use spec::{BranchRule, CampaignSpec, DirectionRule, Iso9283, PayloadRule, Sampling};
 
 /// An error about the campaign, reported under the scenario `file` and `key`.
 fn err(file: &str, key: &str, message: String) -> SimError {

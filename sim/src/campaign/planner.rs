@@ -3,12 +3,12 @@
 
 use super::err;
 use super::sources::{FileContext, PoseSource, grid_point, pose_source};
-use super::spec::{CampaignSpec, DirectionRule, PayloadRule, check_model_free};
+use super::spec::{BranchRule, CampaignSpec, DirectionRule, PayloadRule, check_model_free};
 use crate::error::Result;
 use crate::kinematics::ik::reachable;
 use crate::kinematics::{Data, forward_kinematics};
 use crate::model::Model;
-use crate::seeds::{STREAM_DIRECTIONS, STREAM_PAYLOAD, STREAM_POSES, rng_for};
+use crate::seeds::{STREAM_BRANCHES, STREAM_DIRECTIONS, STREAM_PAYLOAD, STREAM_POSES, rng_for};
 use nalgebra::Vector3;
 use rand::RngExt;
 use rayon::prelude::*;
@@ -61,6 +61,13 @@ pub struct Plan {
     /// Chain indices of the driven joints when the robot has coupled joints (their columns are the
     /// measurement table's `q1 … qD`); `None` when every joint is driven.
     pub drives: Option<Vec<usize>>,
+    /// Values of the branch joints off the chain per row, row-major in [`Model::branches`] order
+    /// (rad or m; the table's `q_<joint>` columns); `None` with the branches at zero
+    /// ([`BranchRule::Zero`]).
+    pub branch: Option<Vec<f64>>,
+    /// The branch joints of `branch`'s values ([`Model::branches`] order; the columns `q_<name>`);
+    /// empty with the branches at zero.
+    pub branch_names: Vec<String>,
 }
 
 impl Plan {
@@ -81,6 +88,12 @@ impl Plan {
         self.dir
             .as_ref()
             .map(|d| &d[r * self.nq..(r + 1) * self.nq])
+    }
+    /// Branch joint values of row `r` (rad or m), when the campaign poses the branches.
+    pub fn branch_row(&self, r: usize) -> Option<&[f64]> {
+        self.branch
+            .as_ref()
+            .map(|b| &b[r * self.branch_names.len()..(r + 1) * self.branch_names.len()])
     }
     /// Repeat index of row `r` within its pose (0-based).
     pub fn repeat_of(&self, r: usize) -> usize {
@@ -137,6 +150,16 @@ impl<'a> Planner<'a> {
     pub fn new(model: &'a Model, spec: &'a CampaignSpec, seed: u64, file: &str) -> Result<Self> {
         let n = model.nq();
         check_model_free(spec, file)?;
+        if spec.branches == BranchRule::Random && model.branches().is_empty() {
+            return Err(err(
+                file,
+                "campaign.branches",
+                format!(
+                    "\"random\", but robot '{}' has no movable joint off its chain to pose",
+                    model.name()
+                ),
+            ));
+        }
         let (source, n_poses, context) = pose_source(model, spec, file)?;
         let rows = n_poses
             .checked_mul(spec.repeats)
@@ -283,7 +306,11 @@ impl<'a> Planner<'a> {
             payload_com_m: self.spec.payload_com_m,
             drives: (!self.model.couplings().is_empty())
                 .then(|| self.model.couplings().drives().to_vec()),
+            branch: None,
+            branch_names: Vec::new(),
         };
+        let branch_values = self.branch_values(k0..k1);
+        plan.branch_names = self.branch_names();
         let mut mass = 0.0;
         for row in r0..r1 {
             let (k, r) = (row / repeats, row % repeats);
@@ -331,6 +358,12 @@ impl<'a> Planner<'a> {
                 out.extend_from_slice(&d[i * n..(i + 1) * n]);
             }
             plan.payload_kg.push(mass);
+            if let Some(v) = &branch_values {
+                let nb = plan.branch_names.len();
+                plan.branch
+                    .get_or_insert_with(|| Vec::with_capacity(rows * nb))
+                    .extend_from_slice(&v[i * nb..(i + 1) * nb]);
+            }
         }
         self.next_row = r1;
         Ok(Some(plan))
@@ -403,6 +436,40 @@ impl<'a> Planner<'a> {
             }
         }
         Ok(out)
+    }
+
+    /// The branch joints whose values the plans carry (the table's `q_<joint>` columns, in
+    /// [`Model::branches`] order); empty with the branches at zero.
+    pub fn branch_names(&self) -> Vec<String> {
+        match self.spec.branches {
+            BranchRule::Zero => Vec::new(),
+            BranchRule::Random => (self.model.branches().joints().iter())
+                .map(|j| j.name.clone())
+                .collect(),
+        }
+    }
+
+    /// Branch joint values of poses `ks` (row-major, [`Model::branches`] order), each drawn from
+    /// pose `k`'s own generator; `None` with the branches at zero.
+    fn branch_values(&self, ks: std::ops::Range<usize>) -> Option<Vec<f64>> {
+        if self.spec.branches == BranchRule::Zero {
+            return None;
+        }
+        let joints = self.model.branches().joints();
+        let mut out = Vec::with_capacity(ks.len() * joints.len());
+        for k in ks {
+            let mut rng = rng_for(self.seed, STREAM_BRANCHES, k as u64);
+            for j in joints {
+                let (lo, hi) = match j.limits {
+                    Some(l) => (l.lower, l.upper),
+                    None if j.kind.is_rotational() => (-std::f64::consts::PI, std::f64::consts::PI),
+                    None => (0.0, 0.0),
+                };
+                let u: f64 = rng.random();
+                out.push(lo + (hi - lo) * u);
+            }
+        }
+        Some(out)
     }
 
     /// Directions of poses `ks` (row-major), whose joint values are `qs`; `None` without `dir`.

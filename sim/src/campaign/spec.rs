@@ -55,6 +55,19 @@ pub enum Sampling {
     },
 }
 
+/// Where the movable joints of branches off the chain ([`crate::branches`]: a second arm, a head)
+/// are at each pose.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum BranchRule {
+    /// At zero; the table has no `q_<joint>` columns.
+    #[default]
+    Zero,
+    /// Per pose, each uniformly within its limits (±π for a continuous joint), from the seed's
+    /// branch stream; written as `q_<joint>` columns.
+    Random,
+}
+
 /// How approach directions are set (see the module docs).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "snake_case")]
@@ -100,6 +113,8 @@ pub struct CampaignSpec {
     pub(super) seconds_per_repeat: f64,
     /// Approach-direction rule.
     pub(super) directions: DirectionRule,
+    /// Where the branches off the chain are.
+    pub(super) branches: BranchRule,
     /// Joint positions before the first pose, for the `move` rule (rad or m); `None` = zero, clamped
     /// into the limits.
     pub(super) start_q: Option<Vec<f64>>,
@@ -128,6 +143,7 @@ impl CampaignSpec {
             seconds_per_pose: 10.0,
             seconds_per_repeat: 1.0,
             directions: DirectionRule::Move,
+            branches: BranchRule::Zero,
             start_q: None,
             payload: PayloadRule::Fixed(0.0),
             payload_com_m: [0.0; 3],
@@ -163,6 +179,10 @@ impl CampaignSpec {
     /// Approach-direction rule.
     pub fn directions(&self) -> DirectionRule {
         self.directions
+    }
+    /// Where the branches off the chain are.
+    pub fn branches(&self) -> BranchRule {
+        self.branches
     }
     /// Joint positions before the first pose (rad or m), if given.
     pub fn start_q(&self) -> Option<&[f64]> {

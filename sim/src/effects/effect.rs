@@ -56,6 +56,9 @@ pub struct Conditions<'a> {
     pub temp_c: f64,
     /// Mass at the flange, if any.
     pub payload: Option<Payload>,
+    /// Values of the movable joints of the branches off the chain ([`crate::branches`], rad or m,
+    /// [`crate::Model::branches`] order), or `None` for every branch at zero.
+    pub branch: Option<&'a [f64]>,
 }
 
 /// What an effect reads besides the joint positions: campaign columns and model data.

@@ -173,6 +173,8 @@ pub struct DeflectionScratch {
     x: Vec<f64>,
     poses: Vec<Pose>,
     work: GravityWork,
+    /// [`DeflectionStage::bodies`] with each joint's body as the state has it (branches posed).
+    bodies: Vec<(f64, Vector3<f64>)>,
 }
 
 /// A hinge about `axis` (unit, in the frame before it) at the origin of that frame.
@@ -315,6 +317,7 @@ impl Effect for LinkDeflection {
             x: vec![0.0; m],
             poses: vec![Pose::identity(); m],
             work: GravityWork::new(m),
+            bodies: stage.bodies.clone(),
         }
     }
 
@@ -328,6 +331,10 @@ impl Effect for LinkDeflection {
         if stage.template.nq() == stage.joint_index.len() {
             // No hinge (every compliance 0): the joints are settled already.
             return Ok(Moved::Unchanged);
+        }
+        // Each joint's body as the state has it: with the branches off the chain posed.
+        for (&f, b) in stage.frame_index.iter().zip(st.bodies) {
+            sc.bodies[f] = *b;
         }
         if let Some(r) = &stage.rapier {
             // The engine settles joints and hinges from rest at the joint springs' anchors (set by
@@ -391,7 +398,7 @@ impl Effect for LinkDeflection {
         let eq = Equilibrium {
             chain: &sc.chain,
             dt: st.dt,
-            bodies: &stage.bodies,
+            bodies: &sc.bodies,
             payload: st.cond.payload.as_ref(),
             gravity: st.gravity,
             compliance: &sc.compliance,

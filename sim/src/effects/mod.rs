@@ -63,7 +63,7 @@
 //!     ..Effects::default()
 //! };
 //! let q = [0.0, 0.8, 0.0, -0.9, 0.0, 0.5, 0.0];
-//! let cond = Conditions { q: &q, dir: None, temp_c: 20.0, payload: None };
+//! let cond = Conditions { q: &q, dir: None, temp_c: 20.0, payload: None, branch: None };
 //! let p_flange = Vector3::new(0.0, 0.0, 0.05);
 //! let gravity = Vector3::new(0.0, 0.0, -9.81);
 //! let truth = true_target(&model, &effects, &cond, &p_flange, &gravity).unwrap();
@@ -410,8 +410,10 @@ pub struct Truth {
     stages: Stages,
     /// What the present effects read.
     needs: Needs,
-    /// Mass (kg) and centre of mass (joint frame, m) of each moving body.
+    /// Mass (kg) and centre of mass (joint frame, m) of each moving body, branches at zero.
     bodies: Vec<(f64, Vector3<f64>)>,
+    /// The branches off the chain, posed per measurement ([`Conditions::branch`]).
+    branches: crate::branches::Branches,
     solver: ComplianceSolver,
     /// The robot's coupled joints, when it has any: a stage's change of a drive's angle moves the
     /// joints coupled to it ([`crate::coupled_joints`]).
@@ -432,6 +434,11 @@ pub struct TruthScratch {
     before: Vec<f64>,
     work: GravityWork,
     stages: StageScratch,
+    /// The bodies with the branches posed ([`Conditions::branch`]).
+    posed: Vec<(f64, Vector3<f64>)>,
+    /// Branch joint frames and first-moment shifts ([`crate::branches::Branches::first_moment_shift`]).
+    branch_poses: Vec<Pose>,
+    branch_shift: Vec<Vector3<f64>>,
 }
 
 impl TruthScratch {
@@ -507,6 +514,7 @@ impl Truth {
             stages,
             needs: effects.needs(),
             bodies: model.bodies().iter().map(|b| (b.mass, b.com)).collect(),
+            branches: model.branches().clone(),
             solver,
             couplings: (!model.couplings().is_empty()).then(|| model.couplings().clone()),
         })
@@ -534,6 +542,9 @@ impl Truth {
             before: vec![0.0; n],
             work: GravityWork::new(n),
             stages: self.stages.scratch(n),
+            posed: self.bodies.clone(),
+            branch_poses: vec![Pose::identity(); self.branches.len()],
+            branch_shift: vec![Vector3::zeros(); n],
         }
     }
 
@@ -574,6 +585,33 @@ impl Truth {
                 cond.temp_c,
                 "not finite (thermal drift needs a temperature)",
             ));
+        }
+        if let Some(b) = cond.branch {
+            if b.len() != self.branches.len() {
+                return Err(cond_err(
+                    "branch",
+                    format!("{} values", b.len()),
+                    &format!(
+                        "needs one per branch joint off the chain ({})",
+                        self.branches.len()
+                    ),
+                ));
+            }
+            if let Some((k, v)) = b.iter().enumerate().find(|(_, v)| !v.is_finite()) {
+                return Err(cond_err(
+                    format!("q_{}", self.branches.joints()[k].name),
+                    v,
+                    "not finite",
+                ));
+            }
+            if matches!(self.solver, ComplianceSolver::Rapier(_)) && b.iter().any(|v| *v != 0.0) {
+                return Err(cond_err(
+                    "branch",
+                    "posed",
+                    "the rapier truth holds the branches off the chain at zero: pose them with the \
+                     analytic solver",
+                ));
+            }
         }
         if let Some(pl) = &cond.payload {
             if !(pl.mass.is_finite() && pl.mass >= 0.0) {
@@ -619,10 +657,23 @@ impl Truth {
         s.angles.copy_from_slice(q);
         s.q_link.copy_from_slice(q);
         s.q_link_first.copy_from_slice(q);
+        let bodies = match cond.branch {
+            Some(values) if !self.branches.is_empty() => {
+                self.branches
+                    .first_moment_shift(values, &mut s.branch_poses, &mut s.branch_shift);
+                for ((out, (m, c)), shift) in
+                    s.posed.iter_mut().zip(&self.bodies).zip(&s.branch_shift)
+                {
+                    *out = (*m, if *m > 0.0 { c + shift / *m } else { *c });
+                }
+                &s.posed
+            }
+            _ => &self.bodies,
+        };
         let mut st = State {
             cond,
             gravity,
-            bodies: &self.bodies,
+            bodies,
             geom: &self.grown,
             dt: 0.0,
             angles: &mut s.angles,

@@ -6,7 +6,7 @@ use super::simulate::{RowTruth, Simulation};
 use crate::campaign::Plan;
 use crate::effects::EffectId;
 use crate::error::{Result, SimError};
-use crate::measurement_table::{MeasurementTable, OptionalColumns};
+use crate::measurement_table::{BranchColumns, MeasurementTable, OptionalColumns};
 use crate::tracker::Tracker;
 use arrow_array::{ArrayRef, BooleanArray, Float64Array, Int64Array, RecordBatch};
 use arrow_schema::{DataType, Field, Schema};
@@ -170,7 +170,10 @@ pub fn measurement_table(plan: &Plan, sim: &Simulation, tracker: &Tracker) -> Me
             .sigma
             .then(|| sim.rows.iter().map(|r| r.reading.sigma_m).collect()),
         campaign: None,
-        branch: None,
+        branch: plan.branch.clone().map(|values| BranchColumns {
+            names: plan.branch_names.clone(),
+            values,
+        }),
     };
     match &plan.drives {
         None => table,

@@ -100,6 +100,7 @@ pub fn simulate(
                     dir: plan.dir_row(r),
                     temp_c: plan.temp_c[r],
                     payload: (mass > 0.0).then_some(Payload { mass, com }),
+                    branch: plan.branch_row(r),
                 };
                 match truth.target(&cond, tracker.p_flange(), gravity, scratch) {
                     Ok(tp) => {

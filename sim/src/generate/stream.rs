@@ -77,10 +77,11 @@ pub fn write_dataset_with(
             dir.join(TRUTH_PARQUET_FILE),
             dir.join(TRUTH_JSON_FILE),
         );
-        let mut measurements = measurement_table::ParquetTableWriter::new(
+        let mut measurements = measurement_table::ParquetTableWriter::with_branch_names(
             AtomicFile::create(&m_path)?,
             res.model.n_drives(),
             measurement_columns(planner.has_dir(), &res.tracker),
+            &planner.branch_names(),
             &m_path.display().to_string(),
         )?;
         let truth_err = |e: parquet::errors::ParquetError| SimError::Io {

@@ -25,6 +25,14 @@ pub struct Data {
     /// Joint torques that hold the robot against gravity (n, N m or N), filled by
     /// [`crate::statics::gravity_torques`].
     pub gravity_torque: nalgebra::DVector<f64>,
+    /// Centre of mass of each body in its joint frame (m), with the branches off the chain at the
+    /// values last given to [`Data::pose_branches`] (at zero, the model's [`crate::Body::com`],
+    /// until then). The statics read it.
+    pub body_com: Vec<Vector3<f64>>,
+    /// Scratch of [`Data::pose_branches`]: each branch joint's frame in its body's frame.
+    branch_poses: Vec<Pose>,
+    /// Scratch of [`Data::pose_branches`]: each body's first-moment change (kg m).
+    branch_shift: Vec<Vector3<f64>>,
 }
 
 impl Data {
@@ -36,6 +44,39 @@ impl Data {
             flange: model.home_flange(),
             jacobian: OMatrix::<f64, U6, Dyn>::zeros(n),
             gravity_torque: nalgebra::DVector::zeros(n),
+            body_com: model.bodies().iter().map(|b| b.com).collect(),
+            branch_poses: vec![Pose::identity(); model.branches().len()],
+            branch_shift: vec![Vector3::zeros(); n],
+        }
+    }
+
+    /// Poses the branches off the chain ([`crate::branches`]) at `values` (rad or m, one per
+    /// [`Model::branches`] joint; `None`: at zero) for the statics that follow: sets
+    /// [`Data::body_com`]. Does not allocate.
+    ///
+    /// # Panics
+    /// If `values` is not one per branch joint of `model`, or `model` is not the one this workspace
+    /// was made for.
+    pub fn pose_branches(&mut self, model: &Model, values: Option<&[f64]>) {
+        for (c, b) in self.body_com.iter_mut().zip(model.bodies()) {
+            c.clone_from(&b.com);
+        }
+        let Some(values) = values else { return };
+        if model.branches().is_empty() {
+            return;
+        }
+        model
+            .branches()
+            .first_moment_shift(values, &mut self.branch_poses, &mut self.branch_shift);
+        for ((c, b), s) in self
+            .body_com
+            .iter_mut()
+            .zip(model.bodies())
+            .zip(&self.branch_shift)
+        {
+            if b.mass > 0.0 {
+                *c += s / b.mass;
+            }
         }
     }
 }

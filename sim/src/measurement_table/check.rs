@@ -132,6 +132,11 @@ pub struct ModelCheck<'a> {
     temp: Option<(f64, f64)>,
     /// Warnings judged on the first piece (positions and `sigma` in millimetres).
     first_piece: Vec<String>,
+    /// The table's branch columns' joint names (`q_<joint>`), from the first piece.
+    branch_names: Vec<String>,
+    /// Per branch joint of the model: (count outside the limits within the tolerance, worst excess,
+    /// its 1-based row).
+    branch_outside: Vec<(usize, f64, usize)>,
 }
 
 impl<'a> ModelCheck<'a> {
@@ -148,6 +153,8 @@ impl<'a> ModelCheck<'a> {
             quaternion: (0, 0.0, 0),
             temp: None,
             first_piece: Vec::new(),
+            branch_names: Vec::new(),
+            branch_outside: vec![(0, 0.0, 0); model.branches().len()],
         }
     }
 
@@ -257,8 +264,46 @@ impl<'a> ModelCheck<'a> {
             }
         }
 
+        // Branch joints' limits (`q_<joint>` columns of the model's branch joints).
+        let branch = table.branch.as_ref();
+        for (k, column) in table.branch_names().iter().enumerate() {
+            let Some(b) = model.branches().index_of(column) else {
+                continue;
+            };
+            let joint = &model.branches().joints()[b];
+            let Some(l) = joint.limits else { continue };
+            let width = table.branch_names().len();
+            for r in 0..n {
+                let v = branch.expect("branch columns").values[r * width + k];
+                let excess = (l.lower - v).max(v - l.upper);
+                if excess <= 0.0 {
+                    continue;
+                }
+                let unit = joint.kind.unit();
+                if excess > LIMIT_TOLERANCE {
+                    return Err(table_err(
+                        &name,
+                        Some(first_row + r + 1),
+                        Some(&format!("q_{column}")),
+                        format!(
+                            "{v:?} {unit} is outside the limits [{}, {}] {unit} of branch joint '{}' \
+                             by {excess:.4} {unit}, more than the {LIMIT_TOLERANCE} {unit} tolerance",
+                            l.lower, l.upper, joint.name
+                        ),
+                    ));
+                }
+                let o = &mut self.branch_outside[b];
+                o.0 += 1;
+                if excess > o.1 {
+                    o.1 = excess;
+                    o.2 = first_row + r + 1;
+                }
+            }
+        }
+
         if self.pieces == 0 {
             self.first_piece = self.median_warnings(table);
+            self.branch_names = table.branch_names().to_vec();
         }
         self.pieces += 1;
 
@@ -281,6 +326,68 @@ impl<'a> ModelCheck<'a> {
             self.temp = Some(self.temp.map_or((lo, hi), |(a, b)| (a.min(lo), b.max(hi))));
         }
         Ok(())
+    }
+
+    /// The branch columns' warnings: columns that name no branch joint (not read), branch joints
+    /// without a column (at zero), values outside a branch joint's limits within the tolerance.
+    fn branch_warnings(&self) -> Vec<String> {
+        let name = &self.name;
+        let branches = self.model.branches();
+        let quoted = |v: &mut dyn Iterator<Item = &str>| {
+            v.map(|n| format!("'{n}'")).collect::<Vec<_>>().join(", ")
+        };
+        let mut warnings = Vec::new();
+        let unknown: Vec<&str> = self
+            .branch_names
+            .iter()
+            .map(String::as_str)
+            .filter(|n| branches.index_of(n).is_none())
+            .collect();
+        if !unknown.is_empty() {
+            let known = if branches.is_empty() {
+                format!("robot '{}' has none", self.model.name())
+            } else {
+                format!(
+                    "robot '{}' has {}",
+                    self.model.name(),
+                    quoted(&mut branches.joints().iter().map(|j| j.name.as_str()))
+                )
+            };
+            warnings.push(format!(
+                "{name}: column(s) {} name no movable joint of a branch off the chain ({known}): not read",
+                unknown
+                    .iter()
+                    .map(|n| format!("q_{n}"))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ));
+        }
+        let missing: Vec<&str> = branches
+            .joints()
+            .iter()
+            .map(|j| j.name.as_str())
+            .filter(|j| !self.branch_names.iter().any(|n| n == j))
+            .collect();
+        if !missing.is_empty() {
+            warnings.push(format!(
+                "{name}: branch joint(s) {} off the chain have no q_<joint> column: their links load \
+                 the chain as if at zero",
+                quoted(&mut missing.iter().copied())
+            ));
+        }
+        for (j, &(count, worst, row)) in self.branch_outside.iter().enumerate() {
+            if count > 0 {
+                let joint = &branches.joints()[j];
+                let l = joint.limits.expect("only joints with limits count");
+                let unit = joint.kind.unit();
+                warnings.push(format!(
+                    "{name}: column q_{}: {count} row(s) outside the limits [{}, {}] {unit} by up to \
+                     {worst:.4} {unit} (row {row}), within the {LIMIT_TOLERANCE} {unit} tolerance",
+                    joint.name, l.lower, l.upper
+                ));
+            }
+        }
+        warnings
     }
 
     /// Positions and `sigma` in millimetres, judged on the medians of `table`.
@@ -354,6 +461,7 @@ impl<'a> ModelCheck<'a> {
                 warnings.push(format!("{name}: column q{}: {h}", j + 1));
             }
         }
+        warnings.extend(self.branch_warnings());
         let (sigma, others): (Vec<&String>, Vec<&String>) = self
             .first_piece
             .iter()

@@ -457,6 +457,7 @@ impl Scenario {
             .seconds_per_pose(c.seconds_per_pose.unwrap_or(dflt.seconds_per_pose()))
             .seconds_per_repeat(c.seconds_per_repeat.unwrap_or(dflt.seconds_per_repeat()))
             .directions(c.directions.unwrap_or(DirectionRule::Move))
+            .branches(c.branches.unwrap_or_default())
             .start_q(c.start_q.clone())
             .p_flange_m(p_flange)
             .reachability(reachability)

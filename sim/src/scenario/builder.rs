@@ -26,7 +26,7 @@
 //! assert!(e.contains("effects.backlash.dead_band_rad[0]"), "{e}");
 //! ```
 
-use crate::campaign::DirectionRule;
+use crate::campaign::{BranchRule, DirectionRule};
 use crate::effects::Registered;
 use crate::effects::coupled_transmission::CoupledTransmissionSection;
 use crate::effects::gear_backlash::{BacklashMode, BacklashSection};
@@ -181,6 +181,12 @@ impl ScenarioBuilder {
     /// `[campaign] seconds_per_repeat` (s).
     pub fn seconds_per_repeat(mut self, s: f64) -> ScenarioBuilder {
         self.file.campaign.seconds_per_repeat = Some(s);
+        self
+    }
+
+    /// `[campaign] branches`.
+    pub fn branches(mut self, rule: BranchRule) -> ScenarioBuilder {
+        self.file.campaign.branches = Some(rule);
         self
     }
 

@@ -29,6 +29,8 @@
 //! seconds_per_pose = 10.0
 //! seconds_per_repeat = 1.0
 //! directions = "move"         # "move" | "random" | "unknown"
+//! branches = "zero"           # "zero" | "random": the joints of branches off the chain (a second
+//!                             #  arm, a head), written as q_<joint> columns when random
 //! start_q = [0, 0, 0, 0, 0, 0, 0]
 //! joint_margin_rad = 0.05     # random and grid
 //! floor_z_m = 0.05            # reachability filter, base frame

@@ -2,7 +2,7 @@
 //! Unknown keys are refused. The `[effects.*]` sections belong to their effects
 //! ([`crate::effects::EffectsSection`]).
 
-use crate::campaign::DirectionRule;
+use crate::campaign::{BranchRule, DirectionRule};
 use crate::effects::EffectsSection;
 use crate::effects::thermal_drift::TemperatureProfile;
 use crate::magnitude::Magnitude;
@@ -107,6 +107,8 @@ pub struct CampaignSection {
     pub seconds_per_repeat: Option<f64>,
     /// Approach-direction rule.
     pub directions: Option<DirectionRule>,
+    /// Where the branches off the chain are.
+    pub branches: Option<BranchRule>,
     /// Joint positions before the first pose (rad or m).
     pub start_q: Option<Vec<f64>>,
     /// Margin from the joint limits for random and grid poses (rad or m).

@@ -515,8 +515,9 @@ pub fn torque_jacobian(
     payload: Option<&sim::statics::Payload>,
     out: &mut [f64],
 ) {
+    // The bodies as the statics saw them: centres with the branches off the chain posed.
     let bodies = model.bodies();
-    let body = |j: usize| (bodies[j].mass, bodies[j].com * bodies[j].mass);
+    let body = |j: usize| (bodies[j].mass, data.body_com[j] * bodies[j].mass);
     torque_jacobian_of(model.joints(), data, gravity, body, payload, out);
 }
 

@@ -464,7 +464,8 @@ pub fn gravity_moments(
     for i in (0..model.nq()).rev() {
         let frame = &data.joint_poses[i];
         let body = &model.bodies()[i];
-        let c = frame * Point3::from(body.com);
+        // The centre as the statics saw it: with the branches off the chain posed.
+        let c = frame * Point3::from(data.body_com[i]);
         mass += body.mass;
         first += c.coords * body.mass;
         let o = frame.translation.vector;

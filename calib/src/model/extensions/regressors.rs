@@ -107,6 +107,8 @@ impl Regressors {
         let mut coef = vec![0.0; rows.len() * n];
         let bends = params.iter().any(|p| matches!(p.term, Term::Bend { .. }));
         if n > 0 {
+            // The branch joints' values of each row, in the model's order, when the table has them.
+            let branch = sim::measurement_table::BranchValues::new(table, model);
             // Rows are independent: blocks of them in parallel, each with its own scratch; the first
             // error in row order is returned.
             let blocks: Vec<Result<()>> = coef
@@ -114,12 +116,14 @@ impl Regressors {
                 .zip(rows.par_chunks(BUILD_BLOCK_ROWS))
                 .map(|(out, rows)| {
                     let mut one = RowRegressors::new(model, settings);
+                    let mut values = vec![0.0; branch.as_ref().map_or(0, |b| b.len())];
                     for (k, &r) in rows.iter().enumerate() {
                         let context = RowContext {
                             payload_kg: table.payload.as_ref().map_or(0.0, |p| p[r]),
                             dir: table.dir_row(r),
                             temp_c: table.temp.as_ref().map(|t| t[r]),
                             t_s: table.t.as_ref().map(|t| t[r]),
+                            branch: branch.as_ref().map(|b| b.row(table, r, &mut values)),
                         };
                         one.fill(table.q_row(r), &context, at).map_err(|e| {
                             CalibError::BadValue {
@@ -157,6 +161,9 @@ pub struct RowContext<'a> {
     pub temp_c: Option<f64>,
     /// Time since the start of the campaign (s), when known.
     pub t_s: Option<f64>,
+    /// Values of the branch joints off the chain (rad or m, [`sim::Model::branches`] order), when
+    /// the table gives them (`q_<joint>` columns); the branches are at zero otherwise.
+    pub branch: Option<&'a [f64]>,
 }
 
 /// The regressors of one row at a time, with the workspace they need (statics, torques, moments):
@@ -268,6 +275,9 @@ impl<'m> RowRegressors<'m> {
             1
         };
         self.theta.copy_from_slice(q);
+        if self.needs_tau && !self.model.branches().is_empty() {
+            self.data.pose_branches(self.model, context.branch);
+        }
         for it in 0..iterations {
             if self.needs_tau {
                 let payload = self.payload(context);
