@@ -151,14 +151,7 @@ fn a_table_of_every_joint_must_agree_with_the_coupling_and_other_counts_are_refu
         &[],
     );
     let t = sim::measurement_table::read(&data).unwrap();
-    let model = sim::urdf::load_file(
-        &urdf(),
-        &sim::ChainSpec {
-            base_link: None,
-            tip_link: Some("left_flange".into()),
-        },
-    )
-    .unwrap();
+    let model = common::load_chain(&urdf(), "left_flange");
     // Every chain joint, the passive one computed: accepted.
     let full = sim::measurement_table::couple(t.clone(), &model, &data).unwrap();
     assert_eq!(full.n_joints, 8);

@@ -83,15 +83,6 @@ stiffness_nm_per_rad = {k:?}
     )
 }
 
-/// `(value, sigma)` of the parameter `name` in a list of `{name, value, sigma}` objects.
-fn parameter(list: &Value, name: &str) -> Option<(f64, f64)> {
-    let p = list.as_array()?.iter().find(|p| p["name"] == name)?;
-    Some((
-        p["value"].as_f64()?,
-        p["sigma"].as_f64().unwrap_or(f64::NAN),
-    ))
-}
-
 /// diagnose of `data` on the torso's left arm: the JSON document and stderr.
 fn diagnose(data: &Path) -> (Value, String) {
     let (out, err) = common::robocal_ok(&[
@@ -126,7 +117,7 @@ fn compliance(diag: &Value, seed: u64) -> Value {
 
 /// `(compliance − truth) / σ` of chain joint `joint` (1-based).
 fn z(finding: &Value, joint: usize, k: &[f64; 4], seed: u64) -> f64 {
-    let (c, s) = parameter(&finding["parameters"], &format!("joint {joint} compliance"))
+    let (c, s) = common::parameter(&finding["parameters"], &format!("joint {joint} compliance"))
         .unwrap_or_else(|| panic!("seed {seed}: no compliance of joint {joint}: {finding:#}"));
     let truth = 1.0 / k[joint - 1];
     let z = (c - truth) / s;
@@ -288,14 +279,7 @@ fn the_generator_poses_the_branches_per_pose() {
     let b = common::generate(&sc, &d.join("b"), &[]);
     assert_eq!(std::fs::read(&a).unwrap(), std::fs::read(&b).unwrap());
     let table = sim::measurement_table::read(&a).unwrap();
-    let model = sim::urdf::load_file(
-        &urdf(),
-        &sim::ChainSpec {
-            base_link: None,
-            tip_link: Some("left_flange".into()),
-        },
-    )
-    .unwrap();
+    let model = common::load_chain(&urdf(), "left_flange");
     for (k, joint) in model.branches().joints().iter().enumerate() {
         let l = joint.limits.unwrap();
         let v: Vec<f64> = (0..table.len())

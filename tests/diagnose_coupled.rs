@@ -69,16 +69,6 @@ stiffness_nm_per_rad = {k:?}
     )
 }
 
-/// `(value, sigma)` of the parameter `name` in a list of `{name, value, sigma}` objects; sigma NaN
-/// when the data do not determine it.
-fn parameter(list: &Value, name: &str) -> Option<(f64, f64)> {
-    let p = list.as_array()?.iter().find(|p| p["name"] == name)?;
-    Some((
-        p["value"].as_f64()?,
-        p["sigma"].as_f64().unwrap_or(f64::NAN),
-    ))
-}
-
 fn generate(dir: &Path, k: &[f64; 8], seed: u64) -> PathBuf {
     let sc = dir.join("scenario.toml");
     std::fs::write(&sc, scenario(k)).unwrap();
@@ -136,11 +126,11 @@ fn a_coupled_torso_with_elastic_drives_is_diagnosed_as_compliance_at_its_drives(
         }
     }
     assert!(
-        parameter(&compliance["parameters"], "joint 4 compliance").is_none(),
+        common::parameter(&compliance["parameters"], "joint 4 compliance").is_none(),
         "seed {seed}: the passive joint has a compliance parameter: {compliance:#}"
     );
     for (joint, limit) in [(2, 3.0), (3, 3.0), (5, 4.0), (6, 4.0), (7, 4.0), (8, 4.0)] {
-        let (c, s) = parameter(
+        let (c, s) = common::parameter(
             &compliance["parameters"],
             &format!("joint {joint} compliance"),
         )

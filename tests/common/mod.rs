@@ -70,3 +70,25 @@ pub fn generate(scenario: &std::path::Path, out: &std::path::Path, extra: &[&str
     robocal_ok(&args);
     out.join("measurements.parquet")
 }
+
+/// `(value, sigma)` of the parameter `name` in a list of `{name, value, sigma}` objects (a
+/// finding's `parameters`); sigma NaN when the data do not determine it.
+pub fn parameter(list: &serde_json::Value, name: &str) -> Option<(f64, f64)> {
+    let p = list.as_array()?.iter().find(|p| p["name"] == name)?;
+    Some((
+        p["value"].as_f64()?,
+        p["sigma"].as_f64().unwrap_or(f64::NAN),
+    ))
+}
+
+/// The chain from the root of the URDF `urdf` to its link `tip`.
+pub fn load_chain(urdf: &std::path::Path, tip: &str) -> sim::Model {
+    sim::urdf::load_file(
+        urdf,
+        &sim::ChainSpec {
+            base_link: None,
+            tip_link: Some(tip.into()),
+        },
+    )
+    .unwrap()
+}

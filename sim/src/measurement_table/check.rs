@@ -110,6 +110,68 @@ pub fn check_against_model(
     Ok(check.warnings())
 }
 
+/// A joint's values outside its limits within [`LIMIT_TOLERANCE`]: how many, the worst excess
+/// (rad or m) and its 1-based row.
+#[derive(Clone, Copy, Debug, Default)]
+struct Outside {
+    count: usize,
+    worst: f64,
+    row: usize,
+}
+
+impl Outside {
+    fn note(&mut self, excess: f64, row: usize) {
+        self.count += 1;
+        if excess > self.worst {
+            self.worst = excess;
+            self.row = row;
+        }
+    }
+}
+
+/// Where a joint value is checked against its limits: the file, its 1-based row, the column, the
+/// joint as messages name it (`joint 'a1'`, `branch joint 'neck'`) and its kind (for the unit).
+struct Limit<'a> {
+    file: &'a str,
+    row: usize,
+    column: &'a str,
+    joint: &'a str,
+    kind: JointKind,
+}
+
+impl Limit<'_> {
+    /// How far `v` lies outside `l` when it does (rad or m), `None` inside; an error naming the file,
+    /// row and column beyond [`LIMIT_TOLERANCE`] (`hint` ends its message).
+    fn check(
+        &self,
+        v: f64,
+        l: &crate::model::JointLimits,
+        hint: impl FnOnce() -> String,
+    ) -> Result<Option<f64>> {
+        let excess = (l.lower - v).max(v - l.upper);
+        if excess <= 0.0 {
+            return Ok(None);
+        }
+        if excess > LIMIT_TOLERANCE {
+            let unit = self.kind.unit();
+            return Err(table_err(
+                self.file,
+                Some(self.row),
+                Some(self.column),
+                format!(
+                    "{v:?} {unit} is outside the limits [{}, {}] {unit} of {} by {excess:.4} {unit}, \
+                     more than the {LIMIT_TOLERANCE} {unit} tolerance{}",
+                    l.lower,
+                    l.upper,
+                    self.joint,
+                    hint()
+                ),
+            ));
+        }
+        Ok(Some(excess))
+    }
+}
+
 /// [`check_against_model`] over a file read in pieces ([`super::read_chunks`]): [`ModelCheck::add`]
 /// each piece with its first file row, then [`ModelCheck::warnings`]. Errors and warnings name
 /// file-wide rows; counts and worst values run over every piece. The unit heuristics that need
@@ -124,8 +186,8 @@ pub struct ModelCheck<'a> {
     /// (rotational) or millimetres (prismatic).
     max_abs: Vec<f64>,
     fits_scaled: Vec<bool>,
-    /// Per joint: (count outside the limits within the tolerance, worst excess, its 1-based row).
-    outside: Vec<(usize, f64, usize)>,
+    /// Per joint: its values outside the limits within the tolerance.
+    outside: Vec<Outside>,
     /// Rows whose quaternion norm is off 1 by more than [`QUATERNION_NORM_WARNING`]: count, worst, row.
     quaternion: (usize, f64, usize),
     /// Temperatures seen: lowest, highest.
@@ -134,9 +196,8 @@ pub struct ModelCheck<'a> {
     first_piece: Vec<String>,
     /// The table's branch columns' joint names (`q_<joint>`), from the first piece.
     branch_names: Vec<String>,
-    /// Per branch joint of the model: (count outside the limits within the tolerance, worst excess,
-    /// its 1-based row).
-    branch_outside: Vec<(usize, f64, usize)>,
+    /// Per branch joint of the model: its values outside the limits within the tolerance.
+    branch_outside: Vec<Outside>,
 }
 
 impl<'a> ModelCheck<'a> {
@@ -149,12 +210,12 @@ impl<'a> ModelCheck<'a> {
             pieces: 0,
             max_abs: vec![0.0; nq],
             fits_scaled: vec![true; nq],
-            outside: vec![(0, 0.0, 0); nq],
+            outside: vec![Outside::default(); nq],
             quaternion: (0, 0.0, 0),
             temp: None,
             first_piece: Vec::new(),
             branch_names: Vec::new(),
-            branch_outside: vec![(0, 0.0, 0); model.branches().len()],
+            branch_outside: vec![Outside::default(); model.branches().len()],
         }
     }
 
@@ -234,32 +295,20 @@ impl<'a> ModelCheck<'a> {
             for (j, joint) in model.joints().iter().enumerate() {
                 let Some(l) = joint.limits else { continue };
                 let v = table.q[r * nq + j];
-                let excess = (l.lower - v).max(v - l.upper);
-                if excess <= 0.0 {
-                    continue;
-                }
-                let unit = joint.kind.unit();
-                if excess > LIMIT_TOLERANCE {
-                    let hint = self
-                        .hint(j)
+                let at = Limit {
+                    file: &name,
+                    row: first_row + r + 1,
+                    column: &format!("q{}", j + 1),
+                    joint: &format!("joint '{}'", joint.name),
+                    kind: joint.kind,
+                };
+                let hint = || {
+                    self.hint(j)
                         .map(|h| format!(" (the column's {h})"))
-                        .unwrap_or_default();
-                    return Err(table_err(
-                        &name,
-                        Some(first_row + r + 1),
-                        Some(&format!("q{}", j + 1)),
-                        format!(
-                            "{v:?} {unit} is outside the limits [{}, {}] {unit} of joint '{}' by {excess:.4} {unit}, \
-                             more than the {LIMIT_TOLERANCE} {unit} tolerance{hint}",
-                            l.lower, l.upper, joint.name
-                        ),
-                    ));
-                }
-                let o = &mut self.outside[j];
-                o.0 += 1;
-                if excess > o.1 {
-                    o.1 = excess;
-                    o.2 = first_row + r + 1;
+                        .unwrap_or_default()
+                };
+                if let Some(excess) = at.check(v, &l, hint)? {
+                    self.outside[j].note(excess, at.row);
                 }
             }
         }
@@ -275,28 +324,15 @@ impl<'a> ModelCheck<'a> {
             let width = table.branch_names().len();
             for r in 0..n {
                 let v = branch.expect("branch columns").values[r * width + k];
-                let excess = (l.lower - v).max(v - l.upper);
-                if excess <= 0.0 {
-                    continue;
-                }
-                let unit = joint.kind.unit();
-                if excess > LIMIT_TOLERANCE {
-                    return Err(table_err(
-                        &name,
-                        Some(first_row + r + 1),
-                        Some(&format!("q_{column}")),
-                        format!(
-                            "{v:?} {unit} is outside the limits [{}, {}] {unit} of branch joint '{}' \
-                             by {excess:.4} {unit}, more than the {LIMIT_TOLERANCE} {unit} tolerance",
-                            l.lower, l.upper, joint.name
-                        ),
-                    ));
-                }
-                let o = &mut self.branch_outside[b];
-                o.0 += 1;
-                if excess > o.1 {
-                    o.1 = excess;
-                    o.2 = first_row + r + 1;
+                let at = Limit {
+                    file: &name,
+                    row: first_row + r + 1,
+                    column: &format!("q_{column}"),
+                    joint: &format!("branch joint '{}'", joint.name),
+                    kind: joint.kind,
+                };
+                if let Some(excess) = at.check(v, &l, String::new)? {
+                    self.branch_outside[b].note(excess, at.row);
                 }
             }
         }
@@ -375,7 +411,7 @@ impl<'a> ModelCheck<'a> {
                 quoted(&mut missing.iter().copied())
             ));
         }
-        for (j, &(count, worst, row)) in self.branch_outside.iter().enumerate() {
+        for (j, &Outside { count, worst, row }) in self.branch_outside.iter().enumerate() {
             if count > 0 {
                 let joint = &branches.joints()[j];
                 let l = joint.limits.expect("only joints with limits count");
@@ -441,7 +477,7 @@ impl<'a> ModelCheck<'a> {
     pub fn warnings(&self) -> Vec<String> {
         let name = &self.name;
         let mut warnings = Vec::new();
-        for (j, &(count, worst, row)) in self.outside.iter().enumerate() {
+        for (j, &Outside { count, worst, row }) in self.outside.iter().enumerate() {
             if count > 0 {
                 let joint = &self.model.joints()[j];
                 let l = joint.limits.expect("only joints with limits count");
