@@ -847,23 +847,33 @@ impl MeasurementTable {
         Ok(())
     }
 
-    /// Row `r` at the joint values of row `f`, the first of its pose.
+    /// Row `r` at the joint values of row `f`, the first of its pose: the chain's (`q1..qN`) and the
+    /// branches' (`q_<joint>`; a branch posed elsewhere loads the chain otherwise, and the scatter of
+    /// a pose's repeats is the measured repeatability, [`POSE_REPEAT_TOLERANCE`]).
     fn check_repeat(&self, f: usize, r: usize, file: &str) -> Result<()> {
-        let (a, b) = (self.q_row(f), self.q_row(r));
-        let Some(j) = (0..a.len()).find(|&j| (a[j] - b[j]).abs() > POSE_REPEAT_TOLERANCE) else {
-            return Ok(());
+        let differs = |a: &[f64], b: &[f64]| {
+            (0..a.len())
+                .find(|&j| (a[j] - b[j]).abs() > POSE_REPEAT_TOLERANCE)
+                .map(|j| (j, a[j], b[j]))
+        };
+        let (column, first, here) = match differs(self.q_row(f), self.q_row(r)) {
+            Some((j, a, b)) => (format!("q{}", j + 1), a, b),
+            None => {
+                let branch = self.branch_row(f).zip(self.branch_row(r));
+                match branch.and_then(|(a, b)| differs(a, b)) {
+                    Some((j, a, b)) => (format!("q_{}", self.branch_names()[j]), a, b),
+                    None => return Ok(()),
+                }
+            }
         };
         Err(table_err(
             file,
             Some(r + 1),
             Some("pose"),
             format!(
-                "pose {} is reused with other joint values: q{} is {:?} here but {:?} in row {} \
-                 (rows sharing a pose id are repeated measurements of one pose, within {:e})",
+                "pose {} is reused with other joint values: {column} is {here:?} here but {first:?} \
+                 in row {} (rows sharing a pose id are repeated measurements of one pose, within {:e})",
                 self.pose[r],
-                j + 1,
-                b[j],
-                a[j],
                 f + 1,
                 POSE_REPEAT_TOLERANCE
             ),

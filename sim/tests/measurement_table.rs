@@ -2135,3 +2135,29 @@ fn select_rows_and_drive_columns_keep_each_rows_branch_values() {
     assert_eq!(d.q_row(3), &[0.30000000000000004, 0.3]);
     assert_eq!(d.branch, t.branch);
 }
+
+/// Rows sharing a pose id are repeats of one pose, branches included: their scatter is the measured
+/// repeatability, and a branch posed elsewhere loads the chain otherwise. A branch column that
+/// differs beyond the tolerance names the pose, the rows and the column; within it, the rows are
+/// repeats.
+#[test]
+fn repeats_of_a_pose_agree_on_the_branch_columns_too() {
+    let text = "pose,q1,q2,q_neck_yaw,q_hand,x,y,z\n\
+                0,0.1,0.2,0.5,-1.0,1,2,3\n\
+                0,0.1,0.2,0.5,-1.2,1,2,3\n";
+    let e = read_csv_str(text, "r.csv").unwrap_err().to_string();
+    assert!(
+        e.contains("r.csv")
+            && e.contains("row 2")
+            && e.contains(
+                "pose 0 is reused with other joint values: q_hand is -1.2 here but -1.0 in row 1"
+            ),
+        "{e}"
+    );
+    let close = "pose,q1,q2,q_neck_yaw,q_hand,x,y,z\n\
+                 0,0.1,0.2,0.5,-1.0,1,2,3\n\
+                 0,0.1,0.2,0.5,-1.0004,1,2,3\n\
+                 1,0.1,0.2,0.9,-1.0,1,2,3\n";
+    let t = read_csv_str(close, "c.csv").unwrap();
+    assert_eq!(t.n_poses(), 2);
+}
