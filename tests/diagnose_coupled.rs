@@ -34,39 +34,7 @@ fn urdf() -> PathBuf {
 /// A scenario of the coupled torso with drive stiffnesses `k` (N m/rad, chain order; the passive
 /// joint's entry is not used) and drawn geometric errors.
 fn scenario(k: &[f64; 8]) -> String {
-    format!(
-        r#"name = "coupled_torso_blind"
-seed = 1
-[robot]
-urdf = "{urdf}"
-tip_link = "left_flange"
-[campaign]
-poses = 300
-sampling = "random"
-directions = "move"
-joint_margin_rad = 0.05
-floor_z_m = 0.2
-min_axis_distance_m = 0.10
-[campaign.payload]
-choice_kg = [0.0, 1.5, 3.0]
-com_m = [0.0, 0.0, -0.05]
-[tracker]
-xyz_m = [2.5, 1.0, 0.4]
-rpy_rad = [0.0, 0.0, 2.5]
-reflector_m = [0.0, 0.0, -0.03]
-radial_sigma_a_m = 5e-6
-radial_sigma_b_m_per_m = 0.15e-6
-transverse_sigma_a_m = 7.5e-6
-transverse_sigma_b_m_per_m = 3e-6
-[effects.kinematic]
-joint_rotation_rad = {{ normal = [0.0, 3e-4] }}
-joint_translation_m = {{ normal = [0.0, 2e-4] }}
-zero_offset_rad = {{ normal = [0.0, 5e-4] }}
-[effects.compliance]
-stiffness_nm_per_rad = {k:?}
-"#,
-        urdf = urdf().display(),
-    )
+    common::torso_scenario("coupled_torso_blind", &urdf(), "", k)
 }
 
 fn generate(dir: &Path, k: &[f64; 8], seed: u64) -> PathBuf {

@@ -17,8 +17,8 @@
 //! used (the rapier truth's dynamics).
 
 use crate::joint_kind::{JointKind, JointLimits};
-use crate::lie::Pose;
-use nalgebra::{Point3, Rotation3, Translation3, Unit, Vector3};
+use crate::lie::{Pose, exp_so3, pose_from};
+use nalgebra::{Matrix3, Point3, Vector3};
 
 /// A movable joint on a branch off the chain.
 #[derive(Clone, Debug, PartialEq)]
@@ -49,12 +49,9 @@ impl BranchJoint {
     /// The joint's motion `X(v)` at value `v` (rad or m).
     fn motion(&self, v: f64) -> Pose {
         if self.kind.is_rotational() {
-            Pose::from_parts(
-                Translation3::identity(),
-                Rotation3::from_axis_angle(&Unit::new_unchecked(self.axis), v),
-            )
+            pose_from(exp_so3(&self.axis, v), Vector3::zeros())
         } else {
-            Pose::from_parts(Translation3::from(self.axis * v), Rotation3::identity())
+            pose_from(Matrix3::identity(), self.axis * v)
         }
     }
 }
@@ -161,7 +158,7 @@ mod tests {
             limits: None,
             body: 0,
             parent,
-            origin: Pose::from_parts(Translation3::from(origin), Rotation3::identity()),
+            origin: pose_from(Matrix3::identity(), origin),
             mass: 1.0,
             com: Vector3::new(0.5, 0.0, 0.0),
         }

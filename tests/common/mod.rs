@@ -92,3 +92,48 @@ pub fn load_chain(urdf: &std::path::Path, tip: &str) -> sim::Model {
     )
     .unwrap()
 }
+
+/// A blind scenario of a humanoid torso's left arm (`tip_link = "left_flange"` of `urdf`): 300 random
+/// poses with approach directions, payloads of 0, 1.5 and 3 kg, a laser tracker's noise, drawn
+/// geometric errors and joint stiffnesses `stiffness` (N m/rad, chain order; the scenario writes
+/// infinity as it reads it). `campaign` adds lines to `[campaign]` (e.g. `branches = "random"`).
+pub fn torso_scenario(
+    name: &str,
+    urdf: &std::path::Path,
+    campaign: &str,
+    stiffness: &[f64],
+) -> String {
+    format!(
+        r#"name = "{name}"
+seed = 1
+[robot]
+urdf = "{urdf}"
+tip_link = "left_flange"
+[campaign]
+poses = 300
+sampling = "random"
+directions = "move"
+{campaign}joint_margin_rad = 0.05
+floor_z_m = 0.2
+min_axis_distance_m = 0.10
+[campaign.payload]
+choice_kg = [0.0, 1.5, 3.0]
+com_m = [0.0, 0.0, -0.05]
+[tracker]
+xyz_m = [2.5, 1.0, 0.4]
+rpy_rad = [0.0, 0.0, 2.5]
+reflector_m = [0.0, 0.0, -0.03]
+radial_sigma_a_m = 5e-6
+radial_sigma_b_m_per_m = 0.15e-6
+transverse_sigma_a_m = 7.5e-6
+transverse_sigma_b_m_per_m = 3e-6
+[effects.kinematic]
+joint_rotation_rad = {{ normal = [0.0, 3e-4] }}
+joint_translation_m = {{ normal = [0.0, 2e-4] }}
+zero_offset_rad = {{ normal = [0.0, 5e-4] }}
+[effects.compliance]
+stiffness_nm_per_rad = {stiffness:?}
+"#,
+        urdf = urdf.display(),
+    )
+}

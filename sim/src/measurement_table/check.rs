@@ -3,7 +3,7 @@
 
 use super::{MeasurementTable, QUATERNION_NORM_WARNING, table_err};
 use crate::error::Result;
-use crate::model::{JointKind, Model};
+use crate::model::{JointKind, JointLimits, Model};
 use std::f64::consts::PI;
 use std::path::Path;
 
@@ -129,41 +129,50 @@ impl Outside {
     }
 }
 
-/// Where a joint value is checked against its limits: the file, its 1-based row, the column, the
-/// joint as messages name it (`joint 'a1'`, `branch joint 'neck'`) and its kind (for the unit).
+/// A joint column as limit messages name it: chain joint `j` (0-based; column `q{j+1}`) or a
+/// branch joint (column `q_<name>`).
+#[derive(Clone, Copy)]
+enum LimitColumn<'a> {
+    Chain(usize, &'a str),
+    Branch(&'a str),
+}
+
+/// One joint's column checked against its limits, made once per column (nothing is allocated per
+/// value; the names are written only into an error).
 struct Limit<'a> {
     file: &'a str,
-    row: usize,
-    column: &'a str,
-    joint: &'a str,
+    column: LimitColumn<'a>,
+    limits: JointLimits,
     kind: JointKind,
 }
 
 impl Limit<'_> {
-    /// How far `v` lies outside `l` when it does (rad or m), `None` inside; an error naming the file,
-    /// row and column beyond [`LIMIT_TOLERANCE`] (`hint` ends its message).
-    fn check(
-        &self,
-        v: f64,
-        l: &crate::model::JointLimits,
-        hint: impl FnOnce() -> String,
-    ) -> Result<Option<f64>> {
+    /// How far `v` (at 1-based file row `row`) lies outside the limits when it does (rad or m),
+    /// `None` inside; an error naming the file, row and column beyond [`LIMIT_TOLERANCE`] (`hint`
+    /// ends its message).
+    fn check(&self, v: f64, row: usize, hint: impl FnOnce() -> String) -> Result<Option<f64>> {
+        let l = &self.limits;
         let excess = (l.lower - v).max(v - l.upper);
         if excess <= 0.0 {
             return Ok(None);
         }
         if excess > LIMIT_TOLERANCE {
             let unit = self.kind.unit();
+            let (column, joint) = match self.column {
+                LimitColumn::Chain(j, name) => (format!("q{}", j + 1), format!("joint '{name}'")),
+                LimitColumn::Branch(name) => {
+                    (format!("q_{name}"), format!("branch joint '{name}'"))
+                }
+            };
             return Err(table_err(
                 self.file,
-                Some(self.row),
-                Some(self.column),
+                Some(row),
+                Some(&column),
                 format!(
-                    "{v:?} {unit} is outside the limits [{}, {}] {unit} of {} by {excess:.4} {unit}, \
+                    "{v:?} {unit} is outside the limits [{}, {}] {unit} of {joint} by {excess:.4} {unit}, \
                      more than the {LIMIT_TOLERANCE} {unit} tolerance{}",
                     l.lower,
                     l.upper,
-                    self.joint,
                     hint()
                 ),
             ));
@@ -291,48 +300,53 @@ impl<'a> ModelCheck<'a> {
         }
 
         // URDF limits.
-        for r in 0..n {
-            for (j, joint) in model.joints().iter().enumerate() {
-                let Some(l) = joint.limits else { continue };
-                let v = table.q[r * nq + j];
-                let at = Limit {
+        let chain: Vec<Option<Limit<'_>>> = (model.joints().iter().enumerate())
+            .map(|(j, joint)| {
+                joint.limits.map(|limits| Limit {
                     file: &name,
-                    row: first_row + r + 1,
-                    column: &format!("q{}", j + 1),
-                    joint: &format!("joint '{}'", joint.name),
+                    column: LimitColumn::Chain(j, &joint.name),
+                    limits,
                     kind: joint.kind,
-                };
+                })
+            })
+            .collect();
+        for r in 0..n {
+            for (j, at) in chain.iter().enumerate() {
+                let Some(at) = at else { continue };
+                let row = first_row + r + 1;
                 let hint = || {
                     self.hint(j)
                         .map(|h| format!(" (the column's {h})"))
                         .unwrap_or_default()
                 };
-                if let Some(excess) = at.check(v, &l, hint)? {
-                    self.outside[j].note(excess, at.row);
+                if let Some(excess) = at.check(table.q[r * nq + j], row, hint)? {
+                    self.outside[j].note(excess, row);
                 }
             }
         }
 
         // Branch joints' limits (`q_<joint>` columns of the model's branch joints).
-        let branch = table.branch.as_ref();
-        for (k, column) in table.branch_names().iter().enumerate() {
-            let Some(b) = model.branches().index_of(column) else {
-                continue;
-            };
-            let joint = &model.branches().joints()[b];
-            let Some(l) = joint.limits else { continue };
-            let width = table.branch_names().len();
-            for r in 0..n {
-                let v = branch.expect("branch columns").values[r * width + k];
+        if let Some(branch) = &table.branch {
+            let width = branch.names.len();
+            for (k, column) in branch.names.iter().enumerate() {
+                let Some(b) = model.branches().index_of(column) else {
+                    continue;
+                };
+                let joint = &model.branches().joints()[b];
+                let Some(limits) = joint.limits else { continue };
                 let at = Limit {
                     file: &name,
-                    row: first_row + r + 1,
-                    column: &format!("q_{column}"),
-                    joint: &format!("branch joint '{}'", joint.name),
+                    column: LimitColumn::Branch(&joint.name),
+                    limits,
                     kind: joint.kind,
                 };
-                if let Some(excess) = at.check(v, &l, String::new)? {
-                    self.branch_outside[b].note(excess, at.row);
+                for r in 0..n {
+                    let row = first_row + r + 1;
+                    if let Some(excess) =
+                        at.check(branch.values[r * width + k], row, String::new)?
+                    {
+                        self.branch_outside[b].note(excess, row);
+                    }
                 }
             }
         }
