@@ -21,8 +21,11 @@ fn table() -> MeasurementTable {
     let mut t = MeasurementTable::with_capacity(7, cols, ROWS);
     let mut q = [0.0; 7];
     for r in 0..ROWS {
-        q.iter_mut()
-            .for_each(|v| *v = rng.random::<f64>() * 4.0 - 2.0);
+        // Three measurements per pose, at its joint values (the table's contract since issue 15).
+        if r % 3 == 0 {
+            q.iter_mut()
+                .for_each(|v| *v = rng.random::<f64>() * 4.0 - 2.0);
+        }
         t.push_row(&Row {
             pose: (r / 3) as i64,
             q: &q,
